@@ -1,0 +1,1286 @@
+/* scene.c - the scene-file parser.  Reads a line-based text file into struct scene: camera,
+ * film, render defaults, materials, OBJ meshes flattened into world-space triangles, analytic
+ * shapes, point lights and sky.  Each line is split into a keyword and key=value words, checked
+ * against a table of statements, then applied.  Transforms are scale, then rotation (Rodrigues'
+ * formula), then translation; normals go through the inverse transpose (PBRT 4e, ch. 3,
+ * "Applying Transformations").  The light list is built last: emissive triangles, quads and
+ * spheres, then point lights.  Full reference: docs/scene-format.md. */
+#include "scene.h"
+
+#include "obj.h"
+
+#include <assert.h>
+#include <errno.h>
+#include <stdlib.h>
+
+/* A small scene in the grammar this file reads:
+ *
+ *   # Cornell box lit by its ceiling quad
+ *   camera eye=0,1,3.9 look-at=0,1,0 up=0,1,0 fov=40
+ *   film width=512 height=512
+ *   render spp=256 max-depth=inf
+ *   material name=white type=diffuse albedo=0.73,0.73,0.73
+ *   material name=lamp type=diffuse albedo=0,0,0 emission=17,12,4
+ *   material name=glass type=dielectric ior=1.5
+ *   mesh file=models/bunny.obj material=white scale=4 translate=0,0.3,0
+ *   quad corner=-0.25,1.98,-0.25 edge1=0.5,0,0 edge2=0,0,0.5 material=lamp
+ *   sphere center=0.4,0.3,0.3 radius=0.3 material=glass
+ *   plane point=0,0,0 normal=0,1,0 material=white
+ *   light type=point position=0,1.5,0 intensity=1,1,1
+ *   sky type=gradient horizon=1,1,1 zenith=0.3,0.5,1
+ */
+
+#define SCENE_MAX_LINE_BYTES 4096 /* longest accepted line, bytes, without its line ending */
+#define MAX_PARAMS 8              /* most distinct parameters any statement accepts */
+#define SHOW_BYTES 40             /* longest piece of user text quoted in a message, bytes */
+#define PARALLEL_SIN 1e-6         /* |sin angle| below which two directions count as parallel */
+
+/* ---- the statement table ---------------------------------------------------------------- */
+
+enum value_kind {
+    VAL_NUMBER,   /* one number */
+    VAL_VEC3,     /* x,y,z */
+    VAL_ROTATION, /* ax,ay,az,deg: axis and angle in degrees */
+    VAL_SCALE,    /* s (uniform) or sx,sy,sz */
+    VAL_INT,      /* unsigned integer, bounds from the range */
+    VAL_DEPTH,    /* unsigned integer or "inf" */
+    VAL_BOOL,     /* true or false */
+    VAL_NAME,     /* a new material name */
+    VAL_MATERIAL, /* the name of a material defined on an earlier line */
+    VAL_PATH,     /* a file path, relative to the scene file's folder */
+    VAL_TYPE,     /* one of the statement's type words */
+};
+
+enum value_range {
+    RANGE_ANY,
+    RANGE_POSITIVE, /* > 0 */
+    RANGE_NONNEG,   /* every component >= 0 */
+    RANGE_UNIT,     /* every component in [0, 1] */
+    RANGE_NONZERO,  /* VAL_VEC3: not the zero vector; VAL_SCALE: no zero component */
+    RANGE_FOV,      /* (0, 180) degrees */
+    RANGE_FILM,     /* 1..65535 pixels */
+    RANGE_SPP,      /* 1..4294967295 */
+};
+
+#define ALL_TYPES 0xffu /* allowed_mask / required_mask bit t stands for type t; bit 0 when the
+                           statement has no 'type' parameter */
+
+struct param_spec {
+    const char *key;
+    enum value_kind kind;
+    enum value_range range;
+    unsigned allowed_mask;  /* the types this parameter may be given with */
+    unsigned required_mask; /* the types this parameter must be given with */
+};
+
+enum stmt_kind {
+    STMT_CAMERA,
+    STMT_FILM,
+    STMT_RENDER,
+    STMT_MATERIAL,
+    STMT_MESH,
+    STMT_SPHERE,
+    STMT_QUAD,
+    STMT_PLANE,
+    STMT_LIGHT,
+    STMT_SKY,
+    STMT_COUNT
+};
+
+struct stmt_spec {
+    const char *keyword;
+    bool is_once;                          /* may appear at most once */
+    const char *types[4];                  /* words of the 'type' parameter; none: no 'type' */
+    struct param_spec params[MAX_PARAMS];  /* in the order the reference lists them */
+};
+
+/* type bits: material */
+#define T_DIFFUSE 1u
+#define T_MIRROR 2u
+#define T_DIELECTRIC 4u
+/* type bits: sky */
+#define T_CONSTANT 1u
+#define T_GRADIENT 2u
+
+static const struct stmt_spec stmt_specs[STMT_COUNT] = {
+    [STMT_CAMERA] = {"camera", true, {NULL}, {
+        {"eye", VAL_VEC3, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+        {"look-at", VAL_VEC3, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+        {"up", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
+        {"fov", VAL_NUMBER, RANGE_FOV, ALL_TYPES, ALL_TYPES},
+        {"aperture", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
+        {"focus-dist", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
+    }},
+    [STMT_FILM] = {"film", true, {NULL}, {
+        {"width", VAL_INT, RANGE_FILM, ALL_TYPES, ALL_TYPES},
+        {"height", VAL_INT, RANGE_FILM, ALL_TYPES, ALL_TYPES},
+    }},
+    [STMT_RENDER] = {"render", true, {NULL}, {
+        {"spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
+        {"max-depth", VAL_DEPTH, RANGE_ANY, ALL_TYPES, 0},
+    }},
+    [STMT_MATERIAL] = {"material", false, {"diffuse", "mirror", "dielectric", NULL}, {
+        {"name", VAL_NAME, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+        {"type", VAL_TYPE, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+        {"albedo", VAL_VEC3, RANGE_UNIT, T_DIFFUSE, T_DIFFUSE},
+        {"specular", VAL_VEC3, RANGE_UNIT, T_MIRROR | T_DIELECTRIC, 0},
+        {"ior", VAL_NUMBER, RANGE_POSITIVE, T_DIELECTRIC, 0},
+        {"emission", VAL_VEC3, RANGE_NONNEG, ALL_TYPES, 0},
+        {"two-sided", VAL_BOOL, RANGE_ANY, ALL_TYPES, 0},
+    }},
+    [STMT_MESH] = {"mesh", false, {NULL}, {
+        {"file", VAL_PATH, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+        {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, 0},
+        {"translate", VAL_VEC3, RANGE_ANY, ALL_TYPES, 0},
+        {"rotate", VAL_ROTATION, RANGE_ANY, ALL_TYPES, 0},
+        {"scale", VAL_SCALE, RANGE_NONZERO, ALL_TYPES, 0},
+    }},
+    [STMT_SPHERE] = {"sphere", false, {NULL}, {
+        {"center", VAL_VEC3, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+        {"radius", VAL_NUMBER, RANGE_POSITIVE, ALL_TYPES, ALL_TYPES},
+        {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+        {"translate", VAL_VEC3, RANGE_ANY, ALL_TYPES, 0},
+        {"scale", VAL_SCALE, RANGE_NONZERO, ALL_TYPES, 0},
+    }},
+    [STMT_QUAD] = {"quad", false, {NULL}, {
+        {"corner", VAL_VEC3, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+        {"edge1", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
+        {"edge2", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
+        {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+        {"translate", VAL_VEC3, RANGE_ANY, ALL_TYPES, 0},
+        {"rotate", VAL_ROTATION, RANGE_ANY, ALL_TYPES, 0},
+        {"scale", VAL_SCALE, RANGE_NONZERO, ALL_TYPES, 0},
+    }},
+    [STMT_PLANE] = {"plane", false, {NULL}, {
+        {"point", VAL_VEC3, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+        {"normal", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
+        {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+    }},
+    [STMT_LIGHT] = {"light", false, {"point", NULL}, {
+        {"type", VAL_TYPE, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+        {"position", VAL_VEC3, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+        {"intensity", VAL_VEC3, RANGE_NONNEG, ALL_TYPES, ALL_TYPES},
+    }},
+    [STMT_SKY] = {"sky", true, {"constant", "gradient", NULL}, {
+        {"type", VAL_TYPE, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+        {"radiance", VAL_VEC3, RANGE_NONNEG, T_CONSTANT, T_CONSTANT},
+        {"horizon", VAL_VEC3, RANGE_NONNEG, T_GRADIENT, T_GRADIENT},
+        {"zenith", VAL_VEC3, RANGE_NONNEG, T_GRADIENT, T_GRADIENT},
+    }},
+};
+
+/* One parameter of the statement being read; key == NULL when the line does not give it. */
+struct param {
+    const char *key;
+    const char *text; /* the value as written */
+    int key_col;      /* 1-based byte columns */
+    int val_col;
+    float f[4];       /* the numbers of VAL_NUMBER, VAL_VEC3, VAL_ROTATION, VAL_SCALE */
+    int n_f;          /* how many numbers were written */
+    uint32_t u;       /* VAL_INT, VAL_DEPTH; type index; material index of VAL_MATERIAL */
+    bool b;           /* VAL_BOOL */
+};
+
+struct stmt {
+    enum stmt_kind kind;
+    const struct stmt_spec *spec;
+    int kw_col;
+    uint32_t type_idx;               /* index into spec->types; 0 without types */
+    struct param p[MAX_PARAMS];      /* parallel to spec->params */
+};
+
+struct parser {
+    const char *path;  /* the scene path as given, for messages */
+    char *dir;         /* the scene file's folder with its trailing '/', or "" */
+    struct scene *scene;
+    struct mcpt_error *err;
+    int line;          /* 1-based line being read */
+    int seen_line[STMT_COUNT];      /* line of the first statement of each kind, 0 = none */
+    int *mat_def_line; /* per material: the scene-file line defining it, 0 = not referable */
+    int64_t default_mat_idx;        /* the meshes' "default" material, -1 until needed */
+    struct light *points;           /* point lights, in file order */
+    uint32_t n_points;
+    uint32_t cap_materials, cap_def_lines, cap_positions, cap_normals, cap_uvs, cap_tris;
+    uint32_t cap_spheres, cap_quads, cap_planes, cap_points;
+};
+
+/* ---- errors ------------------------------------------------------------------------------- */
+
+/* Fills the error at (current line, col) and returns false. */
+static bool fail(struct parser *ps, int col, const char *fmt, ...)
+{
+    char msg[sizeof ps->err->msg];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    mcpt_error_set(ps->err, ps->path, ps->line, col, "%s", msg);
+    return false;
+}
+
+/* User text for a message, cut to SHOW_BYTES with "..." so a long word cannot crowd out the
+ * rest of the message.  out must hold SHOW_BYTES + 4 bytes. */
+static const char *show(const char *s, char *out)
+{
+    size_t n = strlen(s);
+    if (n <= SHOW_BYTES)
+        return s;
+    memcpy(out, s, SHOW_BYTES);
+    memcpy(out + SHOW_BYTES, "...", 4);
+    return out;
+}
+
+/* "a, b, c": the statement keywords, or the parameters a statement of type bit type_bit takes. */
+static void list_words(char *out, size_t out_bytes, const struct stmt_spec *spec,
+                       unsigned type_bit)
+{
+    size_t used = 0;
+    out[0] = '\0';
+    for (int i = 0; i < (spec ? MAX_PARAMS : STMT_COUNT); i++) {
+        const char *w;
+        if (spec) {
+            w = spec->params[i].key;
+            if (!w || !(spec->params[i].allowed_mask & type_bit))
+                continue;
+        } else {
+            w = stmt_specs[i].keyword;
+        }
+        int n = snprintf(out + used, out_bytes - used, "%s%s", used ? ", " : "", w);
+        if (n < 0 || (size_t)n >= out_bytes - used)
+            return;
+        used += (size_t)n;
+    }
+}
+
+/* ---- memory ------------------------------------------------------------------------------- */
+
+/* Returns arr grown to hold at least need >= 1 elements of elem_bytes (arr itself when *cap
+ * already does).  On overflow or out of memory: frees arr, fills the error, returns NULL.
+ * Capacity doubles, so n appends cost O(n). */
+static void *grow(struct parser *ps, void *arr, uint32_t *cap, uint64_t need, size_t elem_bytes)
+{
+    assert(need >= 1);
+    if (need <= *cap)
+        return arr;
+    uint64_t new_cap = *cap ? *cap : 8;
+    while (new_cap < need)
+        new_cap *= 2;
+    if (new_cap > UINT32_MAX)
+        new_cap = UINT32_MAX;
+    void *p = NULL;
+    if (need > new_cap || new_cap > SIZE_MAX / elem_bytes)
+        fail(ps, 0, "expected at most %u elements of %zu bytes, got %llu", UINT32_MAX, elem_bytes,
+             (unsigned long long)need);
+    else if (!(p = realloc(arr, (size_t)new_cap * elem_bytes)))
+        fail(ps, 0, "expected %llu bytes of memory, got an allocation failure",
+             (unsigned long long)new_cap * elem_bytes);
+    if (!p) {
+        free(arr);
+        *cap = 0;
+        return NULL;
+    }
+    *cap = (uint32_t)new_cap;
+    return p;
+}
+
+/* Grows the array arr (an lvalue) of capacity cap; false (array freed, error filled) on failure. */
+#define RESERVE(ps, arr, cap, need)                                                              \
+    (((arr) = grow((ps), (arr), &(cap), (need), sizeof *(arr))) != NULL)
+
+/* Appends m to the material table; def_line > 0 makes it referable by name. */
+static bool add_material(struct parser *ps, const struct material *m, int def_line)
+{
+    struct scene *sc = ps->scene;
+    uint64_t need = (uint64_t)sc->n_materials + 1;
+    if (!RESERVE(ps, sc->materials, ps->cap_materials, need) ||
+        !RESERVE(ps, ps->mat_def_line, ps->cap_def_lines, need))
+        return false;
+    ps->mat_def_line[sc->n_materials] = def_line;
+    sc->materials[sc->n_materials++] = *m;
+    return true;
+}
+
+/* ---- values ------------------------------------------------------------------------------- */
+
+enum number_status { NUMBER_OK, NUMBER_SYNTAX, NUMBER_NONFINITE };
+
+static bool is_digit(char c) { return c >= '0' && c <= '9'; }
+
+/* Case-insensitive: does s start with the lower-case word w? */
+static bool starts_with_word(const char *s, size_t len, const char *w)
+{
+    size_t n = strlen(w);
+    if (len < n)
+        return false;
+    for (size_t i = 0; i < n; i++)
+        if ((s[i] | 0x20) != w[i])
+            return false;
+    return true;
+}
+
+/* Reads the decimal number s[0..len): [+-] (digits [. digits] | . digits) [e [+-] digits].
+ * NaN, infinities and values beyond float range are NUMBER_NONFINITE; hex floats are syntax
+ * errors. */
+static enum number_status parse_number(const char *s, size_t len, float *out)
+{
+    size_t i = 0;
+    if (i < len && (s[i] == '+' || s[i] == '-'))
+        i++;
+    if (starts_with_word(s + i, len - i, "nan") || starts_with_word(s + i, len - i, "inf"))
+        return NUMBER_NONFINITE;
+    size_t n_digits = 0;
+    while (i < len && is_digit(s[i]))
+        i++, n_digits++;
+    if (i < len && s[i] == '.') {
+        i++;
+        while (i < len && is_digit(s[i]))
+            i++, n_digits++;
+    }
+    if (n_digits == 0)
+        return NUMBER_SYNTAX;
+    if (i < len && (s[i] == 'e' || s[i] == 'E')) {
+        i++;
+        if (i < len && (s[i] == '+' || s[i] == '-'))
+            i++;
+        if (i == len || !is_digit(s[i]))
+            return NUMBER_SYNTAX;
+        while (i < len && is_digit(s[i]))
+            i++;
+    }
+    if (i != len)
+        return NUMBER_SYNTAX;
+    char *end;
+    float f = strtof(s, &end); /* correctly rounded; the checked syntax is a subset of strtof's,
+                                  so it stops at len */
+    assert(end == s + len);
+    if (!isfinite(f))
+        return NUMBER_NONFINITE;
+    *out = f;
+    return NUMBER_OK;
+}
+
+/* Reads [+-]digits; *is_negative is set for a '-' sign with a nonzero value.  Magnitudes above
+ * UINT32_MAX come back as UINT32_MAX + 1. */
+static bool parse_integer(const char *s, uint64_t *magnitude, bool *is_negative)
+{
+    bool minus = false;
+    if (*s == '+' || *s == '-')
+        minus = *s++ == '-';
+    if (!is_digit(*s))
+        return false;
+    uint64_t v = 0;
+    for (; is_digit(*s); s++)
+        if (v <= UINT32_MAX)
+            v = v * 10 + (uint64_t)(*s - '0');
+    if (*s)
+        return false;
+    *magnitude = v > UINT32_MAX ? (uint64_t)UINT32_MAX + 1 : v;
+    *is_negative = minus && v != 0;
+    return true;
+}
+
+/* Material names: letters, digits, '_', '-', '.'; so the "<objfile>:<mtlname>" names of MTL
+ * materials can never be written in a scene file. */
+static bool parse_name(struct parser *ps, const struct param *p)
+{
+    char buf[SHOW_BYTES + 4];
+    size_t n = strlen(p->text);
+    for (size_t i = 0; i < n; i++) {
+        char c = p->text[i];
+        bool ok = is_digit(c) || (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || c == '_' ||
+                  c == '-' || c == '.';
+        if (!ok)
+            return fail(ps, p->val_col, "expected a material name of letters, digits, '_', '-' "
+                                        "and '.', got '%s'", show(p->text, buf));
+    }
+    if (n >= sizeof ps->scene->materials[0].name)
+        return fail(ps, p->val_col, "expected a material name of at most %zu bytes, got %zu",
+                    sizeof ps->scene->materials[0].name - 1, n);
+    return true;
+}
+
+/* The referable material named name, or -1. */
+static int64_t find_material(const struct parser *ps, const char *name)
+{
+    for (uint32_t i = 0; i < ps->scene->n_materials; i++)
+        if (ps->mat_def_line[i] && strcmp(ps->scene->materials[i].name, name) == 0)
+            return i;
+    return -1;
+}
+
+/* Checks the numbers of p against its range. */
+static bool check_range(struct parser *ps, const struct param_spec *sp, const struct param *p)
+{
+    char buf[SHOW_BYTES + 4];
+    const char *v = show(p->text, buf);
+    bool all_nonneg = true, all_unit = true, any_zero = false, all_zero = true;
+    for (int i = 0; i < p->n_f; i++) {
+        all_nonneg &= p->f[i] >= 0.0f;
+        all_unit &= p->f[i] >= 0.0f && p->f[i] <= 1.0f;
+        any_zero |= p->f[i] == 0.0f;
+        all_zero &= p->f[i] == 0.0f;
+    }
+    bool is_vector = sp->kind != VAL_NUMBER;
+    switch (sp->range) {
+    case RANGE_POSITIVE:
+        if (!(p->f[0] > 0.0f))
+            return fail(ps, p->val_col, "expected '%s' > 0, got %s", sp->key, v);
+        break;
+    case RANGE_NONNEG:
+        if (!all_nonneg)
+            return fail(ps, p->val_col, "expected '%s'%s >= 0, got %s", sp->key,
+                        is_vector ? " components" : "", v);
+        break;
+    case RANGE_UNIT:
+        if (!all_unit)
+            return fail(ps, p->val_col, "expected '%s' components in [0, 1], got %s", sp->key, v);
+        break;
+    case RANGE_NONZERO:
+        if (sp->kind == VAL_SCALE && any_zero)
+            return fail(ps, p->val_col, "expected nonzero '%s' components, got %s", sp->key, v);
+        if (sp->kind == VAL_VEC3 && all_zero)
+            return fail(ps, p->val_col, "expected a nonzero '%s', got %s", sp->key, v);
+        break;
+    case RANGE_FOV:
+        if (!(p->f[0] > 0.0f && p->f[0] < 180.0f))
+            return fail(ps, p->val_col, "expected '%s' in (0, 180) degrees, got %s", sp->key, v);
+        break;
+    default:
+        break;
+    }
+    return true;
+}
+
+/* Reads p->text as the numbers of a VAL_NUMBER, VAL_VEC3, VAL_ROTATION or VAL_SCALE. */
+static bool parse_numbers(struct parser *ps, const struct param_spec *sp, struct param *p)
+{
+    char buf[SHOW_BYTES + 4];
+    const char *v = show(p->text, buf);
+    const char *what = sp->kind == VAL_NUMBER     ? "a number"
+                       : sp->kind == VAL_VEC3     ? "3 comma-separated numbers"
+                       : sp->kind == VAL_ROTATION ? "4 comma-separated numbers (axis x,y,z, "
+                                                    "angle in degrees)"
+                                                  : "1 or 3 comma-separated numbers";
+    int n_commas = 0;
+    for (const char *c = p->text; *c; c++)
+        n_commas += *c == ',';
+    int n = n_commas + 1;
+    bool arity_ok = sp->kind == VAL_NUMBER     ? n == 1
+                    : sp->kind == VAL_VEC3     ? n == 3
+                    : sp->kind == VAL_ROTATION ? n == 4
+                                               : n == 1 || n == 3;
+    if (!arity_ok)
+        return fail(ps, p->val_col, "expected %s for '%s', got '%s'", what, sp->key, v);
+    const char *s = p->text;
+    for (int i = 0; i < n; i++) {
+        const char *end = strchr(s, ',');
+        size_t len = end ? (size_t)(end - s) : strlen(s);
+        enum number_status st = parse_number(s, len, &p->f[i]);
+        if (st == NUMBER_SYNTAX)
+            return fail(ps, p->val_col, "expected %s for '%s', got '%s'", what, sp->key, v);
+        if (st == NUMBER_NONFINITE)
+            return fail(ps, p->val_col, "expected %s for '%s', got '%s'",
+                        n == 1 ? "a finite number" : "finite numbers", sp->key, v);
+        s += len + 1;
+    }
+    p->n_f = n;
+    if (sp->kind == VAL_SCALE && n == 1)
+        p->f[1] = p->f[2] = p->f[0];
+    if (sp->kind == VAL_ROTATION && p->f[0] == 0.0f && p->f[1] == 0.0f && p->f[2] == 0.0f)
+        return fail(ps, p->val_col, "expected a nonzero axis for '%s', got %s", sp->key, v);
+    return check_range(ps, sp, p);
+}
+
+/* Reads and checks the value of parameter p (anything but the type, read earlier). */
+static bool parse_value(struct parser *ps, const struct param_spec *sp, struct param *p)
+{
+    char buf[SHOW_BYTES + 4];
+    const char *v = show(p->text, buf);
+    uint64_t u;
+    bool is_negative;
+    switch (sp->kind) {
+    case VAL_NUMBER:
+    case VAL_VEC3:
+    case VAL_ROTATION:
+    case VAL_SCALE:
+        return parse_numbers(ps, sp, p);
+    case VAL_INT: {
+        if (!parse_integer(p->text, &u, &is_negative))
+            return fail(ps, p->val_col, "expected an integer for '%s', got '%s'", sp->key, v);
+        uint64_t hi = sp->range == RANGE_FILM ? 65535 : UINT32_MAX;
+        if (is_negative || u < 1 || u > hi)
+            return fail(ps, p->val_col, "expected '%s' in 1..%llu, got %s", sp->key,
+                        (unsigned long long)hi, v);
+        p->u = (uint32_t)u;
+        return true;
+    }
+    case VAL_DEPTH:
+        if (strcmp(p->text, "inf") == 0) {
+            p->u = UINT32_MAX;
+            return true;
+        }
+        if (!parse_integer(p->text, &u, &is_negative))
+            return fail(ps, p->val_col, "expected an integer or 'inf' for '%s', got '%s'",
+                        sp->key, v);
+        if (is_negative || u > UINT32_MAX)
+            return fail(ps, p->val_col, "expected '%s' in 0..%u or 'inf', got %s", sp->key,
+                        UINT32_MAX, v);
+        p->u = (uint32_t)u;
+        return true;
+    case VAL_BOOL:
+        if (strcmp(p->text, "true") != 0 && strcmp(p->text, "false") != 0)
+            return fail(ps, p->val_col, "expected true or false for '%s', got '%s'", sp->key, v);
+        p->b = p->text[0] == 't';
+        return true;
+    case VAL_NAME: {
+        if (!parse_name(ps, p))
+            return false;
+        int64_t idx = find_material(ps, p->text);
+        if (idx >= 0)
+            return fail(ps, p->val_col, "expected a new material name, got '%s' (defined on "
+                                        "line %d)", v, ps->mat_def_line[idx]);
+        return true;
+    }
+    case VAL_MATERIAL: {
+        if (!parse_name(ps, p))
+            return false;
+        int64_t idx = find_material(ps, p->text);
+        if (idx < 0)
+            return fail(ps, p->val_col, "expected a material defined on an earlier line, got "
+                                        "'%s'", v);
+        p->u = (uint32_t)idx;
+        return true;
+    }
+    case VAL_PATH:
+    case VAL_TYPE:
+        return true;
+    }
+    return true;
+}
+
+/* ---- the line reader and tokenizer ---------------------------------------------------------- */
+
+/* Reads one line into buf (SCENE_MAX_LINE_BYTES + 1 bytes), without its "\n" or "\r\n", and
+ * NUL-terminates it.  Returns 1 for a line, 0 at the end of the file, -1 on an error. */
+static int read_line(struct parser *ps, FILE *f, char *buf)
+{
+    size_t len = 0;
+    bool got_any = false;
+    int c;
+    while ((c = getc(f)) != EOF && c != '\n') {
+        got_any = true;
+        if (c == '\r') { /* CRLF (or a CR at the end of the file) ends the line */
+            int next = getc(f);
+            if (next == '\n' || next == EOF)
+                break;
+        }
+        bool is_text = c >= 0x20 ? c != 0x7f : c == '\t';
+        if (!is_text) {
+            fail(ps, (int)len + 1, "expected text, got the byte 0x%02x", (unsigned)c);
+            return -1;
+        }
+        if (len == SCENE_MAX_LINE_BYTES) {
+            fail(ps, SCENE_MAX_LINE_BYTES + 1, "expected a line of at most %d bytes, got a "
+                                               "longer one", SCENE_MAX_LINE_BYTES);
+            return -1;
+        }
+        buf[len++] = (char)c;
+    }
+    if (ferror(f)) {
+        mcpt_error_set(ps->err, ps->path, 0, 0, "expected a readable file, got '%s'",
+                       strerror(errno));
+        return -1;
+    }
+    if (c == EOF && !got_any)
+        return 0;
+    buf[len] = '\0';
+    return 1;
+}
+
+/* The next word at *cur, NUL-terminated in place, or NULL at the end of the line or at a word
+ * starting with '#' (a comment runs to the end of the line). */
+static char *next_word(char **cur)
+{
+    char *s = *cur;
+    while (*s == ' ' || *s == '\t')
+        s++;
+    if (*s == '\0' || *s == '#')
+        return NULL;
+    char *w = s;
+    while (*s && *s != ' ' && *s != '\t')
+        s++;
+    if (*s)
+        *s++ = '\0';
+    *cur = s;
+    return w;
+}
+
+/* ---- transforms --------------------------------------------------------------------------- */
+
+/* p' = L p + t with L = R S: scale, then rotate, then translate.  Normals map by the inverse
+ * transpose, (R S)^-T = R S^-1 since R is orthonormal (PBRT 4e, ch. 3, "Applying
+ * Transformations").  Computed in double, rounded once to float. */
+struct xform {
+    double L[3][3]; /* linear part R S */
+    double N[3][3]; /* normal matrix R S^-1 */
+    double t[3];    /* translation */
+    bool is_mirror; /* det L < 0: the winding is reversed to keep each face's front side */
+};
+
+/* sin and cos of an angle in degrees, exact at multiples of 90 so axis-aligned turns map
+ * coordinates exactly. */
+static void sincos_deg(double deg, double *s, double *c)
+{
+    double r = fmod(deg, 360.0);
+    if (r < 0.0)
+        r += 360.0;
+    if (r == 0.0 || r == 90.0 || r == 180.0 || r == 270.0) {
+        int q = (int)(r / 90.0);
+        const double sin_q[4] = {0.0, 1.0, 0.0, -1.0};
+        *s = sin_q[q];
+        *c = sin_q[(q + 1) % 4];
+        return;
+    }
+    double rad = r * (3.14159265358979323846 / 180.0);
+    *s = sin(rad);
+    *c = cos(rad);
+}
+
+/* Builds the transform from a statement's optional translate, rotate and scale. */
+static void xform_from(struct xform *xf, const struct stmt *st, int i_translate, int i_rotate,
+                       int i_scale)
+{
+    double R[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+    if (i_rotate >= 0 && st->p[i_rotate].key) {
+        /* Rodrigues: R = cos(a) I + sin(a) [k]x + (1 - cos(a)) k k^T, k the unit axis */
+        const float *f = st->p[i_rotate].f;
+        double len = sqrt((double)f[0] * f[0] + (double)f[1] * f[1] + (double)f[2] * f[2]);
+        double k[3] = {f[0] / len, f[1] / len, f[2] / len};
+        double s, c;
+        sincos_deg(f[3], &s, &c);
+        double K[3][3] = {{0, -k[2], k[1]}, {k[2], 0, -k[0]}, {-k[1], k[0], 0}};
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                R[i][j] = (i == j ? c : 0.0) + s * K[i][j] + (1.0 - c) * k[i] * k[j];
+    }
+    double sc[3] = {1, 1, 1};
+    if (i_scale >= 0 && st->p[i_scale].key)
+        for (int j = 0; j < 3; j++)
+            sc[j] = st->p[i_scale].f[j];
+    for (int i = 0; i < 3; i++) {
+        for (int j = 0; j < 3; j++) {
+            xf->L[i][j] = R[i][j] * sc[j];
+            xf->N[i][j] = R[i][j] / sc[j];
+        }
+        xf->t[i] = i_translate >= 0 && st->p[i_translate].key ? st->p[i_translate].f[i] : 0.0;
+    }
+    xf->is_mirror = ((sc[0] < 0) ^ (sc[1] < 0) ^ (sc[2] < 0)) != 0; /* det L = sx sy sz */
+}
+
+static vec3 mat3_apply(const double M[3][3], const double *t, vec3 v)
+{
+    double r[3];
+    for (int i = 0; i < 3; i++)
+        r[i] = M[i][0] * v.x + M[i][1] * v.y + M[i][2] * v.z + (t ? t[i] : 0.0);
+    return v3((float)r[0], (float)r[1], (float)r[2]);
+}
+
+static vec3 xform_point(const struct xform *xf, vec3 p) { return mat3_apply(xf->L, xf->t, p); }
+static vec3 xform_vector(const struct xform *xf, vec3 v) { return mat3_apply(xf->L, NULL, v); }
+
+/* Unit transformed normal; the zero vector when n is zero (or too small to normalise). */
+static vec3 xform_normal(const struct xform *xf, vec3 n)
+{
+    double r[3];
+    for (int i = 0; i < 3; i++)
+        r[i] = xf->N[i][0] * n.x + xf->N[i][1] * n.y + xf->N[i][2] * n.z;
+    double len = sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+    if (!(len > 0.0) || !isfinite(len))
+        return v3(0.0f, 0.0f, 0.0f);
+    return v3((float)(r[0] / len), (float)(r[1] / len), (float)(r[2] / len));
+}
+
+/* ---- statements --------------------------------------------------------------------------- */
+
+/* Index of key in the statement's table (the key must exist: a programming error otherwise). */
+static int param_idx(const struct stmt *st, const char *key)
+{
+    for (int i = 0; i < MAX_PARAMS && st->spec->params[i].key; i++)
+        if (strcmp(st->spec->params[i].key, key) == 0)
+            return i;
+    assert(!"unknown parameter key");
+    return -1;
+}
+
+static const struct param *get(const struct stmt *st, const char *key)
+{
+    return &st->p[param_idx(st, key)];
+}
+
+static vec3 get_vec3(const struct stmt *st, const char *key, vec3 dflt)
+{
+    const struct param *p = get(st, key);
+    return p->key ? v3(p->f[0], p->f[1], p->f[2]) : dflt;
+}
+
+static float get_number(const struct stmt *st, const char *key, float dflt)
+{
+    const struct param *p = get(st, key);
+    return p->key ? p->f[0] : dflt;
+}
+
+/* Are a and b parallel (or either zero)?  |a x b| <= PARALLEL_SIN |a| |b|, in double. */
+static bool is_parallel(const double a[3], const double b[3])
+{
+    double cx = a[1] * b[2] - a[2] * b[1];
+    double cy = a[2] * b[0] - a[0] * b[2];
+    double cz = a[0] * b[1] - a[1] * b[0];
+    double cross2 = cx * cx + cy * cy + cz * cz;
+    double a2 = a[0] * a[0] + a[1] * a[1] + a[2] * a[2];
+    double b2 = b[0] * b[0] + b[1] * b[1] + b[2] * b[2];
+    return cross2 <= PARALLEL_SIN * PARALLEL_SIN * a2 * b2;
+}
+
+static bool is_emissive(const struct material *m) { return v3_max_comp(m->Le) > 0.0f; }
+
+static bool do_camera(struct parser *ps, const struct stmt *st)
+{
+    char buf[SHOW_BYTES + 4];
+    struct camera_params *c = &ps->scene->camera;
+    c->eye = get_vec3(st, "eye", v3_splat(0));
+    c->look_at = get_vec3(st, "look-at", v3_splat(0));
+    c->up = get_vec3(st, "up", v3_splat(0));
+    c->fov_deg = get_number(st, "fov", 0);
+    c->aperture = get_number(st, "aperture", 0.0f);
+    c->focus_dist = get_number(st, "focus-dist", 0.0f);
+    const struct param *look_at = get(st, "look-at");
+    const struct param *up = get(st, "up");
+    if (c->eye.x == c->look_at.x && c->eye.y == c->look_at.y && c->eye.z == c->look_at.z)
+        return fail(ps, look_at->val_col, "expected 'look-at' different from 'eye', got %s for "
+                                          "both", show(look_at->text, buf));
+    double dir[3] = {(double)c->look_at.x - c->eye.x, (double)c->look_at.y - c->eye.y,
+                     (double)c->look_at.z - c->eye.z};
+    double up_d[3] = {c->up.x, c->up.y, c->up.z};
+    if (is_parallel(dir, up_d))
+        return fail(ps, up->val_col, "expected 'up' not parallel to the view direction, got %s",
+                    show(up->text, buf));
+    return true;
+}
+
+/* The MTL record om as an mcpt material (docs/scene-format.md, "MTL materials"). */
+static struct material material_from_mtl(const struct obj_material *om, const char *obj_name)
+{
+    struct material m = {0};
+    /* "<objfile>:<mtlname>", cut to fit: it only labels messages */
+    const char *parts[3] = {obj_name, ":", om->name};
+    size_t used = 0;
+    for (int i = 0; i < 3; i++)
+        for (const char *c = parts[i]; *c && used + 1 < sizeof m.name; c++)
+            m.name[used++] = *c;
+    vec3 zero = v3_splat(0.0f), one = v3_splat(1.0f);
+    switch (om->illum) {
+    case 5:
+        m.kind = MAT_MIRROR;
+        m.specular = v3_min(v3_max(om->Ks, zero), one);
+        m.ior = 1.0f;
+        break;
+    case 4:
+    case 6:
+    case 7:
+    case 9:
+        m.kind = MAT_DIELECTRIC;
+        m.specular = v3_min(v3_max(om->Tf, zero), one);
+        m.ior = om->Ni > 0.0f && om->Ni != 1.0f ? om->Ni : 1.5f; /* 1 or less: crown glass */
+        break;
+    default:
+        m.kind = MAT_DIFFUSE;
+        m.albedo = v3_min(v3_max(om->Kd, zero), one);
+        m.ior = 1.0f;
+        break;
+    }
+    m.Le = v3_max(om->Ke, zero);
+    return m;
+}
+
+/* Joins the scene folder and a path from the scene file; absolute paths stay as they are. */
+static char *resolve_path(const char *dir, const char *file)
+{
+    if (file[0] == '/')
+        dir = "";
+    size_t n_dir = strlen(dir), n_file = strlen(file);
+    char *p = malloc(n_dir + n_file + 1);
+    if (p) {
+        memcpy(p, dir, n_dir);
+        memcpy(p + n_dir, file, n_file + 1);
+    }
+    return p;
+}
+
+static bool do_mesh(struct parser *ps, const struct stmt *st)
+{
+    struct scene *sc = ps->scene;
+    const struct param *file = get(st, "file");
+    const struct param *mat = get(st, "material");
+    struct obj_mesh mesh = {0};
+    bool ok = false;
+    char buf[SHOW_BYTES + 4];
+
+    char *full = resolve_path(ps->dir, file->text);
+    if (!full) {
+        fail(ps, file->val_col, "expected memory for a path, got an allocation failure");
+        goto done;
+    }
+    if (!obj_load(full, &mesh, ps->err)) /* its message names the OBJ/MTL file and line */
+        goto done;
+    if (mesh.n_tris == 0) {
+        fail(ps, file->val_col, "expected at least one face in '%s', got none",
+             show(file->text, buf));
+        goto done;
+    }
+    if ((uint64_t)sc->n_positions + mesh.n_positions > UINT32_MAX ||
+        (uint64_t)sc->n_normals + mesh.n_normals > INT32_MAX ||
+        (uint64_t)sc->n_uvs + mesh.n_uvs > INT32_MAX) {
+        fail(ps, file->val_col, "expected at most %u vertices and %d normals and uvs in the "
+                                "scene, got more with '%s'", UINT32_MAX, INT32_MAX,
+             show(file->text, buf));
+        goto done;
+    }
+    if (!RESERVE(ps, sc->positions, ps->cap_positions,
+                 (uint64_t)sc->n_positions + mesh.n_positions) ||
+        !RESERVE(ps, sc->tris, ps->cap_tris, (uint64_t)sc->n_tris + mesh.n_tris) ||
+        (mesh.n_normals > 0 &&
+         !RESERVE(ps, sc->normals, ps->cap_normals, (uint64_t)sc->n_normals + mesh.n_normals)) ||
+        (mesh.n_uvs > 0 && !RESERVE(ps, sc->uvs, ps->cap_uvs, (uint64_t)sc->n_uvs + mesh.n_uvs)))
+        goto done;
+
+    /* materials: the one named on the line, or the MTL records plus "default" if needed */
+    uint32_t mtl_base = sc->n_materials;
+    if (!mat->key) {
+        const char *slash = strrchr(file->text, '/');
+        const char *obj_name = slash ? slash + 1 : file->text;
+        for (uint32_t i = 0; i < mesh.n_materials; i++) {
+            struct material m = material_from_mtl(&mesh.materials[i], obj_name);
+            if (!add_material(ps, &m, 0))
+                goto done;
+        }
+        bool needs_default = false;
+        for (uint32_t i = 0; i < mesh.n_tris; i++)
+            needs_default |= mesh.tris[i].mat_idx < 0;
+        if (needs_default && ps->default_mat_idx < 0) {
+            struct material m = {.name = "default", .kind = MAT_DIFFUSE,
+                                 .albedo = v3_splat(0.8f), .ior = 1.0f};
+            ps->default_mat_idx = sc->n_materials;
+            if (!add_material(ps, &m, 0))
+                goto done;
+        }
+    }
+
+    /* vertices, normals and uvs, transformed into world space */
+    struct xform xf;
+    xform_from(&xf, st, param_idx(st, "translate"), param_idx(st, "rotate"),
+               param_idx(st, "scale"));
+    for (uint32_t i = 0; i < mesh.n_positions; i++) {
+        vec3 p = xform_point(&xf, mesh.positions[i]);
+        if (!v3_is_finite(p)) {
+            fail(ps, st->kw_col, "expected vertices of '%s' within float range after the "
+                                 "transform, got an overflow", show(file->text, buf));
+            goto done;
+        }
+        sc->positions[sc->n_positions + i] = p;
+    }
+    for (uint32_t i = 0; i < mesh.n_normals; i++)
+        sc->normals[sc->n_normals + i] = xform_normal(&xf, mesh.normals[i]);
+    if (mesh.n_uvs > 0)
+        memcpy(sc->uvs + sc->n_uvs, mesh.uvs, (size_t)mesh.n_uvs * sizeof *mesh.uvs);
+
+    /* triangles; a mirroring transform swaps two corners to keep each face's front side */
+    const int order[3] = {0, xf.is_mirror ? 2 : 1, xf.is_mirror ? 1 : 2};
+    for (uint32_t i = 0; i < mesh.n_tris; i++) {
+        const struct obj_tri *t = &mesh.tris[i];
+        struct scene_tri *out = &sc->tris[sc->n_tris + i];
+        bool has_vn = true, has_vt = true;
+        for (int k = 0; k < 3; k++) {
+            assert(t->v[k] < mesh.n_positions);
+            has_vn &= t->vn[k] >= 0 &&
+                      !v3_is_zero(sc->normals[sc->n_normals + (uint32_t)t->vn[k]]);
+            has_vt &= t->vt[k] >= 0;
+        }
+        for (int k = 0; k < 3; k++) {
+            int j = order[k];
+            out->v[k] = sc->n_positions + t->v[j];
+            out->vn[k] = has_vn ? (int32_t)sc->n_normals + t->vn[j] : -1;
+            out->vt[k] = has_vt ? (int32_t)sc->n_uvs + t->vt[j] : -1;
+        }
+        assert(t->mat_idx < (int32_t)mesh.n_materials);
+        out->mat_idx = mat->key            ? mat->u
+                       : t->mat_idx >= 0   ? mtl_base + (uint32_t)t->mat_idx
+                                           : (uint32_t)ps->default_mat_idx;
+    }
+    sc->n_positions += mesh.n_positions;
+    sc->n_normals += mesh.n_normals;
+    sc->n_uvs += mesh.n_uvs;
+    sc->n_tris += mesh.n_tris;
+    ok = true;
+done:
+    obj_free(&mesh);
+    free(full);
+    return ok;
+}
+
+static bool do_sphere(struct parser *ps, const struct stmt *st)
+{
+    char buf[SHOW_BYTES + 4];
+    const struct param *scale = get(st, "scale");
+    if (scale->key && (scale->f[1] != scale->f[0] || scale->f[2] != scale->f[0]))
+        return fail(ps, scale->val_col, "expected a uniform 'scale' for 'sphere', got %s",
+                    show(scale->text, buf));
+    struct xform xf;
+    xform_from(&xf, st, param_idx(st, "translate"), -1, param_idx(st, "scale"));
+    struct sphere s = {
+        .center = xform_point(&xf, get_vec3(st, "center", v3_splat(0))),
+        .radius = get_number(st, "radius", 0) * fabsf(scale->key ? scale->f[0] : 1.0f),
+        .mat_idx = get(st, "material")->u,
+    };
+    if (!v3_is_finite(s.center) || !isfinite(s.radius) || !(s.radius > 0.0f))
+        return fail(ps, st->kw_col, "expected a sphere within float range after the transform, "
+                                    "got an overflow");
+    struct scene *sc = ps->scene;
+    if (!RESERVE(ps, sc->spheres, ps->cap_spheres, (uint64_t)sc->n_spheres + 1))
+        return false;
+    sc->spheres[sc->n_spheres++] = s;
+    return true;
+}
+
+static bool do_quad(struct parser *ps, const struct stmt *st)
+{
+    char buf[SHOW_BYTES + 4];
+    vec3 e1 = get_vec3(st, "edge1", v3_splat(0)), e2 = get_vec3(st, "edge2", v3_splat(0));
+    const struct param *edge2 = get(st, "edge2");
+    double e1_d[3] = {e1.x, e1.y, e1.z}, e2_d[3] = {e2.x, e2.y, e2.z};
+    if (is_parallel(e1_d, e2_d))
+        return fail(ps, edge2->val_col, "expected 'edge2' not parallel to 'edge1', got %s",
+                    show(edge2->text, buf));
+    struct xform xf;
+    xform_from(&xf, st, param_idx(st, "translate"), param_idx(st, "rotate"),
+               param_idx(st, "scale"));
+    /* a mirroring transform swaps the edges so e1 x e2 stays the transformed front normal */
+    struct quad q = {
+        .corner = xform_point(&xf, get_vec3(st, "corner", v3_splat(0))),
+        .e1 = xform_vector(&xf, xf.is_mirror ? e2 : e1),
+        .e2 = xform_vector(&xf, xf.is_mirror ? e1 : e2),
+        .mat_idx = get(st, "material")->u,
+    };
+    if (!v3_is_finite(q.corner) || !v3_is_finite(q.e1) || !v3_is_finite(q.e2))
+        return fail(ps, st->kw_col, "expected a quad within float range after the transform, "
+                                    "got an overflow");
+    struct scene *sc = ps->scene;
+    if (!RESERVE(ps, sc->quads, ps->cap_quads, (uint64_t)sc->n_quads + 1))
+        return false;
+    sc->quads[sc->n_quads++] = q;
+    return true;
+}
+
+static bool do_plane(struct parser *ps, const struct stmt *st)
+{
+    struct scene *sc = ps->scene;
+    const struct param *mat = get(st, "material");
+    if (is_emissive(&sc->materials[mat->u]))
+        return fail(ps, mat->val_col, "expected a non-emissive material for 'plane' (an "
+                                      "infinite emitter), got '%s'", mat->text);
+    /* normalise in double: a tiny or huge float normal has no float-safe length */
+    vec3 n = get_vec3(st, "normal", v3_splat(0));
+    double len = sqrt((double)n.x * n.x + (double)n.y * n.y + (double)n.z * n.z);
+    struct plane pl = {
+        .point = get_vec3(st, "point", v3_splat(0)),
+        .n = v3((float)(n.x / len), (float)(n.y / len), (float)(n.z / len)),
+        .mat_idx = mat->u,
+    };
+    if (!RESERVE(ps, sc->planes, ps->cap_planes, (uint64_t)sc->n_planes + 1))
+        return false;
+    sc->planes[sc->n_planes++] = pl;
+    return true;
+}
+
+static bool do_material(struct parser *ps, const struct stmt *st)
+{
+    struct material m = {0};
+    snprintf(m.name, sizeof m.name, "%s", get(st, "name")->text); /* length checked */
+    m.Le = get_vec3(st, "emission", v3_splat(0.0f));
+    m.two_sided_emission = get(st, "two-sided")->key && get(st, "two-sided")->b;
+    m.ior = 1.0f;
+    switch (st->type_idx) {
+    case 0:
+        m.kind = MAT_DIFFUSE;
+        m.albedo = get_vec3(st, "albedo", v3_splat(0.0f));
+        break;
+    case 1:
+        m.kind = MAT_MIRROR;
+        m.specular = get_vec3(st, "specular", v3_splat(1.0f));
+        break;
+    default:
+        m.kind = MAT_DIELECTRIC;
+        m.specular = get_vec3(st, "specular", v3_splat(1.0f));
+        m.ior = get_number(st, "ior", 1.5f);
+        break;
+    }
+    return add_material(ps, &m, ps->line);
+}
+
+static bool do_statement(struct parser *ps, const struct stmt *st)
+{
+    struct scene *sc = ps->scene;
+    switch (st->kind) {
+    case STMT_CAMERA:
+        return do_camera(ps, st);
+    case STMT_FILM:
+        sc->width = (int)get(st, "width")->u;
+        sc->height = (int)get(st, "height")->u;
+        return true;
+    case STMT_RENDER:
+        if (get(st, "spp")->key)
+            sc->render.spp = get(st, "spp")->u;
+        if (get(st, "max-depth")->key)
+            sc->render.max_depth = get(st, "max-depth")->u;
+        return true;
+    case STMT_MATERIAL:
+        return do_material(ps, st);
+    case STMT_MESH:
+        return do_mesh(ps, st);
+    case STMT_SPHERE:
+        return do_sphere(ps, st);
+    case STMT_QUAD:
+        return do_quad(ps, st);
+    case STMT_PLANE:
+        return do_plane(ps, st);
+    case STMT_LIGHT: {
+        struct light l = {.kind = LIGHT_POINT, .prim_idx = ps->n_points,
+                          .position = get_vec3(st, "position", v3_splat(0)),
+                          .intensity = get_vec3(st, "intensity", v3_splat(0))};
+        if (!RESERVE(ps, ps->points, ps->cap_points, (uint64_t)ps->n_points + 1))
+            return false;
+        ps->points[ps->n_points++] = l;
+        return true;
+    }
+    case STMT_SKY:
+        sc->sky.kind = st->type_idx == 0 ? SKY_CONSTANT : SKY_GRADIENT;
+        sc->sky.radiance = get_vec3(st, "radiance", v3_splat(0));
+        sc->sky.horizon = get_vec3(st, "horizon", v3_splat(0));
+        sc->sky.zenith = get_vec3(st, "zenith", v3_splat(0));
+        return true;
+    case STMT_COUNT:
+        break;
+    }
+    return true;
+}
+
+/* Reads one line's statement, checked in this order: the keyword; each word's key=value form,
+ * key and uniqueness; the type; each value, left to right; missing parameters; then what
+ * relates parameters to each other (in do_statement). */
+static bool parse_line(struct parser *ps, char *line)
+{
+    char list[160], buf[SHOW_BYTES + 4];
+    char *cur = line;
+    char *kw = next_word(&cur);
+    if (!kw)
+        return true;
+    struct stmt st = {.kw_col = (int)(kw - line) + 1};
+    int kind = 0;
+    while (kind < STMT_COUNT && strcmp(stmt_specs[kind].keyword, kw) != 0)
+        kind++;
+    if (kind == STMT_COUNT) {
+        list_words(list, sizeof list, NULL, 0);
+        return fail(ps, st.kw_col, "expected a statement (%s), got '%s'", list, show(kw, buf));
+    }
+    st.kind = (enum stmt_kind)kind;
+    st.spec = &stmt_specs[kind];
+    if (st.spec->is_once && ps->seen_line[kind])
+        return fail(ps, st.kw_col, "expected at most one '%s' statement, got a second (the "
+                                   "first is on line %d)", kw, ps->seen_line[kind]);
+    ps->seen_line[kind] = ps->line;
+
+    /* every word: key=value, a key of this statement, given once */
+    int order[MAX_PARAMS], n_given = 0;
+    for (char *w; (w = next_word(&cur));) {
+        int col = (int)(w - line) + 1;
+        char *eq = strchr(w, '=');
+        if (!eq)
+            return fail(ps, col, "expected 'key=value', got '%s'", show(w, buf));
+        *eq = '\0';
+        int i = 0;
+        while (i < MAX_PARAMS && st.spec->params[i].key &&
+               strcmp(st.spec->params[i].key, w) != 0)
+            i++;
+        if (i == MAX_PARAMS || !st.spec->params[i].key) {
+            list_words(list, sizeof list, st.spec, ALL_TYPES);
+            return fail(ps, col, "expected a parameter of '%s' (%s), got '%s'", kw, list,
+                        show(w, buf));
+        }
+        if (st.p[i].key)
+            return fail(ps, col, "expected '%s' at most once, got it twice", w);
+        st.p[i] = (struct param){.key = w, .text = eq + 1, .key_col = col,
+                                 .val_col = col + (int)(eq - w) + 1};
+        order[n_given++] = i;
+    }
+
+    /* the type, which decides the other parameters */
+    char stmt_name[48];
+    snprintf(stmt_name, sizeof stmt_name, "%s", kw);
+    unsigned type_bit = 1;
+    if (st.spec->types[0]) {
+        const struct param *t = get(&st, "type");
+        if (!t->key)
+            return fail(ps, st.kw_col, "expected parameter 'type' for '%s', got none", kw);
+        uint32_t ti = 0;
+        while (st.spec->types[ti] && strcmp(st.spec->types[ti], t->text) != 0)
+            ti++;
+        if (!st.spec->types[ti]) {
+            int used = 0;
+            list[0] = '\0';
+            for (int i = 0; st.spec->types[i]; i++)
+                used += snprintf(list + used, sizeof list - (size_t)used, "%s%s", i ? ", " : "",
+                                 st.spec->types[i]);
+            return fail(ps, t->val_col, "expected a %s type (%s), got '%s'", kw, list,
+                        show(t->text, buf));
+        }
+        st.type_idx = ti;
+        type_bit = 1u << ti;
+        snprintf(stmt_name, sizeof stmt_name, "%s type=%s", kw, st.spec->types[ti]);
+    }
+
+    /* each value, left to right */
+    for (int g = 0; g < n_given; g++) {
+        const struct param_spec *sp = &st.spec->params[order[g]];
+        struct param *p = &st.p[order[g]];
+        if (!(sp->allowed_mask & type_bit)) {
+            list_words(list, sizeof list, st.spec, type_bit);
+            return fail(ps, p->key_col, "expected a parameter of '%s' (%s), got '%s'", stmt_name,
+                        list, p->key);
+        }
+        if (p->text[0] == '\0')
+            return fail(ps, p->val_col, "expected a value after '%s=', got nothing", p->key);
+        if (!parse_value(ps, sp, p))
+            return false;
+    }
+
+    /* missing parameters */
+    for (int i = 0; i < MAX_PARAMS && st.spec->params[i].key; i++)
+        if ((st.spec->params[i].required_mask & type_bit) && !st.p[i].key)
+            return fail(ps, st.kw_col, "expected parameter '%s' for '%s', got none",
+                        st.spec->params[i].key, stmt_name);
+    return do_statement(ps, &st);
+}
+
+/* ---- the light list ----------------------------------------------------------------------- */
+
+/* Every emissive triangle of nonzero area, then emissive quads and spheres, then point lights
+ * in file order. */
+static bool build_lights(struct parser *ps)
+{
+    struct scene *sc = ps->scene;
+    uint64_t n_max = (uint64_t)sc->n_tris + sc->n_quads + sc->n_spheres + ps->n_points;
+    if (n_max == 0)
+        return true;
+    if (n_max > UINT32_MAX)
+        return fail(ps, 0, "expected at most %u lights, got %llu", UINT32_MAX,
+                    (unsigned long long)n_max);
+    if ((size_t)n_max > SIZE_MAX / sizeof *sc->lights)
+        return fail(ps, 0, "expected at most %zu lights, got %llu",
+                    SIZE_MAX / sizeof *sc->lights, (unsigned long long)n_max);
+    sc->lights = malloc((size_t)n_max * sizeof *sc->lights);
+    if (!sc->lights)
+        return fail(ps, 0, "expected memory for %llu lights, got an allocation failure",
+                    (unsigned long long)n_max);
+    for (uint32_t i = 0; i < sc->n_tris; i++) {
+        const struct scene_tri *t = &sc->tris[i];
+        vec3 p0 = sc->positions[t->v[0]];
+        vec3 ng = v3_cross(v3_sub(sc->positions[t->v[1]], p0), v3_sub(sc->positions[t->v[2]], p0));
+        if (is_emissive(&sc->materials[t->mat_idx]) && !v3_is_zero(ng))
+            sc->lights[sc->n_lights++] = (struct light){.kind = LIGHT_TRIANGLE, .prim_idx = i};
+    }
+    for (uint32_t i = 0; i < sc->n_quads; i++)
+        if (is_emissive(&sc->materials[sc->quads[i].mat_idx]))
+            sc->lights[sc->n_lights++] = (struct light){.kind = LIGHT_QUAD, .prim_idx = i};
+    for (uint32_t i = 0; i < sc->n_spheres; i++)
+        if (is_emissive(&sc->materials[sc->spheres[i].mat_idx]))
+            sc->lights[sc->n_lights++] = (struct light){.kind = LIGHT_SPHERE, .prim_idx = i};
+    for (uint32_t i = 0; i < ps->n_points; i++)
+        sc->lights[sc->n_lights++] = ps->points[i];
+    return true;
+}
+
+/* ---- public API --------------------------------------------------------------------------- */
+
+bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err)
+{
+    struct mcpt_error err_local;
+    struct parser ps = {.path = path, .scene = scene, .err = err ? err : &err_local,
+                        .default_mat_idx = -1};
+    char *line = NULL;
+    bool ok = false;
+    memset(scene, 0, sizeof *scene);
+    scene->width = 512;
+    scene->height = 512;
+    scene->render = (struct render_settings){.spp = 64, .max_depth = UINT32_MAX};
+
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        mcpt_error_set(ps.err, path, 0, 0, "expected a readable file, got '%s'",
+                       strerror(errno));
+        goto done;
+    }
+    const char *slash = strrchr(path, '/');
+    size_t n_dir = slash ? (size_t)(slash - path) + 1 : 0;
+    ps.dir = malloc(n_dir + 1);
+    line = malloc(SCENE_MAX_LINE_BYTES + 1);
+    if (!ps.dir || !line) {
+        fail(&ps, 0, "expected memory for the line buffer, got an allocation failure");
+        goto done;
+    }
+    memcpy(ps.dir, path, n_dir);
+    ps.dir[n_dir] = '\0';
+
+    for (;;) {
+        if (ps.line == INT32_MAX) {
+            fail(&ps, 0, "expected at most %d lines, got more", INT32_MAX);
+            goto done;
+        }
+        ps.line++;
+        int r = read_line(&ps, f, line);
+        if (r < 0)
+            goto done;
+        if (r == 0)
+            break;
+        if (!parse_line(&ps, line))
+            goto done;
+    }
+    ps.line = 0;
+    if (!ps.seen_line[STMT_CAMERA]) {
+        mcpt_error_set(ps.err, path, 0, 0, "expected a 'camera' statement, got none");
+        goto done;
+    }
+    ok = build_lights(&ps);
+done:
+    if (f)
+        fclose(f);
+    free(line);
+    free(ps.dir);
+    free(ps.mat_def_line);
+    free(ps.points);
+    if (!ok)
+        scene_free(scene);
+    return ok;
+}
+
+void scene_free(struct scene *scene)
+{
+    free(scene->materials);
+    free(scene->positions);
+    free(scene->normals);
+    free(scene->uvs);
+    free(scene->tris);
+    free(scene->spheres);
+    free(scene->quads);
+    free(scene->planes);
+    free(scene->lights);
+    memset(scene, 0, sizeof *scene);
+}

@@ -1,0 +1,1040 @@
+/* bvh_test.c - tests for bvh.c: the binned-SAH BVH (Wald 2007) must return exactly what brute
+ * force returns (same t_hit bits, same prim_idx up to exact ties), on random soups, a closed
+ * icosphere, an axis-aligned flat grid (d_a == 0, origins on slab planes, flat boxes), identical
+ * centroids and zero-area triangles.  The triangle test must be watertight (Woop, Benthin, Wald
+ * 2013, "Watertight Ray/Triangle Intersection"): rays aimed exactly at shared vertices and edges
+ * never escape a closed mesh.  Rays spawned with offset_ray_origin (PBRT 4e, ch. 6, "Robust
+ * Spawned Ray Origins") must not re-hit their own triangle, at scales 1e-4 to 1e4. */
+#include <criterion/criterion.h>
+#include <criterion/logging.h>
+#include <stdlib.h>
+
+#include "bvh.h"
+#include "vec.h"
+
+/* ---- helpers ---------------------------------------------------------------------------------- */
+
+/* splitmix64: a small deterministic stream for test inputs */
+struct rng {
+    uint64_t state;
+};
+
+static uint64_t rng_next(struct rng *r)
+{
+    uint64_t z = (r->state += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+}
+
+/* uniform in [0, 1) */
+static float rng_float(struct rng *r) { return (float)(rng_next(r) >> 40) * 0x1p-24f; }
+
+static float rng_range(struct rng *r, float lo, float hi) { return lo + (hi - lo) * rng_float(r); }
+
+static vec3 rng_in_box(struct rng *r, float lo, float hi)
+{
+    float x = rng_range(r, lo, hi);
+    float y = rng_range(r, lo, hi);
+    float z = rng_range(r, lo, hi);
+    return v3(x, y, z);
+}
+
+/* uniform direction on the unit sphere */
+static vec3 rng_dir(struct rng *r)
+{
+    float z = 1.0f - 2.0f * rng_float(r);
+    float phi = 2.0f * MCPT_PI * rng_float(r);
+    float s = sqrtf(fmaxf(0.0f, 1.0f - z * z));
+    return v3(s * cosf(phi), s * sinf(phi), z);
+}
+
+struct mesh {
+    vec3 *positions;
+    uint32_t n_positions;
+    uint32_t cap_positions;
+    uint32_t *indices; /* 3 per triangle */
+    uint32_t n_tris;
+    uint32_t cap_tris;
+};
+
+static uint32_t mesh_add_vertex(struct mesh *m, vec3 p)
+{
+    if (m->n_positions == m->cap_positions) {
+        m->cap_positions = m->cap_positions ? 2 * m->cap_positions : 64;
+        m->positions = realloc(m->positions, m->cap_positions * sizeof *m->positions);
+        cr_assert_not_null(m->positions);
+    }
+    m->positions[m->n_positions] = p;
+    return m->n_positions++;
+}
+
+static void mesh_add_tri(struct mesh *m, uint32_t a, uint32_t b, uint32_t c)
+{
+    if (m->n_tris == m->cap_tris) {
+        m->cap_tris = m->cap_tris ? 2 * m->cap_tris : 64;
+        m->indices = realloc(m->indices, 3 * (size_t)m->cap_tris * sizeof *m->indices);
+        cr_assert_not_null(m->indices);
+    }
+    m->indices[3 * m->n_tris + 0] = a;
+    m->indices[3 * m->n_tris + 1] = b;
+    m->indices[3 * m->n_tris + 2] = c;
+    m->n_tris++;
+}
+
+static void mesh_add_tri_pos(struct mesh *m, vec3 a, vec3 b, vec3 c)
+{
+    uint32_t ia = mesh_add_vertex(m, a);
+    uint32_t ib = mesh_add_vertex(m, b);
+    uint32_t ic = mesh_add_vertex(m, c);
+    mesh_add_tri(m, ia, ib, ic);
+}
+
+static void mesh_free(struct mesh *m)
+{
+    free(m->positions);
+    free(m->indices);
+    *m = (struct mesh){0};
+}
+
+static vec3 tri_vertex(const struct mesh *m, uint32_t prim, int k)
+{
+    return m->positions[m->indices[3 * prim + (uint32_t)k]];
+}
+
+/* b0 p0 + b1 p1 + b2 p2 */
+static vec3 tri_point(const struct mesh *m, uint32_t prim, float b1, float b2)
+{
+    float b0 = 1.0f - b1 - b2;
+    return v3_add(v3_add(v3_scale(tri_vertex(m, prim, 0), b0), v3_scale(tri_vertex(m, prim, 1), b1)),
+                  v3_scale(tri_vertex(m, prim, 2), b2));
+}
+
+/* random barycentrics, uniform over the triangle */
+static void rng_bary(struct rng *r, float *b1, float *b2)
+{
+    float u = rng_float(r);
+    float v = rng_float(r);
+    if (u + v > 1.0f) {
+        u = 1.0f - u;
+        v = 1.0f - v;
+    }
+    *b1 = u;
+    *b2 = v;
+}
+
+/* n random triangles in [-1, 1]^3, edge lengths from about 0.01 to 0.6 */
+static void make_soup(struct mesh *m, uint32_t n, uint64_t seed)
+{
+    struct rng r = {seed};
+    for (uint32_t i = 0; i < n; i++) {
+        vec3 c = rng_in_box(&r, -1.0f, 1.0f);
+        float size = 0.01f * exp2f(6.0f * rng_float(&r));
+        vec3 a = v3_add(c, v3_scale(rng_in_box(&r, -1.0f, 1.0f), size));
+        vec3 b = v3_add(c, v3_scale(rng_in_box(&r, -1.0f, 1.0f), size));
+        vec3 d = v3_add(c, v3_scale(rng_in_box(&r, -1.0f, 1.0f), size));
+        mesh_add_tri_pos(m, a, b, d);
+    }
+}
+
+/* Icosphere: the icosahedron, each triangle split in four `levels` times with the edge
+ * midpoints shared between neighbours (pushed to the unit sphere), then scaled and moved.
+ * Closed: every edge belongs to exactly two triangles (checked). */
+struct edge_map {
+    uint64_t *keys;
+    uint32_t *vals;
+    uint32_t cap; /* power of two */
+};
+
+static uint32_t edge_midpoint(struct mesh *m, struct edge_map *map, uint32_t a, uint32_t b)
+{
+    uint64_t key = a < b ? ((uint64_t)a << 32 | b) : ((uint64_t)b << 32 | a);
+    uint32_t h = (uint32_t)((key * 0x9E3779B97F4A7C15ull) >> 32) & (map->cap - 1);
+    while (map->keys[h] != UINT64_MAX) {
+        if (map->keys[h] == key)
+            return map->vals[h];
+        h = (h + 1) & (map->cap - 1);
+    }
+    vec3 mid = v3_normalize(v3_scale(v3_add(m->positions[a], m->positions[b]), 0.5f));
+    uint32_t idx = mesh_add_vertex(m, mid);
+    map->keys[h] = key;
+    map->vals[h] = idx;
+    return idx;
+}
+
+static void check_closed(const struct mesh *m)
+{
+    /* every directed edge (a, b) must have its reverse (b, a) exactly once: closed, oriented */
+    for (uint32_t i = 0; i < m->n_tris; i++) {
+        for (int k = 0; k < 3; k++) {
+            uint32_t a = m->indices[3 * i + (uint32_t)k];
+            uint32_t b = m->indices[3 * i + (uint32_t)(k + 1) % 3];
+            int n_reverse = 0;
+            for (uint32_t j = 0; j < m->n_tris; j++)
+                for (int l = 0; l < 3; l++)
+                    if (m->indices[3 * j + (uint32_t)l] == b &&
+                        m->indices[3 * j + (uint32_t)(l + 1) % 3] == a)
+                        n_reverse++;
+            cr_assert_eq(n_reverse, 1, "icosphere edge %u-%u has %d twins", a, b, n_reverse);
+        }
+    }
+}
+
+static void make_icosphere(struct mesh *m, int levels, vec3 centre, float radius)
+{
+    const float t = 1.61803398874989484820f; /* golden ratio */
+    const float base[12][3] = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0},
+                               {0, -1, t}, {0, 1, t}, {0, -1, -t}, {0, 1, -t},
+                               {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+    const uint32_t faces[20][3] = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11},
+                                   {1, 5, 9},  {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
+                                   {3, 9, 4},  {3, 4, 2},  {3, 2, 6},   {3, 6, 8},  {3, 8, 9},
+                                   {4, 9, 5},  {2, 4, 11}, {6, 2, 10},  {8, 6, 7},  {9, 8, 1}};
+    for (int i = 0; i < 12; i++)
+        mesh_add_vertex(m, v3_normalize(v3(base[i][0], base[i][1], base[i][2])));
+    for (int i = 0; i < 20; i++)
+        mesh_add_tri(m, faces[i][0], faces[i][1], faces[i][2]);
+    for (int level = 0; level < levels; level++) {
+        uint32_t n_old = m->n_tris;
+        uint32_t *old = malloc(3 * (size_t)n_old * sizeof *old);
+        cr_assert_not_null(old);
+        memcpy(old, m->indices, 3 * (size_t)n_old * sizeof *old);
+        m->n_tris = 0;
+        struct edge_map map = {NULL, NULL, 1};
+        while (map.cap < 4 * 3 * n_old)
+            map.cap *= 2;
+        map.keys = malloc(map.cap * sizeof *map.keys);
+        map.vals = malloc(map.cap * sizeof *map.vals);
+        cr_assert(map.keys && map.vals);
+        memset(map.keys, 0xff, map.cap * sizeof *map.keys);
+        for (uint32_t i = 0; i < n_old; i++) {
+            uint32_t a = old[3 * i];
+            uint32_t b = old[3 * i + 1];
+            uint32_t c = old[3 * i + 2];
+            uint32_t ab = edge_midpoint(m, &map, a, b);
+            uint32_t bc = edge_midpoint(m, &map, b, c);
+            uint32_t ca = edge_midpoint(m, &map, c, a);
+            mesh_add_tri(m, a, ab, ca);
+            mesh_add_tri(m, b, bc, ab);
+            mesh_add_tri(m, c, ca, bc);
+            mesh_add_tri(m, ab, bc, ca);
+        }
+        free(map.keys);
+        free(map.vals);
+        free(old);
+    }
+    for (uint32_t i = 0; i < m->n_positions; i++)
+        m->positions[i] = v3_add(centre, v3_scale(m->positions[i], radius));
+}
+
+static struct bvh *build(const struct mesh *m)
+{
+    struct bvh *bvh = bvh_build(m->positions, m->indices, m->n_tris, 1);
+    cr_assert_not_null(bvh);
+    return bvh;
+}
+
+static struct ray make_ray(vec3 o, vec3 d, float t_min, float t_max)
+{
+    return (struct ray){o, t_min, d, t_max};
+}
+
+static bool same_bits(float a, float b) { return memcmp(&a, &b, sizeof a) == 0; }
+
+/* Does triangle prim of m alone report a hit at exactly t_hit for this ray? */
+static bool single_tri_hits_at(const struct mesh *m, uint32_t prim, const struct ray *ray,
+                               float t_hit)
+{
+    struct bvh *one = bvh_build(m->positions, m->indices + 3 * prim, 1, 1);
+    cr_assert_not_null(one);
+    struct bvh_hit hit;
+    bool is_hit = bvh_intersect(one, ray, &hit);
+    bvh_free(one);
+    return is_hit && same_bits(hit.t, t_hit);
+}
+
+/* The BVH and brute force must agree: same hit flag, same t bits, and the same prim_idx, u, v;
+ * where two triangles are hit at exactly the same t either may be reported, so a different
+ * prim_idx must itself be hit at that t.  Returns whether the ray hit. */
+static bool expect_matches_brute(const struct mesh *m, const struct bvh *bvh,
+                                 const struct ray *ray)
+{
+    struct bvh_hit fast;
+    struct bvh_hit slow;
+    bool hit_fast = bvh_intersect(bvh, ray, &fast);
+    bool hit_slow = bvh_intersect_brute(bvh, ray, &slow);
+    cr_assert_eq(hit_fast, hit_slow, "bvh %d vs brute %d for o (%a %a %a) d (%a %a %a)", hit_fast,
+                 hit_slow, ray->o.x, ray->o.y, ray->o.z, ray->d.x, ray->d.y, ray->d.z);
+    if (!hit_fast)
+        return false;
+    cr_assert(same_bits(fast.t, slow.t), "t %a vs brute %a (prim %u vs %u)", fast.t, slow.t,
+              fast.prim_idx, slow.prim_idx);
+    cr_assert_lt(fast.prim_idx, m->n_tris);
+    if (fast.prim_idx == slow.prim_idx) {
+        cr_assert(same_bits(fast.u, slow.u) && same_bits(fast.v, slow.v));
+    } else {
+        cr_assert(single_tri_hits_at(m, fast.prim_idx, ray, fast.t),
+                  "tie: prim %u not hit at t %a", fast.prim_idx, fast.t);
+    }
+    return true;
+}
+
+/* For rays aimed exactly at shared vertices and edges, where several triangles are hit within a
+ * few ulps of each other: the BVH may cull the box of the marginally nearer one (bvh.c,
+ * "Traversal"), so require the same hit flag, t within 1e-6 relative, and that the reported
+ * triangle itself is hit at the reported t. */
+static bool expect_close_to_brute(const struct mesh *m, const struct bvh *bvh,
+                                  const struct ray *ray)
+{
+    struct bvh_hit fast;
+    struct bvh_hit slow;
+    bool hit_fast = bvh_intersect(bvh, ray, &fast);
+    bool hit_slow = bvh_intersect_brute(bvh, ray, &slow);
+    cr_assert_eq(hit_fast, hit_slow);
+    if (!hit_fast)
+        return false;
+    cr_assert_float_eq(fast.t, slow.t, 1e-6f * fabsf(slow.t));
+    cr_assert(single_tri_hits_at(m, fast.prim_idx, ray, fast.t));
+    return true;
+}
+
+/* ---- a single triangle ------------------------------------------------------------------------ */
+
+/* Woop et al. 2013: a ray through b0 p0 + b1 p1 + b2 p2 hits with u = b1, v = b2 (the header's
+ * vertex order), from every side and for every major axis of d (the kx/ky swap). */
+Test(bvh, single_triangle_hit_inside)
+{
+    struct mesh m = {0};
+    mesh_add_tri_pos(&m, v3(0.1f, 0.2f, 0.3f), v3(1.7f, 0.4f, -0.2f), v3(0.5f, 1.9f, 0.8f));
+    struct bvh *bvh = build(&m);
+    vec3 p0 = tri_vertex(&m, 0, 0);
+    vec3 n = v3_normalize(v3_cross(v3_sub(tri_vertex(&m, 0, 1), p0), v3_sub(tri_vertex(&m, 0, 2), p0)));
+    const vec3 dirs[6] = {v3(1, 0, 0), v3(-1, 0, 0), v3(0, 1, 0),
+                          v3(0, -1, 0), v3(0, 0, 1), v3(0, 0, -1)};
+    const float barys[4][2] = {{0.2f, 0.3f}, {0.7f, 0.1f}, {0.05f, 0.9f}, {1.0f / 3, 1.0f / 3}};
+    struct rng r = {1};
+    int n_rays = 0;
+    for (int i = 0; i < 6 + 200; i++) {
+        vec3 d = i < 6 ? dirs[i] : rng_dir(&r);
+        if (fabsf(v3_dot(d, n)) < 0.1f)
+            continue;
+        for (int j = 0; j < 4; j++) {
+            vec3 q = tri_point(&m, 0, barys[j][0], barys[j][1]);
+            struct ray ray = make_ray(v3_sub(q, v3_scale(d, 3.0f)), d, 0.0f, INFINITY);
+            struct bvh_hit hit;
+            cr_assert(bvh_intersect(bvh, &ray, &hit));
+            cr_assert_eq(hit.prim_idx, 0u);
+            cr_assert_float_eq(hit.t, 3.0f, 1e-5f);
+            cr_assert_float_eq(hit.u, barys[j][0], 1e-5f);
+            cr_assert_float_eq(hit.v, barys[j][1], 1e-5f);
+            cr_assert(bvh_occluded(bvh, &ray));
+            n_rays++;
+        }
+    }
+    cr_assert_gt(n_rays, 400);
+    bvh_free(bvh);
+    mesh_free(&m);
+}
+
+/* Outside the triangle, behind the origin, parallel to it, or outside (t_min, t_max): no hit. */
+Test(bvh, single_triangle_miss_outside)
+{
+    struct mesh m = {0};
+    mesh_add_tri_pos(&m, v3(0.1f, 0.2f, 0.3f), v3(1.7f, 0.4f, -0.2f), v3(0.5f, 1.9f, 0.8f));
+    struct bvh *bvh = build(&m);
+    vec3 p0 = tri_vertex(&m, 0, 0);
+    vec3 e1 = v3_sub(tri_vertex(&m, 0, 1), p0);
+    vec3 n = v3_normalize(v3_cross(e1, v3_sub(tri_vertex(&m, 0, 2), p0)));
+    const float outside[5][2] = {{-0.05f, 0.5f}, {0.5f, -0.05f}, {0.6f, 0.45f}, {1.1f, 0.1f},
+                                 {-0.2f, -0.2f}};
+    struct bvh_hit hit;
+    for (int j = 0; j < 5; j++) {
+        vec3 q = tri_point(&m, 0, outside[j][0], outside[j][1]);
+        struct ray ray = make_ray(v3_add(q, n), v3_neg(n), 0.0f, INFINITY);
+        cr_assert_not(bvh_intersect(bvh, &ray, &hit));
+        cr_assert_not(bvh_intersect_brute(bvh, &ray, &hit));
+        cr_assert_not(bvh_occluded(bvh, &ray));
+    }
+    vec3 q = tri_point(&m, 0, 0.25f, 0.25f);
+    struct ray away = make_ray(v3_add(q, n), n, 0.0f, INFINITY); /* hit would be at t = -1 */
+    cr_assert_not(bvh_intersect(bvh, &away, &hit));
+    struct ray parallel = make_ray(v3_add(q, v3_scale(e1, -2.0f)), e1, 0.0f, INFINITY);
+    cr_assert_not(bvh_intersect(bvh, &parallel, &hit)); /* in the plane: det == 0 */
+    struct ray short_ray = make_ray(v3_add(q, n), v3_neg(n), 0.0f, 0.9f);
+    cr_assert_not(bvh_intersect(bvh, &short_ray, &hit));
+    cr_assert_not(bvh_occluded(bvh, &short_ray));
+    struct ray late_ray = make_ray(v3_add(q, n), v3_neg(n), 1.1f, INFINITY);
+    cr_assert_not(bvh_intersect(bvh, &late_ray, &hit));
+    bvh_free(bvh);
+    mesh_free(&m);
+}
+
+/* bvh.h: a hit needs t strictly inside (t_min, t_max). */
+Test(bvh, t_interval_is_open)
+{
+    struct mesh m = {0};
+    mesh_add_tri_pos(&m, v3(-1, -1, 0), v3(1, -1, 0), v3(0, 1, 0));
+    struct bvh *bvh = build(&m);
+    struct ray ray = make_ray(v3(0.1f, 0.0f, 0.7f), v3(0.2f, -0.1f, -1.0f), 0.0f, INFINITY);
+    struct bvh_hit hit;
+    cr_assert(bvh_intersect(bvh, &ray, &hit));
+    float t_hit = hit.t;
+    ray.t_max = t_hit;
+    cr_assert_not(bvh_intersect(bvh, &ray, &hit));
+    cr_assert_not(bvh_occluded(bvh, &ray));
+    ray.t_max = next_float_up(t_hit);
+    cr_assert(bvh_intersect(bvh, &ray, &hit));
+    cr_assert(same_bits(hit.t, t_hit));
+    ray.t_max = INFINITY;
+    ray.t_min = t_hit;
+    cr_assert_not(bvh_intersect(bvh, &ray, &hit));
+    cr_assert_not(bvh_occluded(bvh, &ray));
+    ray.t_min = next_float_down(t_hit);
+    cr_assert(bvh_intersect(bvh, &ray, &hit));
+    bvh_free(bvh);
+    mesh_free(&m);
+}
+
+/* Woop et al. 2013, watertightness: a ray through the shared edge of a quad's two triangles,
+ * or through their shared vertices, or through the centre of a fan of six, hits at least one
+ * of them (never zero) and the closest-hit query reports exactly one. */
+Test(bvh, shared_edge_and_vertex_never_missed)
+{
+    struct mesh m = {0};
+    uint32_t a = mesh_add_vertex(&m, v3(0, 0, 0));
+    uint32_t b = mesh_add_vertex(&m, v3(1, 0, 0));
+    uint32_t c = mesh_add_vertex(&m, v3(1, 1, 0));
+    uint32_t d = mesh_add_vertex(&m, v3(0, 1, 0));
+    mesh_add_tri(&m, a, b, c);
+    mesh_add_tri(&m, a, c, d);
+    struct bvh *bvh = build(&m);
+    struct rng r = {2};
+    for (int i = 0; i < 3000; i++) {
+        /* a target exactly on the shared diagonal x == y, away from the quad's corners (there a
+         * rounded shear may legitimately pass outside the quad) */
+        float s = i < 1500 ? rng_range(&r, 1.0f / 64, 63.0f / 64) : (float)(1 + i % 63) / 64.0f;
+        vec3 target = v3(s, s, 0.0f);
+        vec3 o = v3(rng_range(&r, -2, 3), rng_range(&r, -2, 3), rng_range(&r, 0.01f, 2));
+        if (i & 2)
+            o.z = -o.z; /* from below too */
+        struct ray ray = make_ray(o, v3_sub(target, o), 0.0f, INFINITY);
+        int n_tri_hits = 0;
+        for (uint32_t k = 0; k < 2; k++) {
+            struct bvh *one = bvh_build(m.positions, m.indices + 3 * k, 1, 1);
+            cr_assert_not_null(one);
+            struct bvh_hit h;
+            n_tri_hits += bvh_intersect(one, &ray, &h);
+            bvh_free(one);
+        }
+        cr_assert_geq(n_tri_hits, 1, "ray through (%a, %a, 0) from (%a %a %a) slips through", s,
+                      s, o.x, o.y, o.z);
+        struct bvh_hit hit;
+        cr_assert(bvh_intersect(bvh, &ray, &hit));
+        cr_assert_float_eq(hit.t, 1.0f, 1e-5f);
+        expect_matches_brute(&m, bvh, &ray);
+    }
+    /* the two vertices both triangles share, hit along the normal (an exact shear) */
+    for (int i = 0; i < 2; i++) {
+        struct ray ray = make_ray(v3((float)i, (float)i, 1.0f), v3(0, 0, -1), 0.0f, INFINITY);
+        struct bvh_hit hit;
+        cr_assert(bvh_intersect(bvh, &ray, &hit));
+        cr_assert_eq(hit.t, 1.0f);
+    }
+    bvh_free(bvh);
+    mesh_free(&m);
+
+    /* a fan of six triangles in a tilted plane: rays through the shared centre vertex from
+     * either side (not grazing, where the rounded plane may fold) */
+    struct mesh fan = {0};
+    vec3 fan_n = v3_normalize(v3(0.2f, -0.3f, 1.0f));
+    vec3 fan_t;
+    vec3 fan_b;
+    v3_basis(fan_n, &fan_t, &fan_b);
+    vec3 centre_p = v3(0.3f, -0.2f, 0.1f);
+    uint32_t centre = mesh_add_vertex(&fan, centre_p);
+    uint32_t rim[6];
+    for (int k = 0; k < 6; k++) {
+        float phi = (float)k * MCPT_PI / 3.0f + 0.1f;
+        vec3 offset = v3_add(v3_scale(fan_t, cosf(phi)), v3_scale(fan_b, sinf(phi)));
+        rim[k] = mesh_add_vertex(&fan, v3_add(centre_p, offset));
+    }
+    for (int k = 0; k < 6; k++)
+        mesh_add_tri(&fan, centre, rim[k], rim[(k + 1) % 6]);
+    struct bvh *fan_bvh = build(&fan);
+    for (int i = 0; i < 3000; i++) {
+        vec3 w = rng_dir(&r);
+        if (fabsf(v3_dot(w, fan_n)) < 0.05f)
+            continue;
+        vec3 o = v3_add(centre_p, v3_scale(w, rng_range(&r, 0.1f, 10.0f)));
+        struct ray ray = make_ray(o, v3_sub(centre_p, o), 0.0f, INFINITY);
+        struct bvh_hit hit;
+        cr_assert(bvh_intersect(fan_bvh, &ray, &hit), "ray at the fan's centre vertex escaped");
+        cr_assert(expect_close_to_brute(&fan, fan_bvh, &ray));
+    }
+    bvh_free(fan_bvh);
+    mesh_free(&fan);
+}
+
+/* ---- BVH versus brute force (STYLE.md §6) ------------------------------------------------------ */
+
+/* 2000 random triangles: random rays and rays aimed at random points on random triangles. */
+Test(bvh, matches_brute_force_random_soup)
+{
+    struct mesh m = {0};
+    make_soup(&m, 2000, 3);
+    struct bvh *bvh = build(&m);
+    struct rng r = {4};
+    int n_hits = 0;
+    for (int i = 0; i < 6000; i++) {
+        struct ray ray;
+        if (i % 2 == 0) {
+            ray = make_ray(rng_in_box(&r, -2, 2), rng_dir(&r), 0.0f, INFINITY);
+        } else {
+            uint32_t prim = (uint32_t)(rng_next(&r) % m.n_tris);
+            float b1;
+            float b2;
+            rng_bary(&r, &b1, &b2);
+            vec3 o = rng_in_box(&r, -3, 3);
+            ray = make_ray(o, v3_sub(tri_point(&m, prim, b1, b2), o), 0.0f, INFINITY);
+        }
+        if (i % 3 == 0)
+            ray.t_min = rng_range(&r, 0.0f, 0.5f);
+        n_hits += expect_matches_brute(&m, bvh, &ray);
+    }
+    cr_assert_gt(n_hits, 3500); /* the aimed half nearly always hits */
+    bvh_free(bvh);
+    mesh_free(&m);
+}
+
+/* A closed icosphere (5120 triangles): rays from inside always hit; rays from outside. */
+Test(bvh, matches_brute_force_icosphere)
+{
+    struct mesh m = {0};
+    make_icosphere(&m, 4, v3(0.2f, -0.1f, 0.3f), 1.5f);
+    struct bvh *bvh = build(&m);
+    struct rng r = {5};
+    for (int i = 0; i < 3000; i++) {
+        vec3 o = v3_add(v3(0.2f, -0.1f, 0.3f), v3_scale(rng_dir(&r), 1.5f * 0.9f * rng_float(&r)));
+        struct ray ray = make_ray(o, rng_dir(&r), 0.0f, INFINITY);
+        cr_assert(expect_matches_brute(&m, bvh, &ray), "ray from inside escaped");
+    }
+    int n_hits = 0;
+    for (int i = 0; i < 3000; i++) {
+        vec3 o = v3_scale(rng_dir(&r), 4.0f);
+        vec3 target = v3_scale(rng_dir(&r), 2.0f * rng_float(&r));
+        struct ray ray = make_ray(o, v3_sub(target, o), 0.0f, INFINITY);
+        n_hits += expect_matches_brute(&m, bvh, &ray);
+    }
+    cr_assert_gt(n_hits, 1000);
+    bvh_free(bvh);
+    mesh_free(&m);
+}
+
+/* bvh.h: prim_idx is the caller's index.  From the centre of a convex icosphere the ray to a
+ * face's centroid hits that face, with u = v = 1/3. */
+Test(bvh, prim_idx_is_callers_index)
+{
+    struct mesh m = {0};
+    make_icosphere(&m, 3, v3(0, 0, 0), 1.0f);
+    struct bvh *bvh = build(&m);
+    for (uint32_t prim = 0; prim < m.n_tris; prim++) {
+        vec3 target = tri_point(&m, prim, 1.0f / 3.0f, 1.0f / 3.0f);
+        struct ray ray = make_ray(v3(0, 0, 0), target, 0.0f, INFINITY);
+        struct bvh_hit hit;
+        cr_assert(bvh_intersect(bvh, &ray, &hit));
+        cr_assert_eq(hit.prim_idx, prim);
+        cr_assert_float_eq(hit.u, 1.0f / 3.0f, 1e-4f);
+        cr_assert_float_eq(hit.v, 1.0f / 3.0f, 1e-4f);
+        cr_assert_float_eq(hit.t, 1.0f, 1e-5f);
+    }
+    bvh_free(bvh);
+    mesh_free(&m);
+}
+
+/* struct ray: d need not be unit length.  Scaling d by a power of two scales every quantity of
+ * the traversal and the triangle test exactly (the shear sx, sy is unchanged; sz, inv_d and t
+ * scale), so hit or miss, prim_idx, u, v are identical and t scales exactly; this also checks
+ * that the delta_t bound scales like t. */
+Test(bvh, direction_length_does_not_matter)
+{
+    struct mesh m = {0};
+    make_soup(&m, 1000, 21);
+    struct bvh *bvh = build(&m);
+    struct rng r = {22};
+    int n_hits = 0;
+    for (int i = 0; i < 3000; i++) {
+        vec3 o = rng_in_box(&r, -2, 2);
+        vec3 d = i % 2 ? rng_dir(&r) : v3_sub(tri_point(&m, (uint32_t)(i % 1000), 0.3f, 0.3f), o);
+        struct ray ray = make_ray(o, d, 0.0f, INFINITY);
+        struct bvh_hit hit;
+        bool is_hit = bvh_intersect(bvh, &ray, &hit);
+        n_hits += is_hit;
+        for (int e = -17; e <= 17; e += 34) {
+            struct ray scaled = make_ray(o, v3_scale(d, ldexpf(1.0f, e)), 0.0f, INFINITY);
+            struct bvh_hit hit_scaled;
+            cr_assert_eq(bvh_intersect(bvh, &scaled, &hit_scaled), is_hit);
+            cr_assert_eq(bvh_occluded(bvh, &scaled), is_hit);
+            if (!is_hit)
+                continue;
+            cr_assert(same_bits(hit_scaled.t, ldexpf(hit.t, -e)));
+            cr_assert_eq(hit_scaled.prim_idx, hit.prim_idx);
+            cr_assert(same_bits(hit_scaled.u, hit.u) && same_bits(hit_scaled.v, hit.v));
+        }
+    }
+    cr_assert_gt(n_hits, 1500);
+    bvh_free(bvh);
+    mesh_free(&m);
+}
+
+/* ---- degenerate inputs ------------------------------------------------------------------------- */
+
+/* Wald 2007's binning needs a centroid extent; with all centres equal the build cuts the index
+ * range in half instead, so the tree stays shallow and leaves bounded: 1000 copies of one
+ * triangle, and 1000 tiny (1e-6) triangles at one point with their vertex order rotated. */
+Test(bvh, identical_centroids)
+{
+    for (int variant = 0; variant < 2; variant++) {
+        struct mesh m = {0};
+        vec3 p[3];
+        if (variant == 0) {
+            p[0] = v3(0.1f, 0.2f, 0.3f);
+            p[1] = v3(1.1f, 0.5f, 0.2f);
+            p[2] = v3(0.4f, 1.3f, -0.4f);
+        } else {
+            vec3 at = v3(0.3f, -0.2f, 0.7f);
+            p[0] = at;
+            p[1] = v3_add(at, v3(1e-6f, 0.0f, 0.0f));
+            p[2] = v3_add(at, v3(0.0f, 1e-6f, 1e-6f));
+        }
+        uint32_t ia = mesh_add_vertex(&m, p[0]);
+        uint32_t ib = mesh_add_vertex(&m, p[1]);
+        uint32_t ic = mesh_add_vertex(&m, p[2]);
+        for (int i = 0; i < 1000; i++) {
+            if (variant == 0 || i % 3 == 0)
+                mesh_add_tri(&m, ia, ib, ic);
+            else if (i % 3 == 1)
+                mesh_add_tri(&m, ib, ic, ia);
+            else
+                mesh_add_tri(&m, ic, ia, ib);
+        }
+        struct bvh *bvh = build(&m);
+        struct bvh_stats st = bvh_get_stats(bvh);
+        cr_assert_eq(st.n_tris, 1000u);
+        cr_assert_eq(st.n_nodes, 2 * st.n_leaves - 1);
+        cr_assert_geq(st.n_leaves, 2u); /* 1000 triangles are not one leaf */
+        cr_assert_leq(st.max_depth, 12u); /* about log2(1000 / leaf size) */
+        struct rng r = {6};
+        int n_hits = 0;
+        for (int i = 0; i < 500; i++) {
+            float b1;
+            float b2;
+            rng_bary(&r, &b1, &b2);
+            vec3 o = v3_add(p[0], v3_scale(rng_dir(&r), variant == 0 ? 3.0f : 1e-5f));
+            struct ray ray = make_ray(o, v3_sub(tri_point(&m, 0, b1, b2), o), 0.0f, INFINITY);
+            n_hits += expect_matches_brute(&m, bvh, &ray);
+        }
+        cr_assert_gt(n_hits, 400);
+        bvh_free(bvh);
+        mesh_free(&m);
+    }
+}
+
+/* bvh.h: zero-area triangles (repeated vertices, collinear vertices, a point) are kept by the
+ * build and never hit, even by rays aimed exactly at them; a proper triangle among them is. */
+Test(bvh, zero_area_triangles_never_hit)
+{
+    struct mesh m = {0};
+    mesh_add_tri_pos(&m, v3(0, 0, 0), v3(1, 1, 1), v3(2, 2, 2));            /* collinear */
+    mesh_add_tri_pos(&m, v3(0.5f, 0, 0), v3(0.5f, 0, 0), v3(0.5f, 1, 0.5f)); /* repeated */
+    mesh_add_tri_pos(&m, v3(1, 0, 1), v3(1, 0, 1), v3(1, 0, 1));            /* a point */
+    mesh_add_tri_pos(&m, v3(0.1f, 0.3f, 0.7f), v3(0.2f, 0.6f, 1.4f), v3(0.4f, 1.2f, 2.8f)); /* p, 2p, 4p */
+    mesh_add_tri_pos(&m, v3(3, 0, 0), v3(4, 0, 0), v3(3, 1, 0)); /* the one real triangle */
+    struct bvh *bvh = build(&m);
+    struct bvh_stats st = bvh_get_stats(bvh);
+    cr_assert_eq(st.n_tris, 5u);
+    struct rng r = {7};
+    for (int i = 0; i < 4000; i++) {
+        uint32_t prim = (uint32_t)(i % 4);
+        float s = rng_float(&r);
+        vec3 p0 = tri_vertex(&m, prim, 0);
+        vec3 p2 = tri_vertex(&m, prim, 2);
+        vec3 target = i % 8 < 4 ? v3_add(p0, v3_scale(v3_sub(p2, p0), s)) : p0;
+        vec3 o = v3_add(target, v3_scale(rng_dir(&r), rng_range(&r, 0.01f, 5.0f)));
+        struct ray ray = make_ray(o, v3_sub(target, o), 0.0f, INFINITY);
+        struct bvh_hit hit;
+        if (bvh_intersect(bvh, &ray, &hit))
+            cr_assert_eq(hit.prim_idx, 4u, "zero-area triangle %u was hit", hit.prim_idx);
+        if (bvh_intersect_brute(bvh, &ray, &hit))
+            cr_assert_eq(hit.prim_idx, 4u);
+        expect_matches_brute(&m, bvh, &ray);
+    }
+    struct ray at_real = make_ray(v3(3.2f, 0.2f, 1.0f), v3(0, 0, -1), 0.0f, INFINITY);
+    struct bvh_hit hit;
+    cr_assert(bvh_intersect(bvh, &at_real, &hit));
+    cr_assert_eq(hit.prim_idx, 4u);
+    bvh_free(bvh);
+
+    /* only degenerate triangles: builds, never hits */
+    m.n_tris = 4;
+    bvh = build(&m);
+    for (int i = 0; i < 1000; i++) {
+        struct ray ray = make_ray(rng_in_box(&r, -1, 3), rng_dir(&r), 0.0f, INFINITY);
+        cr_assert_not(bvh_intersect(bvh, &ray, &hit));
+        cr_assert_not(bvh_occluded(bvh, &ray));
+    }
+    bvh_free(bvh);
+    mesh_free(&m);
+}
+
+/* ---- an axis-aligned flat grid: flat boxes, d_a == 0, origins on slab planes --------------------
+ * PBRT 4e, ch. 6, "Conservative Ray-Bounds Intersections": with d.x == 0 the slab test meets
+ * 0 * inf = NaN when o.x lies exactly on a box face; the ray must still find the grid. */
+
+static void make_grid(struct mesh *m, int n_cells)
+{
+    float step = 2.0f / (float)n_cells; /* exact for powers of two */
+    for (int i = 0; i <= n_cells; i++)
+        for (int j = 0; j <= n_cells; j++)
+            mesh_add_vertex(m, v3(-1.0f + step * (float)i, 0.0f, -1.0f + step * (float)j));
+    uint32_t row = (uint32_t)n_cells + 1;
+    for (uint32_t i = 0; i < (uint32_t)n_cells; i++) {
+        for (uint32_t j = 0; j < (uint32_t)n_cells; j++) {
+            uint32_t v00 = i * row + j;
+            uint32_t v10 = (i + 1) * row + j;
+            mesh_add_tri(m, v00, v10 + 1, v10);
+            mesh_add_tri(m, v00, v00 + 1, v10 + 1);
+        }
+    }
+}
+
+Test(bvh, flat_axis_aligned_grid)
+{
+    struct mesh m = {0};
+    make_grid(&m, 32);
+    struct bvh *bvh = build(&m);
+    struct rng r = {8};
+    int n_hits = 0;
+    for (int i = 0; i < 6000; i++) {
+        /* x, z on grid lines (box faces), on vertices, or anywhere in [-1, 1] */
+        float x = (i % 3 == 0) ? -1.0f + (float)(rng_next(&r) % 33) / 16.0f : rng_range(&r, -1, 1);
+        float z = (i % 3 != 2) ? -1.0f + (float)(rng_next(&r) % 33) / 16.0f : rng_range(&r, -1, 1);
+        struct ray ray;
+        struct bvh_hit hit;
+        switch (i % 6) {
+        case 0: /* straight down: d.x == d.z == 0 */
+        case 1: /* straight up from below, d.x == -0 */
+            ray = make_ray(v3(x, i % 6 == 0 ? 1.0f : -1.0f, z),
+                           v3(i % 6 == 0 ? 0.0f : -0.0f, i % 6 == 0 ? -1.0f : 1.0f, -0.0f), 0.0f,
+                           INFINITY);
+            cr_assert(bvh_intersect(bvh, &ray, &hit), "vertical ray at x %a z %a missed", x, z);
+            cr_assert_float_eq(hit.t, 1.0f, 1e-6f);
+            cr_assert(bvh_occluded(bvh, &ray));
+            break;
+        case 2: /* d.x == 0: oblique in the yz plane */
+            ray = make_ray(v3(x, 0.5f, z), v3(0.0f, -0.8f, rng_range(&r, -0.6f, 0.6f)), 0.0f,
+                           INFINITY);
+            break;
+        case 3: /* d.z == 0 */
+            ray = make_ray(v3(x, 0.5f, z), v3(rng_range(&r, -0.6f, 0.6f), -0.8f, 0.0f), 0.0f,
+                           INFINITY);
+            break;
+        case 4: /* random from above */
+            ray = make_ray(v3(x, rng_range(&r, 0.1f, 2), z), rng_dir(&r), 0.0f, INFINITY);
+            break;
+        default: /* lying in the plane y = 0: det == 0 for every triangle, no hit */
+            ray = make_ray(v3(x, 0.0f, z), i % 12 == 5 ? v3(1, 0, 0) : v3(0.6f, 0, -0.8f), 0.0f,
+                           INFINITY);
+            cr_assert_not(bvh_intersect(bvh, &ray, &hit));
+            break;
+        }
+        n_hits += expect_matches_brute(&m, bvh, &ray);
+    }
+    cr_assert_gt(n_hits, 3000);
+    bvh_free(bvh);
+    mesh_free(&m);
+}
+
+/* ---- rays that start on a surface ------------------------------------------------------------
+ * Behaviour (documented, not a bug): a ray whose origin lies on a triangle (to rounding) may
+ * report that triangle at t ~ 0: the origin can be on either side of the plane, and only
+ * t == 0 exactly (cut by t > t_min = 0) or t <= delta_t (PBRT 4e, ch. 6, "Avoiding Intersections
+ * Behind Ray Origins") are excluded.  The integrator therefore spawns rays with
+ * offset_ray_origin (PBRT 4e, ch. 6, "Robust Spawned Ray Origins"), which the next test checks. */
+Test(bvh, ray_from_surface_with_t_min_zero)
+{
+    /* exactly on the plane y = 0, y the major axis: the computed t is exactly 0, never a hit */
+    struct mesh grid = {0};
+    make_grid(&grid, 8);
+    struct bvh *bvh = build(&grid);
+    struct rng r = {9};
+    struct bvh_hit hit;
+    for (int i = 0; i < 2000; i++) {
+        vec3 o = v3(rng_range(&r, -0.99f, 0.99f), 0.0f, rng_range(&r, -0.99f, 0.99f));
+        vec3 d = v3(rng_range(&r, -0.5f, 0.5f), i % 2 ? 1.0f : -1.0f, rng_range(&r, -0.5f, 0.5f));
+        struct ray ray = make_ray(o, d, 0.0f, INFINITY);
+        cr_assert_not(bvh_intersect(bvh, &ray, &hit));
+    }
+    bvh_free(bvh);
+    mesh_free(&grid);
+
+    /* on random triangles: any report of the own triangle is at t ~ 0 */
+    struct mesh m = {0};
+    make_soup(&m, 200, 10);
+    bvh = build(&m);
+    int n_self = 0;
+    for (int i = 0; i < 20000; i++) {
+        uint32_t prim = (uint32_t)(rng_next(&r) % m.n_tris);
+        float b1;
+        float b2;
+        rng_bary(&r, &b1, &b2);
+        vec3 p = tri_point(&m, prim, b1, b2);
+        vec3 w = rng_dir(&r);
+        struct ray ray = make_ray(p, w, 0.0f, INFINITY);
+        if (bvh_intersect(bvh, &ray, &hit) && hit.prim_idx == prim) {
+            /* the origin is within rounding of the plane: |t (w . n)| is its distance */
+            vec3 p0 = tri_vertex(&m, prim, 0);
+            vec3 n = v3_normalize(v3_cross(v3_sub(tri_vertex(&m, prim, 1), p0),
+                                           v3_sub(tri_vertex(&m, prim, 2), p0)));
+            cr_assert_lt(fabsf(hit.t * v3_dot(w, n)), 1e-6f, "self hit off the plane: t %g", hit.t);
+            n_self++;
+        }
+    }
+    cr_log_info("ray_from_surface: %d of 20000 rays re-hit their own triangle at t ~ 0", n_self);
+    bvh_free(bvh);
+    mesh_free(&m);
+}
+
+/* PBRT 4e, ch. 6, "Robust Spawned Ray Origins": p from barycentrics carries the error bound
+ * p_error = gamma(7) (|b0 p0| + |b1 p1| + |b2 p2|); offset_ray_origin moves it off the plane by
+ * that bound, and with the t > delta_t check of "Avoiding Intersections Behind Ray Origins" the
+ * spawned ray does not hit its own triangle: at scales 1e-4 to 1e4, for needles, and for
+ * grazing directions down to |w . n| = 1e-5. */
+static void check_offset_origins(vec3 location, float size, uint64_t seed)
+{
+    struct rng r = {seed};
+    int n_rays = 0;
+    for (int i = 0; i < 4000; i++) {
+        struct mesh m = {0};
+        vec3 q0 = v3_add(location, v3_scale(rng_in_box(&r, -1, 1), size));
+        vec3 q1 = v3_add(location, v3_scale(rng_in_box(&r, -1, 1), size));
+        vec3 q2 = v3_add(location, v3_scale(rng_in_box(&r, -1, 1), size));
+        if (i % 4 == 0) { /* a needle: q2 near the segment q0 q1, 1e-3 of the size off it */
+            q2 = v3_add(q0, v3_scale(v3_sub(q1, q0), rng_float(&r)));
+            q2 = v3_add(q2, v3_scale(rng_in_box(&r, -1, 1), 1e-3f * size));
+        }
+        mesh_add_tri_pos(&m, q0, q1, q2);
+        vec3 p0 = tri_vertex(&m, 0, 0);
+        vec3 p1 = tri_vertex(&m, 0, 1);
+        vec3 p2 = tri_vertex(&m, 0, 2);
+        vec3 cross = v3_cross(v3_sub(p1, p0), v3_sub(p2, p0));
+        if (v3_is_zero(cross) || !v3_is_finite(cross)) {
+            mesh_free(&m);
+            continue;
+        }
+        vec3 n = v3_normalize(cross);
+        struct bvh *bvh = build(&m);
+        for (int j = 0; j < 8; j++) {
+            float b1;
+            float b2;
+            rng_bary(&r, &b1, &b2);
+            float b0 = 1.0f - b1 - b2;
+            vec3 p = tri_point(&m, 0, b1, b2);
+            vec3 abs_sum = v3_add(v3_add(v3_scale(v3(fabsf(p0.x), fabsf(p0.y), fabsf(p0.z)), fabsf(b0)),
+                                         v3_scale(v3(fabsf(p1.x), fabsf(p1.y), fabsf(p1.z)), fabsf(b1))),
+                                  v3_scale(v3(fabsf(p2.x), fabsf(p2.y), fabsf(p2.z)), fabsf(b2)));
+            vec3 p_error = v3_scale(abs_sum, mcpt_gamma(7));
+            vec3 w = rng_dir(&r);
+            if (j >= 6) { /* grazing: nearly in the plane */
+                vec3 tangent = v3_normalize(v3_cross(n, w));
+                w = v3_normalize(v3_add(tangent, v3_scale(n, rng_range(&r, -1e-3f, 1e-3f))));
+            }
+            if (fabsf(v3_dot(w, n)) < 1e-5f)
+                continue; /* below the angular error of the computed normal itself */
+            vec3 o = offset_ray_origin(p, p_error, n, w);
+            struct ray ray = make_ray(o, w, 0.0f, INFINITY);
+            struct bvh_hit hit;
+            cr_assert_not(bvh_intersect(bvh, &ray, &hit),
+                          "self hit at t %g: size %g at (%g %g %g), w.n %g", hit.t, size,
+                          location.x, location.y, location.z, v3_dot(w, n));
+            cr_assert_not(bvh_occluded(bvh, &ray));
+            n_rays++;
+        }
+        bvh_free(bvh);
+        mesh_free(&m);
+    }
+    cr_assert_gt(n_rays, 30000);
+}
+
+Test(bvh, offset_origin_does_not_rehit_own_triangle)
+{
+    check_offset_origins(v3(0, 0, 0), 1.0f, 11);
+    check_offset_origins(v3(1e4f, -1e4f, 1e4f), 1.0f, 12);
+    check_offset_origins(v3(1e4f, 1e4f, -1e4f), 1e4f, 13);
+    check_offset_origins(v3(1e-4f, 1e-4f, 1e-4f), 1e-4f, 14);
+    check_offset_origins(v3(0, 0, 0), 1e-4f, 15);
+    check_offset_origins(v3(-1e4f, 0, 3e3f), 1e-2f, 16);
+}
+
+/* The same on a closed mesh far from the origin: a ray spawned outward or inward from a point of
+ * one face never reports that face. */
+Test(bvh, offset_origin_on_mesh)
+{
+    struct mesh m = {0};
+    make_icosphere(&m, 3, v3(1e4f, -2e3f, 5e3f), 2.0f);
+    struct bvh *bvh = build(&m);
+    struct rng r = {17};
+    int n_hits = 0;
+    for (int i = 0; i < 20000; i++) {
+        uint32_t prim = (uint32_t)(rng_next(&r) % m.n_tris);
+        float b1;
+        float b2;
+        rng_bary(&r, &b1, &b2);
+        float b0 = 1.0f - b1 - b2;
+        vec3 p0 = tri_vertex(&m, prim, 0);
+        vec3 p1 = tri_vertex(&m, prim, 1);
+        vec3 p2 = tri_vertex(&m, prim, 2);
+        vec3 p = tri_point(&m, prim, b1, b2);
+        vec3 abs_sum = v3_add(v3_add(v3_scale(v3(fabsf(p0.x), fabsf(p0.y), fabsf(p0.z)), b0),
+                                     v3_scale(v3(fabsf(p1.x), fabsf(p1.y), fabsf(p1.z)), b1)),
+                              v3_scale(v3(fabsf(p2.x), fabsf(p2.y), fabsf(p2.z)), b2));
+        vec3 n = v3_normalize(v3_cross(v3_sub(p1, p0), v3_sub(p2, p0)));
+        vec3 w = rng_dir(&r);
+        if (v3_dot(w, n) == 0.0f)
+            continue;
+        vec3 o = offset_ray_origin(p, v3_scale(abs_sum, mcpt_gamma(7)), n, w);
+        struct ray ray = make_ray(o, w, 0.0f, INFINITY);
+        struct bvh_hit hit;
+        bool is_hit = bvh_intersect(bvh, &ray, &hit);
+        if (is_hit)
+            cr_assert_neq(hit.prim_idx, prim, "ray re-hit its own face at t %g", hit.t);
+        /* inward rays (n points out) must hit the far side: the mesh is closed */
+        if (v3_dot(w, n) < 0.0f)
+            cr_assert(is_hit, "inward ray escaped the closed mesh");
+        n_hits += is_hit;
+    }
+    cr_assert_gt(n_hits, 8000);
+    bvh_free(bvh);
+    mesh_free(&m);
+}
+
+/* ---- watertightness on a closed mesh ----------------------------------------------------------
+ * Woop et al. 2013: rays aimed exactly at the mesh's vertices and edge midpoints, from the
+ * centre, from off-centre points inside and from outside, never escape. */
+static void probe_watertight(vec3 centre, float radius)
+{
+    struct mesh m = {0};
+    make_icosphere(&m, 3, centre, radius);
+    check_closed(&m);
+    struct bvh *bvh = build(&m);
+    const vec3 offsets[5] = {v3(0, 0, 0), v3(0.1f, -0.2f, 0.05f), v3(-0.3f, 0.25f, 0.4f),
+                             v3(0.0f, 0.0f, 0.85f), v3(0.55f, -0.55f, -0.3f)};
+    int n_rays = 0;
+    for (int k = 0; k < 6; k++) {
+        vec3 o = k < 5 ? v3_add(centre, v3_scale(offsets[k], radius))
+                       : v3_add(centre, v3(3.0f * radius, 2.0f * radius, -2.5f * radius));
+        for (uint32_t prim = 0; prim < m.n_tris; prim++) {
+            for (int e = 0; e < 3; e++) {
+                vec3 a = tri_vertex(&m, prim, e);
+                vec3 b = tri_vertex(&m, prim, (e + 1) % 3);
+                vec3 targets[2] = {a, v3_scale(v3_add(a, b), 0.5f)};
+                for (int j = 0; j < 2; j++) {
+                    struct ray ray = make_ray(o, v3_sub(targets[j], o), 0.0f, INFINITY);
+                    struct bvh_hit hit;
+                    bool is_hit = bvh_intersect(bvh, &ray, &hit);
+                    if (k == 5 && !is_hit)
+                        continue; /* from outside a target on the far side may be hidden */
+                    cr_assert(is_hit, "ray to %s of face %u escaped (origin %d)",
+                              j ? "edge midpoint" : "vertex", prim, k);
+                    expect_close_to_brute(&m, bvh, &ray);
+                    if (k < 5) /* from inside, the first hit is the target itself: t = 1 */
+                        cr_assert_float_eq(hit.t, 1.0f, 1e-4f);
+                    n_rays++;
+                }
+            }
+        }
+    }
+    cr_assert_gt(n_rays, 5 * 1280 * 6);
+    bvh_free(bvh);
+    mesh_free(&m);
+}
+
+Test(bvh, watertight_closed_mesh)
+{
+    probe_watertight(v3(0, 0, 0), 1.0f);
+    probe_watertight(v3(100.0f, -200.0f, 50.0f), 10.0f);
+    probe_watertight(v3(0.001f, 0.002f, -0.001f), 1e-3f);
+}
+
+/* ---- occlusion, empty BVH, stats ---------------------------------------------------------------- */
+
+/* bvh.h: bvh_occluded reports a hit in (t_min, t_max) exactly when bvh_intersect finds one. */
+Test(bvh, occluded_agrees_with_intersect)
+{
+    struct mesh m = {0};
+    make_soup(&m, 2000, 18);
+    struct bvh *bvh = build(&m);
+    struct rng r = {19};
+    int n_occluded = 0;
+    for (int i = 0; i < 6000; i++) {
+        float t_max = i % 5 == 0 ? INFINITY : rng_range(&r, 0.0f, 3.0f);
+        struct ray ray = make_ray(rng_in_box(&r, -2, 2), rng_dir(&r), 0.0f, t_max);
+        struct bvh_hit hit;
+        bool is_hit = bvh_intersect(bvh, &ray, &hit);
+        bool occluded = bvh_occluded(bvh, &ray);
+        cr_assert_eq(occluded, is_hit);
+        n_occluded += occluded;
+    }
+    cr_assert_gt(n_occluded, 1000);
+    cr_assert_lt(n_occluded, 5500);
+    bvh_free(bvh);
+    mesh_free(&m);
+}
+
+/* bvh.h: n_tris == 0 gives a valid BVH that nothing hits. */
+Test(bvh, empty_bvh)
+{
+    struct bvh *bvh = bvh_build(NULL, NULL, 0, 1);
+    cr_assert_not_null(bvh);
+    struct ray ray = make_ray(v3(0, 0, 0), v3(0, 0, 1), 0.0f, INFINITY);
+    struct bvh_hit hit;
+    cr_assert_not(bvh_intersect(bvh, &ray, &hit));
+    cr_assert_not(bvh_intersect_brute(bvh, &ray, &hit));
+    cr_assert_not(bvh_occluded(bvh, &ray));
+    struct bvh_stats st = bvh_get_stats(bvh);
+    cr_assert_eq(st.n_tris, 0u);
+    cr_assert_eq(st.n_nodes, 0u);
+    cr_assert_eq(st.n_leaves, 0u);
+    cr_assert_eq(st.sah_cost, 0.0);
+    bvh_free(bvh);
+    bvh_free(NULL);
+}
+
+/* Stats: a binary tree has 2 L - 1 nodes; depth within bounds; the root-normalised SAH cost
+ * (Wald 2007's cost model over the whole tree) is below that of one big leaf (n C_isect) and
+ * at least one triangle test; one triangle is one leaf. */
+Test(bvh, stats_are_consistent)
+{
+    struct mesh m = {0};
+    make_soup(&m, 2000, 20);
+    struct bvh *bvh = build(&m);
+    struct bvh_stats st = bvh_get_stats(bvh);
+    cr_assert_eq(st.n_tris, 2000u);
+    cr_assert_eq(st.n_nodes, 2 * st.n_leaves - 1);
+    cr_assert_geq(st.max_depth, 8u); /* at least log2(n_leaves) with n_leaves >= 2000 / 8 */
+    cr_assert_leq(st.max_depth, 64u);
+    cr_assert_gt(st.sah_cost, 1.0);
+    cr_assert_lt(st.sah_cost, 200.0);
+    cr_assert_geq(st.bytes, st.n_nodes * sizeof(struct bvh_node) + 2000 * (9 * sizeof(float)));
+    cr_assert_geq(st.build_ms, 0.0);
+    bvh_free(bvh);
+
+    m.n_tris = 1;
+    bvh = build(&m);
+    st = bvh_get_stats(bvh);
+    cr_assert_eq(st.n_nodes, 1u);
+    cr_assert_eq(st.n_leaves, 1u);
+    cr_assert_eq(st.max_depth, 0u);
+    cr_assert_gt(st.sah_cost, 0.0);
+    bvh_free(bvh);
+    mesh_free(&m);
+}

@@ -1,0 +1,161 @@
+/* tests/cli_test.c - main.c: exit status 0 / 2 / 1, one error line for bad usage and bad input,
+ * nothing written on error, and a small render producing a readable EXR (with variance and
+ * sample-count channels) and a PNG.  Runs the binary named by $MCPT (default ./mcpt). */
+#include <criterion/criterion.h>
+
+#include <fcntl.h>
+#include <stdlib.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "image.h"
+
+static char tmpdir[256];
+
+static void setup(void)
+{
+    snprintf(tmpdir, sizeof tmpdir, "/tmp/mcpt_cli_XXXXXX");
+    cr_assert(mkdtemp(tmpdir));
+}
+
+static void teardown(void)
+{
+    char cmd[512];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmpdir);
+    cr_assert_eq(system(cmd), 0);
+}
+
+/* Runs mcpt with args (NULL-terminated), stdout and stderr captured; returns the exit status. */
+static int run_mcpt(const char *const *args, char *err_out, size_t err_bytes)
+{
+    const char *bin = getenv("MCPT") ? getenv("MCPT") : "./mcpt";
+    char err_path[300];
+    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
+    pid_t pid = fork();
+    cr_assert(pid >= 0);
+    if (pid == 0) {
+        int fd = open(err_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        int null_fd = open("/dev/null", O_WRONLY);
+        dup2(fd, 2);
+        dup2(null_fd, 1);
+        const char *argv[32] = {bin};
+        int n = 1;
+        for (; args[n - 1] && n < 31; n++)
+            argv[n] = args[n - 1];
+        argv[n] = NULL;
+        execv(bin, (char *const *)argv);
+        _exit(127);
+    }
+    int status;
+    cr_assert_eq(waitpid(pid, &status, 0), pid);
+    FILE *f = fopen(err_path, "r");
+    size_t len = f ? fread(err_out, 1, err_bytes - 1, f) : 0;
+    err_out[len] = '\0';
+    if (f)
+        fclose(f);
+    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+static int count_lines(const char *s)
+{
+    int n = 0;
+    for (; *s; s++)
+        n += *s == '\n';
+    return n;
+}
+
+static bool exists(const char *path)
+{
+    struct stat st;
+    return stat(path, &st) == 0;
+}
+
+/* Bad usage: exit 2, exactly one line "mcpt: error: expected ...". */
+Test(cli, bad_usage, .init = setup, .fini = teardown)
+{
+    const char *cases[][4] = {
+        {NULL},
+        {"tests/data/cli/tiny.txt", "--spp", "0", NULL},
+        {"tests/data/cli/tiny.txt", "--spp", "-3", NULL},
+        {"tests/data/cli/tiny.txt", "--spp", "abc", NULL},
+        {"tests/data/cli/tiny.txt", "--spp", "4294967296", NULL},
+        {"tests/data/cli/tiny.txt", "--threads", "0", NULL},
+        {"tests/data/cli/tiny.txt", "--max-depth", "x", NULL},
+        {"tests/data/cli/tiny.txt", "--width", "0", NULL},
+        {"tests/data/cli/tiny.txt", "--seed", "-1", NULL},
+        {"tests/data/cli/tiny.txt", "--bogus", NULL},
+        {"tests/data/cli/tiny.txt", "--spp", NULL},
+        {"a.txt", "b.txt", NULL},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        char err[4096];
+        int rc = run_mcpt(cases[i], err, sizeof err);
+        cr_assert_eq(rc, 2, "case %zu: exit %d, stderr: %s", i, rc, err);
+        cr_assert_eq(count_lines(err), 1, "case %zu: one line, got: %s", i, err);
+        cr_assert(strncmp(err, "mcpt: error: expected ", 22) == 0, "case %zu: %s", i, err);
+    }
+}
+
+/* Bad scene: exit 2, one line naming file:line:col, and an existing output left untouched. */
+Test(cli, bad_scene_writes_nothing, .init = setup, .fini = teardown)
+{
+    char out[300], png[300], err[4096];
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(png, sizeof png, "%s/out.png", tmpdir);
+    FILE *f = fopen(out, "w");
+    fputs("precious", f);
+    fclose(f);
+    const char *args[] = {"tests/data/cli/bad-statement.txt", "-o", out, NULL};
+    cr_assert_eq(run_mcpt(args, err, sizeof err), 2);
+    cr_assert_eq(count_lines(err), 1, "%s", err);
+    cr_assert(strncmp(err, "tests/data/cli/bad-statement.txt:2:1: error: expected ", 54) == 0,
+              "%s", err);
+    char buf[16] = {0};
+    f = fopen(out, "r");
+    cr_assert(fread(buf, 1, sizeof buf - 1, f) == 8);
+    fclose(f);
+    cr_assert_str_eq(buf, "precious");
+    cr_assert_not(exists(png));
+    const char *missing[] = {"tests/data/cli/no-such-scene.txt", "-o", out, NULL};
+    cr_assert_eq(run_mcpt(missing, err, sizeof err), 2);
+    cr_assert(strstr(err, "tests/data/cli/no-such-scene.txt") == err, "%s", err);
+}
+
+/* --help and --version exit 0. */
+Test(cli, help_version, .init = setup, .fini = teardown)
+{
+    char err[4096];
+    const char *h[] = {"--help", NULL};
+    cr_assert_eq(run_mcpt(h, err, sizeof err), 0);
+    const char *v[] = {"--version", NULL};
+    cr_assert_eq(run_mcpt(v, err, sizeof err), 0);
+}
+
+/* A render writes an EXR with R, G, B, variance.R/G/B and samples (= spp everywhere) and a
+ * PNG beside it; no NaN anywhere. */
+Test(cli, render_writes_exr_and_png, .init = setup, .fini = teardown)
+{
+    char out[300], png[300], err[4096];
+    snprintf(out, sizeof out, "%s/tiny.exr", tmpdir);
+    snprintf(png, sizeof png, "%s/tiny.png", tmpdir);
+    const char *args[] = {"tests/data/cli/tiny.txt", "-o", out, "--spp", "5", "--quiet", NULL};
+    cr_assert_eq(run_mcpt(args, err, sizeof err), 0, "%s", err);
+    cr_assert(exists(png));
+    struct image img;
+    struct mcpt_error e;
+    cr_assert(image_read_exr(out, &img, &e), "%s", e.msg);
+    cr_assert_eq(img.width, 16);
+    cr_assert_eq(img.height, 12);
+    const char *names[] = {"R", "G", "B", "variance.R", "variance.G", "variance.B", "samples"};
+    for (int c = 0; c < 7; c++) {
+        int idx = image_find_channel(&img, names[c]);
+        cr_assert(idx >= 0, "channel %s", names[c]);
+        for (int i = 0; i < 16 * 12; i++)
+            cr_assert(isfinite(img.data[idx][i]));
+    }
+    int s = image_find_channel(&img, "samples");
+    for (int i = 0; i < 16 * 12; i++)
+        cr_assert_eq(img.data[s][i], 5.0f);
+    image_free(&img);
+}

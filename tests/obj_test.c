@@ -1,0 +1,465 @@
+/* obj_test.c - tests obj.c, the Wavefront OBJ/MTL reader.
+ * Checks: every face index form (v, v/vt, v//vn, v/vt/vn) and negative indices counting back
+ * from the end at the time the face is read (Wavefront "Object Files (.obj)", "Referencing
+ * vertex data"); fan triangulation (n corners -> n-2 triangles in order); CRLF, tabs, comments,
+ * BOM, no final newline; mtllib/usemtl mapping and MTL keys with their defaults; floats equal to
+ * strtof bit for bit (Clinger 1990 fast path); the real Cornell box; and golden error strings
+ * "file:line:col: error: msg" for every malformed input (STYLE.md §5).
+ * Fixtures: tests/data/obj/, scenes/models/; paths are relative to the repo root. */
+#define _POSIX_C_SOURCE 200809L /* mkstemp, close, unlink */
+
+#include <criterion/criterion.h>
+
+#include <stdlib.h>
+#include <unistd.h>
+
+#include "obj.h"
+
+#define DATA "tests/data/obj/"
+
+static void load_ok(const char *path, struct obj_mesh *mesh)
+{
+    struct mcpt_error err = {0};
+    char msg[600];
+    bool ok = obj_load(path, mesh, &err);
+    mcpt_error_format(&err, msg, sizeof msg);
+    cr_assert(ok, "%s failed: %s", path, msg);
+}
+
+/* PCG-style LCG step (Knuth's MMIX constants); the high bits are the random ones. */
+static uint64_t next_u64(uint64_t *state)
+{
+    *state = *state * 6364136223846793005u + 1442695040888963407u;
+    return *state >> 24;
+}
+
+static bool vec3_eq(vec3 a, vec3 b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
+
+static void assert_tri(const struct obj_mesh *m, uint32_t i, uint32_t v0, uint32_t v1, uint32_t v2,
+                       int32_t t0, int32_t t1, int32_t t2, int32_t n0, int32_t n1, int32_t n2)
+{
+    cr_assert_lt(i, m->n_tris);
+    const struct obj_tri *t = &m->tris[i];
+    cr_assert(t->v[0] == v0 && t->v[1] == v1 && t->v[2] == v2,
+              "tri %u: v = (%u %u %u), expected (%u %u %u)", i, t->v[0], t->v[1], t->v[2], v0, v1,
+              v2);
+    cr_assert(t->vt[0] == t0 && t->vt[1] == t1 && t->vt[2] == t2,
+              "tri %u: vt = (%d %d %d), expected (%d %d %d)", i, t->vt[0], t->vt[1], t->vt[2], t0,
+              t1, t2);
+    cr_assert(t->vn[0] == n0 && t->vn[1] == n1 && t->vn[2] == n2,
+              "tri %u: vn = (%d %d %d), expected (%d %d %d)", i, t->vn[0], t->vn[1], t->vn[2], n0,
+              n1, n2);
+}
+
+/* The quad written five ways (crlf, tabs, comments, BOM, no final newline, ignored statements):
+ * 4 positions, one face on line face_line -> triangles (0 1 2) and (0 2 3). */
+static void assert_quad(const char *path, uint32_t face_line)
+{
+    struct obj_mesh m;
+    load_ok(path, &m);
+    cr_assert_eq(m.n_positions, 4);
+    cr_assert(vec3_eq(m.positions[0], v3(0.5f, -1.25f, 2.0f)), "%s: v1 misread", path);
+    cr_assert(vec3_eq(m.positions[3], v3(0.0f, 1.0f, 0.0f)), "%s: v4 misread", path);
+    cr_assert_eq(m.n_tris, 2);
+    assert_tri(&m, 0, 0, 1, 2, -1, -1, -1, -1, -1, -1);
+    assert_tri(&m, 1, 0, 2, 3, -1, -1, -1, -1, -1, -1);
+    cr_assert_eq(m.tris[0].line, face_line);
+    cr_assert_eq(m.tris[1].line, face_line);
+    cr_assert_eq(m.tris[0].mat_idx, -1);
+    cr_assert_eq(m.n_normals + m.n_uvs + m.n_materials, 0);
+    obj_free(&m);
+}
+
+/* Each form sets exactly the indices it names; the others stay -1; 1-based -> 0-based. */
+Test(obj, index_forms)
+{
+    struct obj_mesh m;
+    load_ok(DATA "index_forms.obj", &m);
+    cr_assert_eq(m.n_positions, 4);
+    cr_assert_eq(m.n_uvs, 3);
+    cr_assert_eq(m.n_normals, 2);
+    cr_assert_eq(m.n_tris, 5);
+    assert_tri(&m, 0, 0, 1, 2, -1, -1, -1, -1, -1, -1); /* f 1 2 3 */
+    assert_tri(&m, 1, 0, 1, 2, 0, 1, 2, -1, -1, -1);    /* f 1/1 2/2 3/3 */
+    assert_tri(&m, 2, 1, 2, 3, -1, -1, -1, 1, 0, 1);    /* f 2//2 3//1 4//2 */
+    assert_tri(&m, 3, 3, 2, 0, 2, 1, 0, 0, 1, 0);       /* f 4/3/1 3/2/2 1/1/1 */
+    assert_tri(&m, 4, 0, 1, 2, -1, 2, -1, -1, -1, 1);   /* f 1 2/3 3//2: mixed per corner */
+    for (uint32_t i = 0; i < m.n_tris; i++)
+        cr_assert_eq(m.tris[i].line, 11 + i);
+    cr_assert(m.uvs[2].x == 0.0f && m.uvs[2].y == 1.0f);
+    cr_assert(vec3_eq(m.normals[1], v3(1.0f, 0.0f, 0.0f)));
+    obj_free(&m);
+}
+
+/* -k names the k-th last element defined before the face, so the same -1 changes meaning once
+ * more vertices are read. */
+Test(obj, negative_indices_count_back_from_current_end)
+{
+    struct obj_mesh m;
+    load_ok(DATA "negative.obj", &m);
+    cr_assert_eq(m.n_tris, 2);
+    assert_tri(&m, 0, 0, 1, 2, -1, -1, -1, -1, -1, -1); /* f -3 -2 -1 with 3 v */
+    assert_tri(&m, 1, 3, 0, 2, 0, 1, -1, 0, 0, 0);      /* f -1/-2/-1 -4/-1/-1 -2//-1 with 4 v */
+    obj_free(&m);
+}
+
+/* Fan from the first corner: quad -> 2, pentagon -> 3 triangles, in face order. */
+Test(obj, polygons_fan_from_first_vertex)
+{
+    struct obj_mesh m;
+    load_ok(DATA "polygons.obj", &m);
+    cr_assert_eq(m.n_tris, 6);
+    assert_tri(&m, 0, 0, 1, 2, -1, -1, -1, -1, -1, -1); /* quad 1 2 3 4 */
+    assert_tri(&m, 1, 0, 2, 3, -1, -1, -1, -1, -1, -1);
+    assert_tri(&m, 2, 0, 1, 2, -1, -1, -1, -1, -1, -1); /* pentagon 1 2 3 4 5 */
+    assert_tri(&m, 3, 0, 2, 3, -1, -1, -1, -1, -1, -1);
+    assert_tri(&m, 4, 0, 3, 4, -1, -1, -1, -1, -1, -1);
+    assert_tri(&m, 5, 4, 3, 2, -1, -1, -1, -1, -1, -1); /* triangle 5 4 3 */
+    const uint32_t lines[6] = {6, 6, 7, 7, 7, 8};
+    for (uint32_t i = 0; i < 6; i++)
+        cr_assert_eq(m.tris[i].line, lines[i]);
+    obj_free(&m);
+}
+
+/* CRLF line ends (the Cornell box and dragon files use them). */
+Test(obj, crlf) { assert_quad(DATA "crlf.obj", 6); }
+
+/* Tabs as separators, leading and trailing; a line of blanks only. */
+Test(obj, tabs) { assert_quad(DATA "tabs.obj", 6); }
+
+/* The last statement ends at end of file, not at a newline. */
+Test(obj, no_final_newline) { assert_quad(DATA "no_final_newline.obj", 5); }
+
+/* Full-line, indented and inline comments, with and without a blank before '#'. */
+Test(obj, comments) { assert_quad(DATA "comments.obj", 9); }
+
+/* A UTF-8 byte order mark before the first statement. */
+Test(obj, byte_order_mark) { assert_quad(DATA "bom.obj", 5); }
+
+/* o, g (with and without names), s, and statements mcpt does not use (vp l p cstype deg curv
+ * end) are skipped. */
+Test(obj, ignored_statements) { assert_quad(DATA "ignored.obj", 15); }
+
+/* An empty file is a valid empty mesh; the scene decides whether that is an error. */
+Test(obj, empty_file_is_empty_mesh)
+{
+    struct obj_mesh m;
+    load_ok(DATA "empty.obj", &m);
+    cr_assert_eq(m.n_positions + m.n_normals + m.n_uvs + m.n_tris + m.n_materials, 0);
+    obj_free(&m);
+}
+
+/* usemtl maps faces to materials of every mtllib read so far; an unknown name gives -1; MTL
+ * lines may be indented and carry inline comments; absent keys keep the obj.h defaults;
+ * Kd with one number is grey; Tr = 1 - d; a repeated mtllib is read once (no duplicate). */
+Test(obj, mtllib_usemtl_mapping)
+{
+    struct obj_mesh m;
+    load_ok(DATA "materials.obj", &m);
+    cr_assert_eq(m.n_materials, 4);
+    cr_assert_eq(m.n_tris, 5);
+    const int32_t expected_mat[5] = {-1, 0, 1, -1, 2};
+    for (uint32_t i = 0; i < 5; i++)
+        cr_assert_eq(m.tris[i].mat_idx, expected_mat[i], "tri %u: mat_idx %d, expected %d", i,
+                     m.tris[i].mat_idx, expected_mat[i]);
+
+    const struct obj_material *red = &m.materials[0];
+    cr_assert_str_eq(red->name, "red");
+    cr_assert(vec3_eq(red->Kd, v3(0.63f, 0.065f, 0.05f)));
+    cr_assert(vec3_eq(red->Ks, v3(0.0f, 0.0f, 0.0f)));
+    cr_assert_eq(red->Ns, 10.0f);
+    cr_assert_eq(red->illum, 2);
+    cr_assert_eq(red->line, 2);
+
+    const struct obj_material *light = &m.materials[1];
+    cr_assert_str_eq(light->name, "light");
+    cr_assert(vec3_eq(light->Kd, v3(0.78f, 0.78f, 0.78f)));
+    cr_assert(vec3_eq(light->Ke, v3(17.0f, 12.0f, 4.0f)));
+    cr_assert_eq(light->line, 10);
+
+    const struct obj_material *glass = &m.materials[2];
+    cr_assert_str_eq(glass->name, "glass");
+    cr_assert_eq(glass->Ni, 1.5f);
+    cr_assert_eq(glass->d, 0.75f);
+    cr_assert_eq(glass->illum, 7);
+    cr_assert(vec3_eq(glass->Ks, v3(0.9f, 0.9f, 0.9f)));
+    cr_assert(vec3_eq(glass->Tf, v3(1.0f, 1.0f, 1.0f)));
+
+    const struct obj_material *def = &m.materials[3];
+    cr_assert_str_eq(def->name, "defaults");
+    cr_assert(vec3_eq(def->Kd, v3(0.8f, 0.8f, 0.8f)));
+    cr_assert(vec3_eq(def->Ks, v3(0.0f, 0.0f, 0.0f)));
+    cr_assert(vec3_eq(def->Ke, v3(0.0f, 0.0f, 0.0f)));
+    cr_assert(vec3_eq(def->Tf, v3(1.0f, 1.0f, 1.0f)));
+    cr_assert(def->Ns == 0.0f && def->Ni == 1.0f && def->d == 1.0f && def->illum == 2);
+    obj_free(&m);
+}
+
+/* Every coordinate equals strtof of its text bit for bit (-0 included): the Clinger fast path
+ * (m <= 2^24, |k| <= 10) and the strtof fallback must both round correctly.  20000 random
+ * literals: mostly fast-path forms, plus long mantissas, exponents, subnormals, signs. */
+Test(obj, floats_match_strtof)
+{
+    enum { N_VERTS = 20000 / 3 + 1 };
+    static char text[N_VERTS][3][48];
+    char path[] = "/tmp/mcpt_obj_test_XXXXXX";
+    int fd = mkstemp(path);
+    cr_assert_neq(fd, -1);
+    FILE *f = fdopen(fd, "w");
+    cr_assert_not_null(f);
+    uint64_t state = 0x9e3779b97f4a7c15u; /* fixed seed: the same literals every run */
+    for (int i = 0; i < N_VERTS; i++) {
+        for (int j = 0; j < 3; j++) {
+            char *s = text[i][j];
+            int n = 0;
+            uint64_t sign = next_u64(&state) % 3;
+            if (sign != 2)
+                s[n++] = sign ? '-' : '+';
+            int n_int = (int)(next_u64(&state) % 4); /* 0..3 digits */
+            int n_frac = next_u64(&state) % 4 ? (int)(next_u64(&state) % 8)   /* 0..7 */
+                                               : (int)(next_u64(&state) % 13); /* 0..12 */
+            for (int d = 0; d < n_int; d++)
+                s[n++] = (char)('0' + next_u64(&state) % 10);
+            if (n_int == 0 && n_frac == 0)
+                s[n++] = '0';
+            if (n_frac > 0)
+                s[n++] = '.';
+            for (int d = 0; d < n_frac; d++)
+                s[n++] = (char)('0' + next_u64(&state) % 10);
+            s[n] = '\0';
+            if (next_u64(&state) % 4 == 0) /* an exponent e-60..e30 in one literal of four */
+                sprintf(s + n, "e%d", (int)(next_u64(&state) % 91) - 60);
+        }
+        fprintf(f, "v %s %s %s\n", text[i][0], text[i][1], text[i][2]);
+    }
+    fclose(f);
+
+    struct obj_mesh m;
+    struct mcpt_error err = {0};
+    bool ok = obj_load(path, &m, &err);
+    unlink(path);
+    cr_assert(ok, "%s", err.msg);
+    cr_assert_eq(m.n_positions, N_VERTS);
+    for (int i = 0; i < N_VERTS; i++) {
+        const float got[3] = {m.positions[i].x, m.positions[i].y, m.positions[i].z};
+        for (int j = 0; j < 3; j++) {
+            float want = strtof(text[i][j], NULL);
+            cr_assert(memcmp(&got[j], &want, sizeof want) == 0, "'%s': got %a, strtof %a",
+                      text[i][j], (double)got[j], (double)want);
+        }
+    }
+    obj_free(&m);
+}
+
+/* The real McGuire Cornell box (CRLF, negative indices, quads, indented MTL with inline
+ * comments): 18 quads -> 36 triangles, 8 materials, every face has a material, the light's
+ * Ke = (17, 12, 4) and its quad gives 2 triangles. */
+Test(obj, cornell_box_original)
+{
+    struct obj_mesh m;
+    load_ok("scenes/models/CornellBox-Original.obj", &m);
+    cr_assert_eq(m.n_positions, 72);
+    cr_assert_eq(m.n_tris, 36);
+    cr_assert_eq(m.n_materials, 8);
+    cr_assert(vec3_eq(m.positions[0], v3(-1.01f, 0.0f, 0.99f)));
+    int32_t light_idx = -1;
+    for (uint32_t i = 0; i < m.n_materials; i++) {
+        if (strcmp(m.materials[i].name, "light") == 0)
+            light_idx = (int32_t)i;
+    }
+    cr_assert_geq(light_idx, 0);
+    cr_assert(vec3_eq(m.materials[light_idx].Ke, v3(17.0f, 12.0f, 4.0f)));
+    cr_assert(vec3_eq(m.materials[light_idx].Kd, v3(0.78f, 0.78f, 0.78f)));
+    cr_assert(vec3_eq(m.materials[0].Kd, v3(0.63f, 0.065f, 0.05f))); /* leftWall, red */
+    uint32_t n_light_tris = 0;
+    for (uint32_t i = 0; i < m.n_tris; i++) {
+        cr_assert(m.tris[i].mat_idx >= 0 && m.tris[i].mat_idx < (int32_t)m.n_materials,
+                  "tri %u has mat_idx %d", i, m.tris[i].mat_idx);
+        n_light_tris += m.tris[i].mat_idx == light_idx;
+    }
+    cr_assert_eq(n_light_tris, 2);
+    obj_free(&m);
+}
+
+/* The 100k Stanford dragon (shared models, when present): counts from models/README.md; its
+ * stray "usemtl" with no mtllib leaves every mat_idx at -1. */
+Test(obj, stanford_dragon_if_present)
+{
+    const char *path = "../shared/models/stanford-dragon-100k.obj";
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        cr_skip_test("%s not present", path);
+    fclose(f);
+    struct obj_mesh m;
+    load_ok(path, &m);
+    cr_assert_eq(m.n_positions, 50000);
+    cr_assert_eq(m.n_tris, 100000);
+    cr_assert(vec3_eq(m.positions[0], v3(1.6831f, 3.0852f, -0.9792f)));
+    for (uint32_t i = 0; i < m.n_tris; i++)
+        cr_assert_eq(m.tris[i].mat_idx, -1);
+    obj_free(&m);
+}
+
+/* Dabrovic Sponza (shared models, when present): v/vt/vn triangles, 3-component vt. */
+Test(obj, sponza_if_present)
+{
+    const char *path = "../shared/models/sponza-dabrovic.obj";
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        cr_skip_test("%s not present", path);
+    fclose(f);
+    struct obj_mesh m;
+    load_ok(path, &m);
+    cr_assert_eq(m.n_positions, 39999);
+    cr_assert_eq(m.n_uvs, 71396);
+    cr_assert_eq(m.n_normals, 39999);
+    cr_assert_eq(m.n_tris, 66454);
+    for (uint32_t i = 0; i < m.n_tris; i++) {
+        for (int k = 0; k < 3; k++)
+            cr_assert(m.tris[i].vt[k] >= 0 && m.tris[i].vn[k] >= 0, "tri %u", i);
+    }
+    obj_free(&m);
+}
+
+/* ---- golden error messages: "file:line:col: error: msg", column of the offending token ---- */
+
+struct golden {
+    const char *path;
+    const char *message;
+};
+
+/* Loads each path, which must fail with exactly its message and leave the mesh zeroed. */
+static void check_golden(const struct golden *cases, size_t n_cases)
+{
+    for (size_t i = 0; i < n_cases; i++) {
+        struct obj_mesh m;
+        memset(&m, 0xab, sizeof m); /* obj_load must zero it whatever it held */
+        struct mcpt_error err = {0};
+        bool ok = obj_load(cases[i].path, &m, &err);
+        cr_expect_not(ok, "%s loaded but should fail", cases[i].path);
+        char got[600];
+        mcpt_error_format(&err, got, sizeof got);
+        cr_expect_str_eq(got, cases[i].message);
+        struct obj_mesh zero;
+        memset(&zero, 0, sizeof zero);
+        cr_expect(memcmp(&m, &zero, sizeof m) == 0, "%s: mesh not left empty", cases[i].path);
+    }
+}
+
+/* Face indices: zero, past the end, too far back, huge, before any v/vt/vn (the column is the
+ * offending number's). */
+Test(obj, errors_face_indices)
+{
+    static const struct golden cases[] = {
+        {DATA "err_index_zero.obj", DATA "err_index_zero.obj:4:5: error: expected a vertex index "
+                                         "in 1..3 or -3..-1, got 0"},
+        {DATA "err_index_high.obj", DATA "err_index_high.obj:4:7: error: expected a vertex index "
+                                         "in 1..3 or -3..-1, got 4"},
+        {DATA "err_index_negative.obj", DATA "err_index_negative.obj:4:9: error: expected a "
+                                             "vertex index in 1..3 or -3..-1, got -4"},
+        {DATA "err_index_huge.obj", DATA "err_index_huge.obj:4:7: error: expected a vertex index "
+                                         "in 1..3 or -3..-1, got 99999999999999999999"},
+        {DATA "err_index_no_v.obj", DATA "err_index_no_v.obj:1:3: error: expected a vertex "
+                                         "index, got 1 before any 'v' statement"},
+        {DATA "err_vt_range.obj", DATA "err_vt_range.obj:6:13: error: expected a texture index "
+                                       "in 1..2 or -2..-1, got 3"},
+        {DATA "err_vn_range.obj", DATA "err_vn_range.obj:5:11: error: expected a normal index in "
+                                       "1..1 or -1..-1, got -2"},
+        {DATA "err_vn_none.obj", DATA "err_vn_none.obj:4:6: error: expected a normal index, got 1 "
+                                      "before any 'vn' statement"},
+    };
+    check_golden(cases, sizeof cases / sizeof cases[0]);
+}
+
+/* Malformed statements: corner forms, too few corners, wrong number counts, bad numbers,
+ * NaN/Inf/overflow, a CRLF line, missing names. */
+Test(obj, errors_statements)
+{
+    static const struct golden cases[] = {
+        {DATA "err_corner_form.obj", DATA "err_corner_form.obj:4:7: error: expected a vertex of "
+                                          "the form v, v/vt, v//vn or v/vt/vn, got '3/4/5/6'"},
+        {DATA "err_corner_float.obj", DATA "err_corner_float.obj:4:3: error: expected a vertex "
+                                           "of the form v, v/vt, v//vn or v/vt/vn, got '1.5'"},
+        {DATA "err_corner_empty_vt.obj", DATA "err_corner_empty_vt.obj:4:3: error: expected a "
+                                              "vertex of the form v, v/vt, v//vn or v/vt/vn, "
+                                              "got '1/'"},
+        {DATA "err_face_two.obj", DATA "err_face_two.obj:4:6: error: expected at least 3 "
+                                       "vertices after 'f', got 2"},
+        {DATA "err_v_count.obj", DATA "err_v_count.obj:1:6: error: expected 3 numbers after 'v', "
+                                      "got 2"},
+        {DATA "err_v_count5.obj", DATA "err_v_count5.obj:1:12: error: expected 3, 4 or 6 "
+                                       "numbers after 'v', got 5"},
+        {DATA "err_vn_count.obj", DATA "err_vn_count.obj:1:10: error: expected 3 numbers after "
+                                       "'vn', got 4"},
+        {DATA "err_vt_count.obj", DATA "err_vt_count.obj:1:3: error: expected 1 to 3 numbers "
+                                       "after 'vt', got 0"},
+        {DATA "err_number.obj", DATA "err_number.obj:1:5: error: expected a number, got 'abc'"},
+        {DATA "err_nan.obj", DATA "err_nan.obj:1:3: error: expected a finite number, got 'nan'"},
+        {DATA "err_inf.obj", DATA "err_inf.obj:1:5: error: expected a finite number, got '-inf'"},
+        {DATA "err_overflow.obj", DATA "err_overflow.obj:1:7: error: expected a finite number, "
+                                       "got '1e39'"},
+        {DATA "err_crlf.obj", DATA "err_crlf.obj:2:6: error: expected 3 numbers after 'v', got "
+                                   "2"},
+        {DATA "err_mtllib_empty.obj", DATA "err_mtllib_empty.obj:1:7: error: expected an MTL "
+                                           "file name after 'mtllib', got end of line"},
+        {DATA "err_usemtl_empty.obj", DATA "err_usemtl_empty.obj:1:7: error: expected a "
+                                           "material name after 'usemtl', got end of line"},
+    };
+    check_golden(cases, sizeof cases / sizeof cases[0]);
+}
+
+/* MTL errors name the .mtl file: duplicate newmtl (same file, earlier mtllib), wrong counts,
+ * illum not an integer 0..10, a key before newmtl, an over-long name, Inf, a NUL byte. */
+Test(obj, errors_mtl)
+{
+    static const struct golden cases[] = {
+        {DATA "err_mtl_dup.obj", DATA "err_mtl_dup.mtl:4:8: error: expected a new material name, "
+                                      "got 'red' (already defined at line 1)"},
+        {DATA "err_mtl_dup2.obj", DATA "err_mtl_dup2.mtl:1:8: error: expected a new material "
+                                       "name, got 'red' (already defined by an earlier mtllib)"},
+        {DATA "err_mtl_kd_count.obj", DATA "err_mtl_kd_count.mtl:2:13: error: expected 1 or 3 "
+                                           "numbers after 'Kd', got 2"},
+        {DATA "err_mtl_ns_count.obj", DATA "err_mtl_ns_count.mtl:2:3: error: expected 1 number "
+                                           "after 'Ns', got 0"},
+        {DATA "err_mtl_illum.obj", DATA "err_mtl_illum.mtl:2:7: error: expected an integer 0..10 "
+                                        "after 'illum', got '2.5'"},
+        {DATA "err_mtl_no_newmtl.obj", DATA "err_mtl_no_newmtl.mtl:1:1: error: expected "
+                                            "'newmtl', got 'Kd' before any material"},
+        {DATA "err_mtl_long_name.obj", DATA "err_mtl_long_name.mtl:1:8: error: expected a "
+                                            "material name of at most 63 bytes, got 64 bytes"},
+        {DATA "err_mtl_inf.obj", DATA "err_mtl_inf.mtl:2:4: error: expected a finite number, got "
+                                      "'inf'"},
+        {DATA "err_mtl_nul.obj", DATA "err_mtl_nul.mtl:2:1: error: expected text, got a NUL "
+                                      "byte"},
+    };
+    check_golden(cases, sizeof cases / sizeof cases[0]);
+}
+
+/* Files: a missing OBJ or a directory has no line (strerror text); a missing mtllib points at
+ * the name in the OBJ line; NUL bytes and a binary first byte are not misread as text. */
+Test(obj, errors_files)
+{
+    static const struct golden cases[] = {
+        {DATA "no_such_file.obj", DATA "no_such_file.obj: error: cannot open: No such file or "
+                                       "directory"},
+        {"tests/data/obj", "tests/data/obj: error: cannot read: Is a directory"},
+        {DATA "err_mtllib_missing.obj", DATA "err_mtllib_missing.obj:1:8: error: cannot open '"
+                                             DATA "no_such.mtl': No such file or directory"},
+        {DATA "err_nul.obj", DATA "err_nul.obj:2:4: error: expected text, got a NUL byte"},
+        {DATA "err_keyword.obj", DATA "err_keyword.obj:2:1: error: expected a statement keyword, "
+                                      "got '\\x89PNG'"},
+    };
+    check_golden(cases, sizeof cases / sizeof cases[0]);
+}
+
+/* obj_free zeroes the mesh and is safe on a zeroed one (and twice). */
+Test(obj, free_is_idempotent)
+{
+    struct obj_mesh m;
+    load_ok(DATA "polygons.obj", &m);
+    obj_free(&m);
+    cr_assert_null(m.positions);
+    cr_assert_null(m.tris);
+    cr_assert_eq(m.n_tris, 0);
+    obj_free(&m);
+}

@@ -1,0 +1,679 @@
+/* scene_test.c - tests for scene.c, the scene-file parser (docs/scene-format.md).
+ * Checks: every statement parses to its exact values and defaults; transforms follow scale,
+ * then Rodrigues rotation, then translation, with normals by the inverse transpose (PBRT 4e,
+ * ch. 3, "Applying Transformations") and mirrored winding kept front-facing; MTL records map to
+ * mcpt materials; the light list holds emissive triangles, quads, spheres, then point lights;
+ * every error gives its exact "file:line:col: error: expected ..., got ..." message (golden
+ * strings); the Cornell box scene loads as the standard view. */
+#ifndef _DEFAULT_SOURCE
+#define _DEFAULT_SOURCE /* mkdtemp, rmdir */
+#endif
+#include "scene.h"
+
+#include "obj.h"
+
+#include <criterion/criterion.h>
+#include <stdlib.h>
+#include <unistd.h>
+
+#define CAM "camera eye=0,0,5 look-at=0,0,0 up=0,1,0 fov=40\n"
+#define MAT "material name=red type=diffuse albedo=0.5,0.5,0.5\n"
+
+static void assert_vec3(vec3 a, float x, float y, float z, const char *what)
+{
+    cr_assert(a.x == x && a.y == y && a.z == z, "%s: expected (%.9g, %.9g, %.9g), got (%.9g, "
+              "%.9g, %.9g)", what, x, y, z, a.x, a.y, a.z);
+}
+
+static void assert_vec3_near(vec3 a, float x, float y, float z, const char *what)
+{
+    cr_assert(fabsf(a.x - x) <= 1e-6f && fabsf(a.y - y) <= 1e-6f && fabsf(a.z - z) <= 1e-6f,
+              "%s: expected (%g, %g, %g), got (%.9g, %.9g, %.9g)", what, x, y, z, a.x, a.y, a.z);
+}
+
+static void assert_zeroed(const struct scene *sc)
+{
+    static const struct scene zero;
+    cr_assert(memcmp(sc, &zero, sizeof zero) == 0, "a failed load must leave the scene zeroed");
+}
+
+/* Writes len bytes of text as scene.txt in a fresh temporary folder and loads it.  Returns
+ * scene_load's result; on failure *msg holds the formatted error with the folder cut off, so
+ * golden strings read "scene.txt:line:col: error: ...". */
+static bool load_text(const char *text, size_t len, struct scene *sc, char *msg, size_t msg_bytes)
+{
+    char dir[] = "/tmp/mcpt-scene-test-XXXXXX";
+    cr_assert_not_null(mkdtemp(dir));
+    char path[64];
+    snprintf(path, sizeof path, "%s/scene.txt", dir);
+    FILE *f = fopen(path, "wb");
+    cr_assert_not_null(f);
+    cr_assert_eq(fwrite(text, 1, len, f), len);
+    cr_assert_eq(fclose(f), 0);
+    struct mcpt_error err = {0};
+    bool ok = scene_load(path, sc, &err);
+    remove(path);
+    rmdir(dir);
+    if (!ok) {
+        char full[640];
+        mcpt_error_format(&err, full, sizeof full);
+        size_t n_dir = strlen(dir);
+        cr_assert(strncmp(full, dir, n_dir) == 0 && full[n_dir] == '/', "%s", full);
+        snprintf(msg, msg_bytes, "%s", full + n_dir + 1);
+    }
+    return ok;
+}
+
+/* Loads text (with possible NUL bytes) and requires the exact error message golden. */
+static void check_error_n(const char *text, size_t len, const char *golden)
+{
+    struct scene sc;
+    memset(&sc, 0xa5, sizeof sc);
+    char msg[640];
+    cr_assert(!load_text(text, len, &sc, msg, sizeof msg), "expected an error for:\n%s", text);
+    cr_assert_str_eq(msg, golden);
+    assert_zeroed(&sc);
+}
+
+#define check_error(text, golden) check_error_n((text), sizeof(text) - 1, (golden))
+
+/* Loads a fixture file and requires the exact error message golden. */
+static void check_file_error(const char *path, const char *golden)
+{
+    struct scene sc;
+    struct mcpt_error err = {0};
+    char msg[640];
+    cr_assert(!scene_load(path, &sc, &err), "expected an error for %s", path);
+    mcpt_error_format(&err, msg, sizeof msg);
+    cr_assert_str_eq(msg, golden);
+    assert_zeroed(&sc);
+}
+
+static void load_ok(const char *text, struct scene *sc)
+{
+    char msg[640] = "";
+    cr_assert(load_text(text, strlen(text), sc, msg, sizeof msg), "unexpected error: %s", msg);
+}
+
+/* ---- valid scenes ---------------------------------------------------------------------- */
+
+/* Every statement of tests/data/scene/full.txt, value by value: camera, film, render, the
+ * material table (scene-file materials, then the mesh's MTL records and "default"), two meshes
+ * (one rotated 90 degrees about y, scaled 2 and translated; one mirrored by scale=-1,1,1),
+ * spheres (scaled and translated), quads (rotated 180 degrees; mirrored), a plane, point
+ * lights, the sky and the light list.  The transforms chosen are exact in float, so positions
+ * compare exactly: p' = R (s p) + t with R_y(90) (x, y, z) -> (z, y, -x). */
+Test(scene, full_scene_values)
+{
+    struct scene sc;
+    struct mcpt_error err = {0};
+    bool ok = scene_load("tests/data/scene/full.txt", &sc, &err);
+    cr_assert(ok, "%s:%d:%d: %s", err.file, err.line, err.col, err.msg);
+
+    assert_vec3(sc.camera.eye, 0, 1, 3.9f, "eye");
+    assert_vec3(sc.camera.look_at, 0, 1, 0, "look-at");
+    assert_vec3(sc.camera.up, 0, 1, 0, "up");
+    cr_assert_eq(sc.camera.fov_deg, 40.0f);
+    cr_assert_eq(sc.camera.aperture, 0.05f);
+    cr_assert_eq(sc.camera.focus_dist, 3.5f);
+    cr_assert_eq(sc.width, 320);
+    cr_assert_eq(sc.height, 240);
+    cr_assert_eq(sc.render.spp, 16);
+    cr_assert_eq(sc.render.max_depth, 5);
+
+    /* materials */
+    cr_assert_eq(sc.n_materials, 12);
+    const struct material *m = sc.materials;
+    cr_assert_str_eq(m[0].name, "red");
+    cr_assert_eq(m[0].kind, MAT_DIFFUSE);
+    assert_vec3(m[0].albedo, 0.63f, 0.065f, 0.05f, "red albedo");
+    assert_vec3(m[0].Le, 0, 0, 0, "red Le");
+    cr_assert(!m[0].two_sided_emission);
+    cr_assert_str_eq(m[1].name, "lamp");
+    assert_vec3(m[1].albedo, 0, 0, 0, "lamp albedo");
+    assert_vec3(m[1].Le, 17, 12, 4, "lamp Le");
+    cr_assert(m[1].two_sided_emission);
+    cr_assert_str_eq(m[2].name, "chrome");
+    cr_assert_eq(m[2].kind, MAT_MIRROR);
+    assert_vec3(m[2].specular, 0.9f, 0.9f, 0.9f, "chrome specular");
+    cr_assert_str_eq(m[3].name, "glass");
+    cr_assert_eq(m[3].kind, MAT_DIELECTRIC);
+    cr_assert_eq(m[3].ior, 1.33f);
+    assert_vec3(m[3].specular, 1, 1, 1, "glass specular default");
+    assert_vec3(m[3].Le, 0, 0, 0.5f, "glass Le");
+    cr_assert_str_eq(m[4].name, "plain-glass");
+    cr_assert_eq(m[4].ior, 1.5f, "default ior");
+    /* tiny.mtl, mapped as docs/scene-format.md "MTL materials" says */
+    cr_assert_str_eq(m[5].name, "tiny.obj:white");
+    cr_assert_eq(m[5].kind, MAT_DIFFUSE);
+    assert_vec3(m[5].albedo, 0.5f, 0.6f, 0.7f, "white Kd");
+    cr_assert_str_eq(m[6].name, "tiny.obj:lamp");
+    assert_vec3(m[6].Le, 4, 5, 6, "lamp Ke");
+    cr_assert(!m[6].two_sided_emission);
+    cr_assert_str_eq(m[7].name, "tiny.obj:chrome");
+    cr_assert_eq(m[7].kind, MAT_MIRROR, "illum 5 -> mirror");
+    assert_vec3(m[7].specular, 0.9f, 0.8f, 0.7f, "chrome Ks");
+    cr_assert_str_eq(m[8].name, "tiny.obj:glass");
+    cr_assert_eq(m[8].kind, MAT_DIELECTRIC, "illum 7 -> dielectric");
+    cr_assert_eq(m[8].ior, 1.33f);
+    assert_vec3(m[8].specular, 0.9f, 1, 1, "glass Tf");
+    cr_assert_str_eq(m[9].name, "tiny.obj:crown");
+    cr_assert_eq(m[9].kind, MAT_DIELECTRIC, "illum 4 -> dielectric");
+    cr_assert_eq(m[9].ior, 1.5f, "Ni 1 (absent) -> 1.5");
+    cr_assert_str_eq(m[10].name, "tiny.obj:bright");
+    cr_assert_eq(m[10].kind, MAT_DIFFUSE, "illum 1 -> diffuse");
+    assert_vec3(m[10].albedo, 1, 0.25f, 1, "Kd clamped to [0, 1]");
+    assert_vec3(m[10].Le, 0, 0, 3, "Ke clamped to >= 0");
+    cr_assert_str_eq(m[11].name, "default");
+    cr_assert_eq(m[11].kind, MAT_DIFFUSE);
+    assert_vec3(m[11].albedo, 0.8f, 0.8f, 0.8f, "default albedo");
+
+    /* mesh 1: translate=1,2,3 rotate=0,1,0,90 scale=2; mesh 2: scale=-1,1,1 */
+    cr_assert_eq(sc.n_positions, 12);
+    const float pos[12][3] = {{1, 2, 3},  {1, 2, 1}, {1, 4, 1},  {1, 4, 3}, {3, 2, 3}, {1, 2, -1},
+                              {0, 0, 0},  {-1, 0, 0}, {-1, 1, 0}, {0, 1, 0}, {0, 0, 1}, {-2, 0, 0}};
+    for (int i = 0; i < 12; i++)
+        assert_vec3(sc.positions[i], pos[i][0], pos[i][1], pos[i][2], "position");
+    cr_assert_eq(sc.n_normals, 4);
+    assert_vec3(sc.normals[0], 1, 0, 0, "normal (0,0,2): S^-1, R_y(90), renormalised");
+    assert_vec3(sc.normals[1], 0, 0, 0, "zero-length normal kept");
+    assert_vec3(sc.normals[2], 0, 0, 1, "normal under the mirror");
+    assert_vec3(sc.normals[3], 0, 0, 0, "zero-length normal kept");
+    cr_assert_eq(sc.n_uvs, 8);
+    cr_assert(sc.uvs[2].x == 1 && sc.uvs[2].y == 1 && sc.uvs[7].x == 0 && sc.uvs[7].y == 1);
+
+    cr_assert_eq(sc.n_tris, 10);
+    const struct scene_tri tris[10] = {
+        {{0, 1, 4}, {-1, -1, -1}, {-1, -1, -1}, 11},  /* no usemtl: "default" */
+        {{0, 1, 2}, {0, 0, 0}, {0, 1, 2}, 5},
+        {{0, 2, 3}, {0, 0, 0}, {0, 2, 3}, 5},
+        {{0, 2, 4}, {-1, -1, -1}, {-1, -1, -1}, 6},   /* zero normal: vn dropped */
+        {{0, 1, 5}, {-1, -1, -1}, {-1, -1, -1}, 6},
+        {{6, 10, 7}, {-1, -1, -1}, {-1, -1, -1}, 0},  /* mirrored: corners 0, 2, 1 */
+        {{6, 8, 7}, {2, 2, 2}, {4, 6, 5}, 0},
+        {{6, 9, 8}, {2, 2, 2}, {4, 7, 6}, 0},
+        {{6, 10, 8}, {-1, -1, -1}, {-1, -1, -1}, 0},
+        {{6, 11, 7}, {-1, -1, -1}, {-1, -1, -1}, 0},
+    };
+    for (int i = 0; i < 10; i++) {
+        const struct scene_tri *a = &sc.tris[i], *e = &tris[i];
+        for (int k = 0; k < 3; k++) {
+            cr_assert_eq(a->v[k], e->v[k], "tri %d v[%d]", i, k);
+            cr_assert_eq(a->vn[k], e->vn[k], "tri %d vn[%d]", i, k);
+            cr_assert_eq(a->vt[k], e->vt[k], "tri %d vt[%d]", i, k);
+        }
+        cr_assert_eq(a->mat_idx, e->mat_idx, "tri %d mat_idx", i);
+    }
+    /* the mirrored copy keeps its front side: winding normal agrees with the shading normal */
+    vec3 p0 = sc.positions[sc.tris[6].v[0]];
+    vec3 ng = v3_cross(v3_sub(sc.positions[sc.tris[6].v[1]], p0),
+                       v3_sub(sc.positions[sc.tris[6].v[2]], p0));
+    cr_assert_gt(v3_dot(ng, sc.normals[2]), 0.0f);
+
+    /* spheres: center' = 2 (1,0,0) + (0,1,0), radius' = 0.5 |2| */
+    cr_assert_eq(sc.n_spheres, 2);
+    assert_vec3(sc.spheres[0].center, 2, 1, 0, "sphere 0 center");
+    cr_assert_eq(sc.spheres[0].radius, 1.0f);
+    cr_assert_eq(sc.spheres[0].mat_idx, 1);
+    assert_vec3(sc.spheres[1].center, 0, 0, 0, "sphere 1 center");
+    cr_assert_eq(sc.spheres[1].radius, 1.0f);
+    cr_assert_eq(sc.spheres[1].mat_idx, 3);
+
+    /* quads: R_x(180) = diag(1,-1,-1) then translate; the mirrored one swaps its edges */
+    cr_assert_eq(sc.n_quads, 2);
+    assert_vec3(sc.quads[0].corner, 0, 2, 0, "quad 0 corner");
+    assert_vec3(sc.quads[0].e1, 1, 0, 0, "quad 0 e1");
+    assert_vec3(sc.quads[0].e2, 0, 0, -1, "quad 0 e2");
+    cr_assert_eq(sc.quads[0].mat_idx, 1);
+    assert_vec3(sc.quads[1].corner, -1, 0, 0, "quad 1 corner");
+    assert_vec3(sc.quads[1].e1, 0, 1, 0, "quad 1 e1");
+    assert_vec3(sc.quads[1].e2, -1, 0, 0, "quad 1 e2");
+    assert_vec3(v3_cross(sc.quads[1].e1, sc.quads[1].e2), 0, 0, 1, "quad 1 front normal");
+    cr_assert_eq(sc.quads[1].mat_idx, 0);
+
+    cr_assert_eq(sc.n_planes, 1);
+    assert_vec3(sc.planes[0].point, 0, -1, 0, "plane point");
+    assert_vec3(sc.planes[0].n, 0, 1, 0, "plane normal normalised");
+    cr_assert_eq(sc.planes[0].mat_idx, 0);
+
+    cr_assert_eq(sc.sky.kind, SKY_GRADIENT);
+    assert_vec3(sc.sky.horizon, 1, 1, 1, "horizon");
+    assert_vec3(sc.sky.zenith, 0.2f, 0.4f, 0.8f, "zenith");
+
+    /* lights: tri 3 (tri 4 has zero area), quad 0, spheres 0 and 1, then the point lights */
+    cr_assert_eq(sc.n_lights, 6);
+    const enum light_kind kinds[6] = {LIGHT_TRIANGLE, LIGHT_QUAD, LIGHT_SPHERE, LIGHT_SPHERE,
+                                      LIGHT_POINT, LIGHT_POINT};
+    const uint32_t prims[6] = {3, 0, 0, 1, 0, 1};
+    for (int i = 0; i < 6; i++) {
+        cr_assert_eq(sc.lights[i].kind, kinds[i], "light %d kind", i);
+        cr_assert_eq(sc.lights[i].prim_idx, prims[i], "light %d prim_idx", i);
+    }
+    assert_vec3(sc.lights[4].position, 0, 1.9f, 0, "point 0 position");
+    assert_vec3(sc.lights[4].intensity, 1, 2, 3, "point 0 intensity");
+    assert_vec3(sc.lights[5].position, 1, 1, 1, "point 1 position");
+    assert_vec3(sc.lights[5].intensity, 0.5f, 0.5f, 0.5f, "point 1 intensity");
+    scene_free(&sc);
+    assert_zeroed(&sc);
+}
+
+/* A scene with only a camera gets the documented defaults: 512x512 film, spp 64, max-depth
+ * inf (UINT32_MAX), pinhole (aperture 0, focus-dist 0), no sky, nothing allocated. */
+Test(scene, defaults)
+{
+    struct scene sc;
+    load_ok(CAM, &sc);
+    cr_assert_eq(sc.width, 512);
+    cr_assert_eq(sc.height, 512);
+    cr_assert_eq(sc.render.spp, 64);
+    cr_assert_eq(sc.render.max_depth, UINT32_MAX);
+    cr_assert_eq(sc.camera.aperture, 0.0f);
+    cr_assert_eq(sc.camera.focus_dist, 0.0f);
+    cr_assert_eq(sc.sky.kind, SKY_NONE);
+    cr_assert(sc.n_materials == 0 && sc.n_tris == 0 && sc.n_lights == 0 && !sc.lights);
+    scene_free(&sc);
+}
+
+/* CRLF endings, tabs between words, blank lines, whole-line and trailing comments and a missing
+ * final newline are all accepted. */
+Test(scene, crlf_tabs_comments)
+{
+    struct scene sc;
+    struct mcpt_error err = {0};
+    cr_assert(scene_load("tests/data/scene/crlf.txt", &sc, &err), "%s:%d:%d: %s", err.file,
+              err.line, err.col, err.msg);
+    assert_vec3(sc.camera.eye, 0, 0, 5, "eye");
+    cr_assert_eq(sc.camera.fov_deg, 40.0f);
+    cr_assert_eq(sc.sky.kind, SKY_CONSTANT);
+    assert_vec3(sc.sky.radiance, 0.5f, 0.25f, 0.125f, "radiance (the commented sky is skipped)");
+    scene_free(&sc);
+}
+
+/* Range ends are inclusive where documented: a 4096-byte line, 65535-pixel film, spp
+ * 4294967295, max-depth 0; a leading '+' and exponents are numbers. */
+Test(scene, range_boundaries)
+{
+    char text[4400];
+    int n = snprintf(text, sizeof text, "%s#", CAM);
+    memset(text + n, 'x', 4095); /* '#' + 4095 bytes = 4096 */
+    snprintf(text + n + 4095, sizeof text - (size_t)(n + 4095),
+             "\r\nfilm width=65535 height=+1\nrender spp=4294967295 max-depth=0\n"
+             "material name=m type=dielectric ior=2.5e-1\n");
+    struct scene sc;
+    load_ok(text, &sc);
+    cr_assert_eq(sc.width, 65535);
+    cr_assert_eq(sc.height, 1);
+    cr_assert_eq(sc.render.spp, UINT32_MAX);
+    cr_assert_eq(sc.render.max_depth, 0);
+    cr_assert_eq(sc.materials[0].ior, 0.25f);
+    scene_free(&sc);
+    load_ok(CAM "render max-depth=inf spp=1\n", &sc);
+    cr_assert_eq(sc.render.max_depth, UINT32_MAX);
+    cr_assert_eq(sc.render.spp, 1);
+    scene_free(&sc);
+}
+
+/* Rodrigues' rotation about a non-axis direction: 120 degrees about (1,1,1) permutes the
+ * axes x -> y -> z -> x; the axis is normalised first. */
+Test(scene, rotation_rodrigues)
+{
+    struct scene sc;
+    load_ok(CAM MAT "quad corner=1,0,0 edge1=0,1,0 edge2=0,0,1 material=red rotate=2,2,2,120\n",
+            &sc);
+    assert_vec3_near(sc.quads[0].corner, 0, 1, 0, "corner");
+    assert_vec3_near(sc.quads[0].e1, 0, 0, 1, "e1");
+    assert_vec3_near(sc.quads[0].e2, 1, 0, 0, "e2");
+    scene_free(&sc);
+    /* -90 about z, written as 270: (1,0,0) -> (0,-1,0) exactly; scale applies before */
+    load_ok(CAM MAT "quad corner=1,0,0 edge1=0,1,0 edge2=0,0,1 material=red rotate=0,0,1,270 "
+                    "scale=3,1,1 translate=0,0,1\n", &sc);
+    assert_vec3(sc.quads[0].corner, 0, -3, 1, "corner");
+    assert_vec3(sc.quads[0].e1, 1, 0, 0, "e1");
+    assert_vec3(sc.quads[0].e2, 0, 0, 1, "e2");
+    scene_free(&sc);
+}
+
+/* Normals transform by the inverse transpose of the linear part (PBRT 4e, ch. 3, "Applying
+ * Transformations"): under a non-uniform scale and a rotation the stored unit normal stays
+ * perpendicular to the transformed triangle (the matrix itself would tilt it). */
+Test(scene, normals_inverse_transpose)
+{
+    struct scene sc;
+    struct mcpt_error err = {0};
+    cr_assert(scene_load("tests/data/scene/nonuniform.txt", &sc, &err), "%s:%d:%d: %s",
+              err.file, err.line, err.col, err.msg);
+    cr_assert(sc.n_tris == 1 && sc.n_normals == 1);
+    vec3 n = sc.normals[sc.tris[0].vn[0]];
+    vec3 p0 = sc.positions[sc.tris[0].v[0]];
+    vec3 e1 = v3_normalize(v3_sub(sc.positions[sc.tris[0].v[1]], p0));
+    vec3 e2 = v3_normalize(v3_sub(sc.positions[sc.tris[0].v[2]], p0));
+    cr_assert_float_eq(v3_length(n), 1.0f, 1e-6f);
+    cr_assert_float_eq(v3_dot(n, e1), 0.0f, 1e-6f);
+    cr_assert_float_eq(v3_dot(n, e2), 0.0f, 1e-6f);
+    cr_assert_gt(v3_dot(n, v3_cross(e1, e2)), 0.0f, "same side as the winding");
+    scene_free(&sc);
+}
+
+/* scenes/cornell-box.txt: the standard view of McGuire's CornellBox-Original; 18 quads = 36
+ * triangles, 8 MTL materials (every face has a usemtl, so no "default"), and the two triangles
+ * of the light quad (y = 1.98, Ke 17 12 4) are the only lights. */
+Test(scene, cornell_box)
+{
+    struct scene sc;
+    struct mcpt_error err = {0};
+    cr_assert(scene_load("scenes/cornell-box.txt", &sc, &err), "%s:%d:%d: %s", err.file,
+              err.line, err.col, err.msg);
+    assert_vec3(sc.camera.eye, 0, 1, 3.9f, "eye");
+    assert_vec3(sc.camera.look_at, 0, 1, 0, "look-at");
+    assert_vec3(sc.camera.up, 0, 1, 0, "up");
+    cr_assert_eq(sc.camera.fov_deg, 40.0f);
+    cr_assert_eq(sc.camera.aperture, 0.0f);
+    cr_assert(sc.width == 512 && sc.height == 512);
+    cr_assert_eq(sc.render.spp, 256);
+    cr_assert_eq(sc.render.max_depth, UINT32_MAX);
+    cr_assert_eq(sc.n_tris, 36);
+    cr_assert_eq(sc.n_positions, 72);
+    cr_assert_eq(sc.n_materials, 8);
+    cr_assert_eq(sc.n_lights, 2);
+    for (uint32_t i = 0; i < 2; i++) {
+        const struct light *l = &sc.lights[i];
+        cr_assert_eq(l->kind, LIGHT_TRIANGLE);
+        cr_assert_eq(l->prim_idx, 34 + i, "the light quad is the last face");
+        const struct scene_tri *t = &sc.tris[l->prim_idx];
+        const struct material *m = &sc.materials[t->mat_idx];
+        cr_assert_str_eq(m->name, "CornellBox-Original.obj:light");
+        assert_vec3(m->Le, 17, 12, 4, "light Le");
+        for (int k = 0; k < 3; k++)
+            cr_assert_eq(sc.positions[t->v[k]].y, 1.98f);
+    }
+    cr_assert_str_eq(sc.materials[sc.tris[0].mat_idx].name, "CornellBox-Original.obj:floor");
+    assert_vec3(sc.materials[sc.tris[0].mat_idx].albedo, 0.725f, 0.71f, 0.68f, "floor Kd");
+    scene_free(&sc);
+}
+
+/* scene_free is safe on a zeroed scene and twice in a row. */
+Test(scene, free_zeroed)
+{
+    struct scene sc = {0};
+    scene_free(&sc);
+    scene_free(&sc);
+    assert_zeroed(&sc);
+}
+
+/* ---- errors: statements and parameters --------------------------------------------------- */
+
+/* Unknown statement keyword: the message lists the valid ones. */
+Test(scene, error_unknown_statement)
+{
+    check_error(CAM "cam eye=1\n",
+                "scene.txt:2:1: error: expected a statement (camera, film, render, material, "
+                "mesh, sphere, quad, plane, light, sky), got 'cam'");
+}
+
+/* Unknown parameter: the message lists the statement's parameters (for a typed statement,
+ * those of its type). */
+Test(scene, error_unknown_parameter)
+{
+    check_error("camera eye=0,0,5 look-at=0,0,0 up=0,1,0 fov=40 zoom=2\n",
+                "scene.txt:1:48: error: expected a parameter of 'camera' (eye, look-at, up, fov, "
+                "aperture, focus-dist), got 'zoom'");
+    check_error(CAM "material name=m type=diffuse albedo=1,1,1 ior=1.5\n",
+                "scene.txt:2:43: error: expected a parameter of 'material type=diffuse' (name, "
+                "type, albedo, emission, two-sided), got 'ior'");
+    check_error(CAM MAT "sphere center=0,0,0 radius=1 material=red rotate=0,1,0,9\n",
+                "scene.txt:3:43: error: expected a parameter of 'sphere' (center, radius, "
+                "material, translate, scale), got 'rotate'");
+}
+
+/* A parameter given twice, and a word without '='. */
+Test(scene, error_duplicate_parameter_and_missing_equals)
+{
+    check_error("camera eye=0,0,5 look-at=0,0,0 up=0,1,0 fov=40 fov=50\n",
+                "scene.txt:1:48: error: expected 'fov' at most once, got it twice");
+    check_error(CAM "film width 512 height=512\n",
+                "scene.txt:2:6: error: expected 'key=value', got 'width'");
+    check_error("camera eye= look-at=0,0,0 up=0,1,0 fov=40\n",
+                "scene.txt:1:12: error: expected a value after 'eye=', got nothing");
+}
+
+/* Missing required parameters are reported at the statement keyword. */
+Test(scene, error_missing_parameter)
+{
+    check_error("camera eye=0,0,5 up=0,1,0 fov=40\n",
+                "scene.txt:1:1: error: expected parameter 'look-at' for 'camera', got none");
+    check_error(CAM "  material name=x albedo=1,1,1\n",
+                "scene.txt:2:3: error: expected parameter 'type' for 'material', got none");
+    check_error(CAM "material name=x type=diffuse\n",
+                "scene.txt:2:1: error: expected parameter 'albedo' for 'material type=diffuse', "
+                "got none");
+    check_error(CAM "sky type=gradient horizon=1,1,1\n",
+                "scene.txt:2:1: error: expected parameter 'zenith' for 'sky type=gradient', "
+                "got none");
+}
+
+/* A value of the wrong type: number, vector, name, bool, integer; and wrong vector arity. */
+Test(scene, error_wrong_type)
+{
+    check_error("camera eye=0,0,5 look-at=0,0,0 up=0,1,0 fov=1,2,3\n",
+                "scene.txt:1:45: error: expected a number for 'fov', got '1,2,3'");
+    check_error("camera eye=here look-at=0,0,0 up=0,1,0 fov=40\n",
+                "scene.txt:1:12: error: expected 3 comma-separated numbers for 'eye', got "
+                "'here'");
+    check_error("camera eye=0,1 look-at=0,0,0 up=0,1,0 fov=40\n",
+                "scene.txt:1:12: error: expected 3 comma-separated numbers for 'eye', got '0,1'");
+    check_error("camera eye=0,,1 look-at=0,0,0 up=0,1,0 fov=40\n",
+                "scene.txt:1:12: error: expected 3 comma-separated numbers for 'eye', got "
+                "'0,,1'");
+    check_error(CAM MAT "sphere center=0,0,0 radius=1 material=1,2,3\n",
+                "scene.txt:3:39: error: expected a material name of letters, digits, '_', '-' "
+                "and '.', got '1,2,3'");
+    check_error(CAM "material name=m type=mirror two-sided=yes\n",
+                "scene.txt:2:39: error: expected true or false for 'two-sided', got 'yes'");
+    check_error(CAM "film width=1.5 height=2\n",
+                "scene.txt:2:12: error: expected an integer for 'width', got '1.5'");
+    check_error(CAM "render max-depth=deep\n",
+                "scene.txt:2:18: error: expected an integer or 'inf' for 'max-depth', got "
+                "'deep'");
+    check_error(CAM MAT "quad corner=0,0,0 edge1=1,0,0 edge2=0,1,0 material=red rotate=0,1,0\n",
+                "scene.txt:3:63: error: expected 4 comma-separated numbers (axis x,y,z, angle in "
+                "degrees) for 'rotate', got '0,1,0'");
+    check_error(CAM MAT "quad corner=0,0,0 edge1=1,0,0 edge2=0,1,0 material=red scale=1,2\n",
+                "scene.txt:3:62: error: expected 1 or 3 comma-separated numbers for 'scale', got "
+                "'1,2'");
+    /* '#' inside a value is part of the value, not a comment */
+    check_error("camera eye=0,0,5 look-at=0,0,0 up=0,1,0 fov=40#wide\n",
+                "scene.txt:1:45: error: expected a number for 'fov', got '40#wide'");
+    check_error("camera eye=0,0,5 look-at=0,0,0 up=0,1,0 fov=0x10\n",
+                "scene.txt:1:45: error: expected a number for 'fov', got '0x10'");
+}
+
+/* NaN, infinity and literals beyond float range are rejected. */
+Test(scene, error_non_finite)
+{
+    check_error("camera eye=0,0,5 look-at=0,0,0 up=0,1,0 fov=nan\n",
+                "scene.txt:1:45: error: expected a finite number for 'fov', got 'nan'");
+    check_error("camera eye=0,-INF,5 look-at=0,0,0 up=0,1,0 fov=40\n",
+                "scene.txt:1:12: error: expected finite numbers for 'eye', got '0,-INF,5'");
+    check_error(CAM MAT "sphere center=0,0,0 radius=1e39 material=red\n",
+                "scene.txt:3:28: error: expected a finite number for 'radius', got '1e39'");
+}
+
+/* Out-of-range values, each with its documented range. */
+Test(scene, error_out_of_range)
+{
+    check_error(CAM MAT "sphere center=0,0,0 radius=0 material=red\n",
+                "scene.txt:3:28: error: expected 'radius' > 0, got 0");
+    check_error(CAM MAT "sphere center=0,0,0 radius=-1 material=red\n",
+                "scene.txt:3:28: error: expected 'radius' > 0, got -1");
+    check_error("camera eye=0,0,5 look-at=0,0,0 up=0,1,0 fov=180\n",
+                "scene.txt:1:45: error: expected 'fov' in (0, 180) degrees, got 180");
+    check_error("camera eye=0,0,5 look-at=0,0,0 up=0,1,0 fov=0\n",
+                "scene.txt:1:45: error: expected 'fov' in (0, 180) degrees, got 0");
+    check_error(CAM "film width=0 height=4\n",
+                "scene.txt:2:12: error: expected 'width' in 1..65535, got 0");
+    check_error(CAM "film width=640 height=65536\n",
+                "scene.txt:2:23: error: expected 'height' in 1..65535, got 65536");
+    check_error(CAM "render spp=0\n",
+                "scene.txt:2:12: error: expected 'spp' in 1..4294967295, got 0");
+    check_error(CAM "render spp=-4\n",
+                "scene.txt:2:12: error: expected 'spp' in 1..4294967295, got -4");
+    check_error(CAM "render spp=4294967296\n",
+                "scene.txt:2:12: error: expected 'spp' in 1..4294967295, got 4294967296");
+    check_error(CAM "render max-depth=-1\n",
+                "scene.txt:2:18: error: expected 'max-depth' in 0..4294967295 or 'inf', got -1");
+    check_error("camera eye=0,0,5 look-at=0,0,0 up=0,1,0 fov=40 aperture=-0.1\n",
+                "scene.txt:1:57: error: expected 'aperture' >= 0, got -0.1");
+    check_error("camera eye=0,0,5 look-at=0,0,0 up=0,1,0 fov=40 focus-dist=-1\n",
+                "scene.txt:1:59: error: expected 'focus-dist' >= 0, got -1");
+    check_error(CAM "material name=m type=diffuse albedo=1.2,0,0\n",
+                "scene.txt:2:37: error: expected 'albedo' components in [0, 1], got 1.2,0,0");
+    check_error(CAM "material name=m type=mirror specular=1,1,1.5\n",
+                "scene.txt:2:38: error: expected 'specular' components in [0, 1], got 1,1,1.5");
+    check_error(CAM "material name=m type=mirror emission=-1,0,0\n",
+                "scene.txt:2:38: error: expected 'emission' components >= 0, got -1,0,0");
+    check_error(CAM "light type=point position=0,1,0 intensity=1,-2,3\n",
+                "scene.txt:2:43: error: expected 'intensity' components >= 0, got 1,-2,3");
+    check_error(CAM "sky type=constant radiance=-1,0,0\n",
+                "scene.txt:2:28: error: expected 'radiance' components >= 0, got -1,0,0");
+    check_error(CAM "material name=g type=dielectric ior=0\n",
+                "scene.txt:2:37: error: expected 'ior' > 0, got 0");
+}
+
+/* Materials: a duplicate name, a reference before the definition or to no definition, names of
+ * MTL materials (not referable), a name too long, an unknown type. */
+Test(scene, error_materials)
+{
+    check_error(CAM MAT "material name=red type=mirror\n",
+                "scene.txt:3:15: error: expected a new material name, got 'red' (defined on "
+                "line 2)");
+    check_error(CAM "sphere center=0,0,0 radius=1 material=red\n" MAT,
+                "scene.txt:2:39: error: expected a material defined on an earlier line, got "
+                "'red'");
+    check_error(CAM MAT "plane point=0,0,0 normal=0,1,0 material=blue\n",
+                "scene.txt:3:41: error: expected a material defined on an earlier line, got "
+                "'blue'");
+    check_error(CAM MAT "plane point=0,0,0 normal=0,1,0 material=tiny.obj:white\n",
+                "scene.txt:3:41: error: expected a material name of letters, digits, '_', '-' "
+                "and '.', got 'tiny.obj:white'");
+    check_error(CAM "material name=m234567890123456789012345678901234567890123456789012345678901234"
+                    " type=mirror\n",
+                "scene.txt:2:15: error: expected a material name of at most 63 bytes, got 64");
+    check_error(CAM "material name=m type=metal\n",
+                "scene.txt:2:22: error: expected a material type (diffuse, mirror, dielectric), "
+                "got 'metal'");
+    check_error(CAM "light type=area position=0,0,0 intensity=1,1,1\n",
+                "scene.txt:2:12: error: expected a light type (point), got 'area'");
+}
+
+/* The meshes' "default" material is not referable by name either. */
+Test(scene, error_default_material_not_referable)
+{
+    check_file_error("tests/data/scene/default-ref.txt",
+                     "tests/data/scene/default-ref.txt:3:39: error: expected a material defined "
+                     "on an earlier line, got 'default'");
+}
+
+/* Statements that may appear once, and the required camera. */
+Test(scene, error_statement_count)
+{
+    check_error(CAM CAM,
+                "scene.txt:2:1: error: expected at most one 'camera' statement, got a second "
+                "(the first is on line 1)");
+    check_error(CAM "sky type=constant radiance=1,1,1\n\n\tsky type=constant radiance=1,1,1\n",
+                "scene.txt:4:2: error: expected at most one 'sky' statement, got a second (the "
+                "first is on line 2)");
+    check_error("film width=4 height=4\n",
+                "scene.txt: error: expected a 'camera' statement, got none");
+    check_error("", "scene.txt: error: expected a 'camera' statement, got none");
+}
+
+/* A camera looking at its own eye, or with up parallel to the view direction. */
+Test(scene, error_camera_geometry)
+{
+    check_error("camera eye=1,2,3 look-at=1,2,3 up=0,1,0 fov=40\n",
+                "scene.txt:1:26: error: expected 'look-at' different from 'eye', got 1,2,3 for "
+                "both");
+    check_error("camera eye=0,0,5 look-at=0,0,0 up=0,0,-2 fov=40\n",
+                "scene.txt:1:35: error: expected 'up' not parallel to the view direction, got "
+                "0,0,-2");
+    check_error("camera eye=0,0,5 look-at=0,0,0 up=0,0,0 fov=40\n",
+                "scene.txt:1:35: error: expected a nonzero 'up', got 0,0,0");
+}
+
+/* Shapes and transforms: zero rotation axis, zero scale, non-uniform sphere scale, emissive or
+ * degenerate plane, parallel quad edges. */
+Test(scene, error_shapes_and_transforms)
+{
+    check_error(CAM MAT "quad corner=0,0,0 edge1=1,0,0 edge2=0,1,0 material=red rotate=0,0,0,90\n",
+                "scene.txt:3:63: error: expected a nonzero axis for 'rotate', got 0,0,0,90");
+    check_error(CAM MAT "quad corner=0,0,0 edge1=1,0,0 edge2=0,1,0 material=red scale=1,0,1\n",
+                "scene.txt:3:62: error: expected nonzero 'scale' components, got 1,0,1");
+    check_error(CAM MAT "sphere center=0,0,0 radius=1 material=red scale=1,2,1\n",
+                "scene.txt:3:49: error: expected a uniform 'scale' for 'sphere', got 1,2,1");
+    check_error(CAM "material name=lamp type=diffuse albedo=0,0,0 emission=1,1,1\n"
+                    "plane point=0,0,0 normal=0,1,0 material=lamp\n",
+                "scene.txt:3:41: error: expected a non-emissive material for 'plane' (an "
+                "infinite emitter), got 'lamp'");
+    check_error(CAM MAT "plane point=0,0,0 normal=0,0,0 material=red\n",
+                "scene.txt:3:26: error: expected a nonzero 'normal', got 0,0,0");
+    check_error(CAM MAT "quad corner=0,0,0 edge1=1,0,0 edge2=-2,0,0 material=red\n",
+                "scene.txt:3:37: error: expected 'edge2' not parallel to 'edge1', got -2,0,0");
+    check_error(CAM MAT "quad corner=0,0,0 edge1=1e30,0,0 edge2=0,1,0 material=red scale=1e30\n",
+                "scene.txt:3:1: error: expected a quad within float range after the transform, "
+                "got an overflow");
+}
+
+/* ---- errors: the file itself ------------------------------------------------------------ */
+
+/* A file that cannot be opened names the reason (strerror). */
+Test(scene, error_unreadable_file)
+{
+    check_file_error("tests/data/scene/no-such-scene.txt",
+                     "tests/data/scene/no-such-scene.txt: error: expected a readable file, got "
+                     "'No such file or directory'");
+}
+
+/* Binary bytes (NUL, other control bytes, a lone carriage return) and overlong lines. */
+Test(scene, error_binary_and_long_lines)
+{
+    check_error("camera eye=0\0,0,5 look-at=0,0,0 up=0,1,0 fov=40\n",
+                "scene.txt:1:13: error: expected text, got the byte 0x00");
+    check_error(CAM "\x7f" "ELF\n", "scene.txt:2:1: error: expected text, got the byte 0x7f");
+    check_error(CAM "film width=4\rheight=4\n",
+                "scene.txt:2:13: error: expected text, got the byte 0x0d");
+    char text[6000];
+    int n = snprintf(text, sizeof text, "%s#", CAM);
+    memset(text + n, 'x', 4096); /* '#' + 4096 bytes = 4097 */
+    text[n + 4096] = '\n';
+    check_error_n(text, (size_t)n + 4097,
+                  "scene.txt:2:4097: error: expected a line of at most 4096 bytes, got a longer "
+                  "one");
+}
+
+/* ---- errors: meshes ---------------------------------------------------------------------- */
+
+/* A mesh without faces is an error at its file value. */
+Test(scene, error_mesh_without_faces)
+{
+    check_file_error("tests/data/scene/empty-mesh.txt",
+                     "tests/data/scene/empty-mesh.txt:2:11: error: expected at least one face in "
+                     "'empty.obj', got none");
+}
+
+/* OBJ errors pass through unchanged: the message is obj_load's, naming the OBJ file. */
+Test(scene, error_mesh_passes_obj_errors)
+{
+    struct obj_mesh mesh = {0};
+    struct mcpt_error obj_err = {0};
+    cr_assert(!obj_load("tests/data/scene/bad.obj", &mesh, &obj_err));
+    char golden[640];
+    mcpt_error_format(&obj_err, golden, sizeof golden);
+    cr_assert(strncmp(golden, "tests/data/scene/bad.obj:2:", 27) == 0, "%s", golden);
+    check_file_error("tests/data/scene/bad-mesh.txt", golden);
+
+    cr_assert(!obj_load("tests/data/scene/no-such-file.obj", &mesh, &obj_err));
+    mcpt_error_format(&obj_err, golden, sizeof golden);
+    cr_assert(strncmp(golden, "tests/data/scene/no-such-file.obj: error: ", 42) == 0, "%s",
+              golden);
+    check_file_error("tests/data/scene/missing-mesh.txt", golden);
+}

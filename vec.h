@@ -1,0 +1,146 @@
+/* vec.h - the one header every file may include: 3-vector math, struct ray, constants and the
+ * error record that parsers fill in.  Geometry is float; pixel sums and statistics use double.
+ * The ray-origin offset follows PBRT 4e, ch. 6, "Robust Spawned Ray Origins". */
+#ifndef MCPT_VEC_H
+#define MCPT_VEC_H
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+
+#define MCPT_PI 3.14159265358979323846f
+#define MCPT_INV_PI 0.31830988618379067154f
+#define MCPT_VERSION "0.1.0"
+
+typedef struct vec3 {
+    float x; /* components, in scene units or radiance units by context */
+    float y;
+    float z;
+} vec3; /* 12 bytes */
+
+typedef struct vec2 {
+    float x;
+    float y;
+} vec2; /* 8 bytes */
+
+/* A ray o + t d for t in [t_min, t_max].  d need not be unit length unless a caller says so. */
+struct ray {
+    vec3 o;      /* origin */
+    float t_min; /* smallest accepted hit parameter */
+    vec3 d;      /* direction */
+    float t_max; /* largest accepted hit parameter; +INFINITY for an unbounded ray */
+}; /* 32 bytes */
+
+/* Parsers report user-input errors here; main prints "file:line:col: error: msg".
+ * line == 0 means the error has no line (e.g. the file cannot be opened); col == 0 no column. */
+struct mcpt_error {
+    char file[256];
+    int line;
+    int col;
+    char msg[256];
+};
+
+static inline void mcpt_error_set(struct mcpt_error *err, const char *file, int line, int col,
+                                  const char *fmt, ...)
+{
+    if (!err)
+        return;
+    snprintf(err->file, sizeof err->file, "%s", file ? file : "");
+    err->line = line;
+    err->col = col;
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(err->msg, sizeof err->msg, fmt, ap);
+    va_end(ap);
+}
+
+/* Formats the error as one line (no trailing newline): "file:line:col: error: msg",
+ * "file:line: error: msg" when col == 0, "file: error: msg" when line == 0. */
+static inline void mcpt_error_format(const struct mcpt_error *err, char *out, size_t out_bytes)
+{
+    if (err->line > 0 && err->col > 0)
+        snprintf(out, out_bytes, "%s:%d:%d: error: %s", err->file, err->line, err->col, err->msg);
+    else if (err->line > 0)
+        snprintf(out, out_bytes, "%s:%d: error: %s", err->file, err->line, err->msg);
+    else if (err->file[0])
+        snprintf(out, out_bytes, "%s: error: %s", err->file, err->msg);
+    else
+        snprintf(out, out_bytes, "error: %s", err->msg);
+}
+
+static inline vec3 v3(float x, float y, float z) { return (vec3){x, y, z}; }
+static inline vec3 v3_splat(float s) { return (vec3){s, s, s}; }
+static inline vec3 v3_add(vec3 a, vec3 b) { return (vec3){a.x + b.x, a.y + b.y, a.z + b.z}; }
+static inline vec3 v3_sub(vec3 a, vec3 b) { return (vec3){a.x - b.x, a.y - b.y, a.z - b.z}; }
+static inline vec3 v3_mul(vec3 a, vec3 b) { return (vec3){a.x * b.x, a.y * b.y, a.z * b.z}; }
+static inline vec3 v3_scale(vec3 a, float s) { return (vec3){a.x * s, a.y * s, a.z * s}; }
+static inline vec3 v3_neg(vec3 a) { return (vec3){-a.x, -a.y, -a.z}; }
+static inline float v3_dot(vec3 a, vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+static inline vec3 v3_cross(vec3 a, vec3 b)
+{
+    return (vec3){a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+static inline float v3_length(vec3 a) { return sqrtf(v3_dot(a, a)); }
+static inline vec3 v3_normalize(vec3 a) { return v3_scale(a, 1.0f / v3_length(a)); }
+static inline vec3 v3_min(vec3 a, vec3 b)
+{
+    return (vec3){fminf(a.x, b.x), fminf(a.y, b.y), fminf(a.z, b.z)};
+}
+static inline vec3 v3_max(vec3 a, vec3 b)
+{
+    return (vec3){fmaxf(a.x, b.x), fmaxf(a.y, b.y), fmaxf(a.z, b.z)};
+}
+static inline float v3_get(vec3 a, int axis) { return axis == 0 ? a.x : axis == 1 ? a.y : a.z; }
+static inline float v3_max_comp(vec3 a) { return fmaxf(a.x, fmaxf(a.y, a.z)); }
+static inline bool v3_is_zero(vec3 a) { return a.x == 0.0f && a.y == 0.0f && a.z == 0.0f; }
+static inline bool v3_is_finite(vec3 a) { return isfinite(a.x) && isfinite(a.y) && isfinite(a.z); }
+/* Rec. 709 luminance of linear RGB. */
+static inline float v3_luminance(vec3 c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }
+
+/* Orthonormal basis around unit n: Duff et al. 2017, "Building an Orthonormal Basis, Revisited",
+ * listing 3.  Returns t, b with (t, b, n) right-handed. */
+static inline void v3_basis(vec3 n, vec3 *t, vec3 *b)
+{
+    float sign = copysignf(1.0f, n.z);
+    float a = -1.0f / (sign + n.z);
+    float c = n.x * n.y * a;
+    *t = (vec3){1.0f + sign * n.x * n.x * a, sign * c, -sign * n.x};
+    *b = (vec3){c, sign + n.y * n.y * a, -n.y};
+}
+
+/* Local (tangent-space, z = n) vector to world space. */
+static inline vec3 v3_from_local(vec3 l, vec3 t, vec3 b, vec3 n)
+{
+    return v3_add(v3_add(v3_scale(t, l.x), v3_scale(b, l.y)), v3_scale(n, l.z));
+}
+
+/* Floating-point error bounds, PBRT 4e, ch. 6, "Managing Rounding Error":
+ * gamma(n) = n eps / (1 - n eps), eps = 2^-24 (half an ulp of 1). */
+static inline float mcpt_gamma(int n)
+{
+    const float eps = 0x1p-24f;
+    return ((float)n * eps) / (1.0f - (float)n * eps);
+}
+static inline float next_float_up(float v) { return nextafterf(v, INFINITY); }
+static inline float next_float_down(float v) { return nextafterf(v, -INFINITY); }
+
+/* PBRT 4e, ch. 6, "Robust Spawned Ray Origins": p carries the absolute error bound p_error of
+ * its computation; push it along the geometric normal n by the error projected on n, to the side
+ * of w (the new ray's direction), then round away from p.  Scale-free: no scene-tuned epsilon. */
+static inline vec3 offset_ray_origin(vec3 p, vec3 p_error, vec3 n, vec3 w)
+{
+    float d = fabsf(n.x) * p_error.x + fabsf(n.y) * p_error.y + fabsf(n.z) * p_error.z;
+    vec3 offset = v3_scale(n, d);
+    if (v3_dot(w, n) < 0.0f)
+        offset = v3_neg(offset);
+    vec3 po = v3_add(p, offset);
+    po.x = offset.x > 0.0f ? next_float_up(po.x) : offset.x < 0.0f ? next_float_down(po.x) : po.x;
+    po.y = offset.y > 0.0f ? next_float_up(po.y) : offset.y < 0.0f ? next_float_down(po.y) : po.y;
+    po.z = offset.z > 0.0f ? next_float_up(po.z) : offset.z < 0.0f ? next_float_down(po.z) : po.z;
+    return po;
+}
+
+#endif
