@@ -50,6 +50,13 @@ static inline void film_add(struct film_pixel *p, vec3 L)
     p->n++;
 }
 
+/* Sum of the luminances of pixel p's samples (luminance is linear in RGB, so it is the
+ * luminance of the RGB sums; Rec. 709 weights, as in film_add). */
+static inline double film_sum_lum(const struct film_pixel *p)
+{
+    return 0.2126 * p->sum[0] + 0.7152 * p->sum[1] + 0.0722 * p->sum[2];
+}
+
 /* Mean of pixel p, channel c; 0 for an empty pixel. */
 double film_mean(const struct film_pixel *p, int c);
 /* Unbiased estimate of the variance of the mean of pixel p, channel c:
@@ -57,7 +64,55 @@ double film_mean(const struct film_pixel *p, int c);
 double film_var_of_mean(const struct film_pixel *p, int c);
 
 /* Fills planar float arrays (width * height each; any may be NULL) with the mean RGB, the
- * variance of the mean RGB and the sample count. */
+ * variance of the mean RGB and the sample count.  Values beyond float range are stored as
+ * +-FLT_MAX, so no image holds an infinity. */
 void film_resolve(const struct film *film, float *mean[3], float *var_of_mean[3], float *count);
+
+/* ---- checkpoints: an interrupted render's film, to be resumed bit-identically ---- */
+
+#define FILM_CHECKPOINT_VERSION 1u
+#define FILM_CHECKPOINT_PATH_BYTES 1024 /* scene path stored for messages, incl. NUL */
+#define FILM_CHECKPOINT_ARGS_BYTES 4096 /* the run's options, NUL-separated words */
+
+/* The render parameters a resumed run must reproduce exactly: with them, each pixel continues
+ * from its own count with the same sample indices, so the result is bit-identical to an
+ * uninterrupted run. */
+struct film_checkpoint_info {
+    uint64_t scene_hash;    /* FNV-1a 64 of the scene file's bytes */
+    uint64_t seed;          /* render seed */
+    uint32_t spp;           /* target samples per pixel */
+    uint32_t max_depth;     /* path segments, TRACE_DEPTH_INFINITE allowed */
+    uint32_t sampler;       /* enum sampler_kind */
+    uint32_t sample_offset; /* sample index of a pixel's first film sample */
+    char scene_path[FILM_CHECKPOINT_PATH_BYTES]; /* as given on the command line */
+    uint32_t args_bytes;                          /* bytes of args in use */
+    char args[FILM_CHECKPOINT_ARGS_BYTES];        /* options of the run, each word NUL-ended */
+};
+
+/* Writes film and info to path atomically (a temporary file in the same folder, fsync, rename),
+ * so a reader sees the old file or the new one, never a mix.  Format (docs/reliability.md):
+ * magic "MCPTCKPT", version, byte-order mark, pixel record size, film size, info, the raw
+ * pixel records, then an FNV-1a 64 checksum of everything before it.  Returns false with *err
+ * (file = path, no line) on an I/O failure; nothing is left behind then. */
+bool film_save_checkpoint(const char *path, const struct film *film,
+                          const struct film_checkpoint_info *info, struct mcpt_error *err);
+
+/* Reads a checkpoint written by film_save_checkpoint into a new film (free with film_free) and
+ * *info.  Every field is checked (magic, version, byte order, record size, film size against
+ * memory, string lengths, per-pixel counts at most spp, exact file length, checksum); on any
+ * mismatch returns false with *film zeroed and *err naming path and what was expected. */
+bool film_load_checkpoint(const char *path, struct film *film, struct film_checkpoint_info *info,
+                          struct mcpt_error *err);
+
+/* ---- the sample-count map: where the renderer spent its samples ---- */
+
+#define FILM_HEATMAP_MIN_WIDTH 256 /* pixels: smaller films are scaled up by a whole factor */
+
+/* Draws each pixel's sample count (n + n_dropped) in false colour (viridis, linear from the
+ * least to the most samples in the film), the film scaled up by a whole factor to at least
+ * FILM_HEATMAP_MIN_WIDTH pixels wide, above a legend: the title "samples per pixel", the colour
+ * bar and its tick labels.  Returns a malloc'ed interleaved RGB8 image of *width x *height
+ * pixels (the caller frees it), or NULL when out of memory or too large. */
+uint8_t *film_count_heatmap(const struct film *film, int *width, int *height);
 
 #endif

@@ -26,9 +26,25 @@ uint32_t sample_pcg32_bounded(struct pcg32 *rng, uint32_t bound);
  * generation with arbitrary strides"). */
 void sample_pcg32_advance(struct pcg32 *rng, uint64_t delta);
 
+/* Samplers: how the uniforms of a pixel's samples are spread over [0,1)^dims.  See
+ * docs/sampling.md for their convergence on real scenes. */
 enum sampler_kind {
-    SAMPLER_INDEPENDENT, /* every dimension an independent uniform */
+    SAMPLER_INDEPENDENT, /* every dimension an independent uniform (PCG32) */
+    SAMPLER_STRATIFIED,  /* correlated multi-jittered strata over the pixel's spp (Kensler 2013),
+                            dimensions decorrelated by per-pixel hashed permutations */
+    SAMPLER_SOBOL,       /* Owen-scrambled Sobol' with a per-pixel shuffled index (Burley 2020):
+                            joint over the first SAMPLE_SOBOL_JOINT_DIMS dimensions, padded
+                            beyond by independently scrambled 2D (0,2)-sequences */
 };
+#define SAMPLER_COUNT 3
+/* The sampler of a scene and command line that name none: the best of the three in the
+ * measurements of docs/sampling.md. */
+#define SAMPLER_DEFAULT SAMPLER_SOBOL
+
+/* "independent", "stratified", "sobol"; "?" for a value outside the enum. */
+const char *sample_sampler_name(enum sampler_kind kind);
+/* Sets *kind to the sampler called name; false (kind untouched) when there is none. */
+bool sample_sampler_parse(const char *name, enum sampler_kind *kind);
 
 /* Dimension layout of one camera sample. */
 enum {
@@ -44,9 +60,31 @@ enum {
     SAMPLE_BOUNCE_BSDF_DIR = 4,
     SAMPLE_BOUNCE_ROULETTE = 6,
 };
+/* Extra light samples (trace.c, --light-samples N > 1).  Light sample 0 of bounce k uses the
+ * bounce block above; light samples j = 1 .. N-1 of bounce k read their light choice (1D) and
+ * light position (2D) from a block past every bounce block (4 + 7 * 1025 < 8192, the depth cap
+ * being 1024 bounces):
+ *   dim = SAMPLE_DIM_LIGHT_EXTRA + SAMPLE_DIMS_PER_LIGHT * (k * (N - 1) + j - 1) + {0, 1..2}.
+ * trace.c reads them through a copy of the path's sampler moved there with sample_set_dim, in
+ * increasing order (k, then j), so a sampler only needs random access to dimensions; note for
+ * the samplers (issue 5): these dimensions are reached without visiting the ones in between. */
+enum {
+    SAMPLE_DIM_LIGHT_EXTRA = 8192, /* first dimension of the extra light samples */
+    SAMPLE_DIMS_PER_LIGHT = 3      /* light choice 1, light position 2 */
+};
 
-/* The sample generator for one (pixel, sample index): a PCG32 stream seeded by hashing
- * (seed, pixel_idx, sample_idx), read dimension by dimension. */
+/* Dimensions the Sobol' sampler draws from one Sobol' point (pixel and lens: a joint 4D
+ * net); every later 1D or 2D request is a separately shuffled and scrambled padding sequence. */
+#define SAMPLE_SOBOL_JOINT_DIMS 4
+#define SAMPLE_SOBOL_MAX_DIMS 16 /* dimensions in the generator-matrix table */
+
+/* The unscrambled Sobol' point of index in dimension dim < SAMPLE_SOBOL_MAX_DIMS, as a 32-bit
+ * fraction (value / 2^32); direction numbers of Joe & Kuo 2008 (sobol_matrices.h). */
+uint32_t sample_sobol_u32(uint32_t index, uint32_t dim);
+
+/* The sample generator for one (pixel, sample index), read dimension by dimension.
+ * Independent: a PCG32 stream seeded by hashing (seed, pixel_idx, sample_idx).  Stratified and
+ * Sobol': stateless hashes of (seed, pixel_idx, sample_idx, dim, set_spp). */
 struct sampler {
     enum sampler_kind kind;
     uint64_t seed;
@@ -54,32 +92,80 @@ struct sampler {
     uint32_t sample_idx;
     uint32_t dim; /* next dimension to be returned */
     struct pcg32 rng;
+    uint32_t set_spp;    /* stratified: samples per stratified set (0 or 1: none) */
+    uint32_t cmj_cols;   /* stratified: columns m of the m x n multi-jittered grid */
+    uint64_t pixel_hash; /* hash of (seed, pixel_idx): root of every scrambling seed */
+    uint32_t sobol_index; /* Sobol': the shuffled index of the joint dimensions */
 };
 
-/* Starts the sample sample_idx of pixel pixel_idx at dimension 0. */
+/* Starts the sample sample_idx of pixel pixel_idx at dimension 0, with set_spp = 0: the
+ * stratified sampler then has no strata to fill and gives independent hashed uniforms. */
 void sample_start(struct sampler *s, enum sampler_kind kind, uint64_t seed, uint32_t pixel_idx,
                   uint32_t sample_idx);
+/* As sample_start, for a pixel whose samples come in stratified sets of set_spp (normally its
+ * spp): sample indices k set_spp .. (k+1) set_spp - 1 form set k, whose points fill every
+ * stratum once.  Only SAMPLER_STRATIFIED uses set_spp; Sobol' is stratified at every
+ * power-of-two prefix without it. */
+void sample_start_spp(struct sampler *s, enum sampler_kind kind, uint64_t seed,
+                      uint32_t pixel_idx, uint32_t sample_idx, uint32_t set_spp);
 /* Moves to dimension dim (>= the current one), skipping the values in between. */
 void sample_set_dim(struct sampler *s, uint32_t dim);
+/* The value of the next dimension, in [0, 1). */
 float sample_1d(struct sampler *s);
+/* The next two dimensions as one 2D point in [0, 1)^2: stratified and Sobol' stratify the pair
+ * jointly (in 2D), which two sample_1d calls would not. */
 vec2 sample_2d(struct sampler *s);
 
 /* 64-bit mixing hash (SplitMix64 finaliser, Steele et al. 2014). */
 uint64_t sample_hash64(uint64_t x);
 
-/* ---- warps: each takes uniforms u in [0,1)^2; its pdf sits beside it ---- */
+/* ---- warps: each takes uniforms u in [0,1)^2; its pdf sits beside it, and its inverse
+ * (sample_invert_*: the u that maps to a given point) where one exists ---- */
 
-/* Concentric disk, Shirley & Chiu 1997, "A Low Distortion Map Between Disk and Square". */
+/* Concentric disk, Shirley & Chiu 1997, "A Low Distortion Map Between Disk and Square";
+ * pdf = 1 / pi per unit area. */
 vec2 sample_concentric_disk(vec2 u);
+vec2 sample_invert_concentric_disk(vec2 p);
 /* Cosine-weighted hemisphere about +z (Malley's method: disk lifted to the hemisphere). */
 vec3 sample_cosine_hemisphere(vec2 u);
 float pdf_cosine_hemisphere(float cos_theta); /* cos_theta / pi, per steradian */
+vec2 sample_invert_cosine_hemisphere(vec3 w);
 /* Uniform hemisphere about +z. */
 vec3 sample_uniform_hemisphere(vec2 u);
 float pdf_uniform_hemisphere(void); /* 1 / (2 pi), per steradian */
+vec2 sample_invert_uniform_hemisphere(vec3 w);
+/* Uniform sphere. */
+vec3 sample_uniform_sphere(vec2 u);
+float pdf_uniform_sphere(void); /* 1 / (4 pi), per steradian */
+vec2 sample_invert_uniform_sphere(vec3 w);
+/* Uniform directions in the cone about +z of half-angle theta_max (cos_theta_max in [-1, 1)):
+ * the directions to a sphere seen from outside it, PBRT 4e, ch. 6, "Spheres". */
+vec3 sample_uniform_cone(vec2 u, float cos_theta_max);
+float pdf_uniform_cone(float cos_theta_max); /* 1 / (2 pi (1 - cos_theta_max)), per sr */
+vec2 sample_invert_uniform_cone(vec3 w, float cos_theta_max);
 /* Uniform barycentrics (b0, b1) on a triangle, square-root warp, PBRT 4e, ch. 6, "Triangles"
  * (b2 = 1 - b0 - b1); pdf = 1 / area per unit area. */
 vec2 sample_uniform_triangle(vec2 u);
+vec2 sample_invert_uniform_triangle(vec2 b);
+
+/* ---- discrete distributions ---- */
+
+/* Walker's alias method with Vose's O(n) construction: O(1) picks of index i with probability
+ * pmf_i = w_i / sum w (Walker 1977, "An Efficient Method for Generating Discrete Random Variables
+ * with General Distributions"; Vose 1991, "A Linear Algorithm for Generating Random Numbers with
+ * a Given Distribution"; PBRT 4e, ch. A.1, "The Alias Method").  Used to pick lights by power. */
+struct sample_alias_bin {
+    float q;        /* probability of keeping this bin's own index once the bin is chosen */
+    uint32_t alias; /* the index returned otherwise */
+    float pmf;      /* probability that a pick returns this bin's index */
+}; /* 12 bytes */
+
+/* Fills bins[0 .. n-1] from the n weights (finite, >= 0; all zero means uniform).  A zero
+ * weight is never picked.  Returns false when n == 0, a weight is negative or not finite, or
+ * memory runs out (bins then unspecified). */
+bool sample_alias_build(const double *weights, uint32_t n, struct sample_alias_bin *bins);
+/* The index picked by u in [0, 1); *pmf (may be NULL) receives its probability. */
+uint32_t sample_alias_pick(const struct sample_alias_bin *bins, uint32_t n, float u, float *pmf);
 
 /* Veach 1997, sec. 9.2.4: power heuristic, beta = 2, one sample from each of two strategies. */
 float mis_power(float pdf_a, float pdf_b);

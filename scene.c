@@ -31,7 +31,7 @@
  */
 
 #define SCENE_MAX_LINE_BYTES 4096 /* longest accepted line, bytes, without its line ending */
-#define MAX_PARAMS 8              /* most distinct parameters any statement accepts */
+#define MAX_PARAMS 20             /* most distinct parameters any statement accepts */
 #define SHOW_BYTES 40             /* longest piece of user text quoted in a message, bytes */
 #define PARALLEL_SIN 1e-6         /* |sin angle| below which two directions count as parallel */
 
@@ -49,6 +49,11 @@ enum value_kind {
     VAL_MATERIAL, /* the name of a material defined on an earlier line */
     VAL_PATH,     /* a file path, relative to the scene file's folder */
     VAL_TYPE,     /* one of the statement's type words */
+    VAL_SAMPLER,  /* a sampler name: independent, stratified, sobol */
+    VAL_DIRECT,   /* a direct-lighting estimator: mis, light, bsdf, cosine, hemisphere */
+    VAL_SPLIT,    /* full, direct or indirect */
+    VAL_RR,       /* 'throughput' (stored as 0) or a probability in (0, 1] */
+    VAL_CHECKER,  /* true, false, or a colour (the checker's second albedo) */
 };
 
 enum value_range {
@@ -60,6 +65,7 @@ enum value_range {
     RANGE_FOV,      /* (0, 180) degrees */
     RANGE_FILM,     /* 1..65535 pixels */
     RANGE_SPP,      /* 1..4294967295 */
+    RANGE_1K,       /* 1..1024 */
 };
 
 #define ALL_TYPES 0xffu /* allowed_mask / required_mask bit t stands for type t; bit 0 when the
@@ -90,7 +96,7 @@ enum stmt_kind {
 struct stmt_spec {
     const char *keyword;
     bool is_once;                          /* may appear at most once */
-    const char *types[4];                  /* words of the 'type' parameter; none: no 'type' */
+    const char *types[8];                  /* words of the 'type' parameter; none: no 'type' */
     struct param_spec params[MAX_PARAMS];  /* in the order the reference lists them */
 };
 
@@ -98,6 +104,11 @@ struct stmt_spec {
 #define T_DIFFUSE 1u
 #define T_MIRROR 2u
 #define T_DIELECTRIC 4u
+#define T_DIFFUSE_UNIFORM 8u
+#define T_CONDUCTOR 16u
+#define T_PLASTIC 32u
+#define T_UNITY 64u
+#define T_ALBEDO (T_DIFFUSE | T_DIFFUSE_UNIFORM | T_PLASTIC | T_UNITY) /* textured by 'checker' */
 /* type bits: sky */
 #define T_CONSTANT 1u
 #define T_GRADIENT 2u
@@ -118,15 +129,37 @@ static const struct stmt_spec stmt_specs[STMT_COUNT] = {
     [STMT_RENDER] = {"render", true, {NULL}, {
         {"spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
         {"max-depth", VAL_DEPTH, RANGE_ANY, ALL_TYPES, 0},
+        {"sampler", VAL_SAMPLER, RANGE_ANY, ALL_TYPES, 0},
+        {"adaptive", VAL_BOOL, RANGE_ANY, ALL_TYPES, 0},
+        {"tolerance", VAL_NUMBER, RANGE_POSITIVE, ALL_TYPES, 0},
+        {"adaptive-floor", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
+        {"batch", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
+        {"min-spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
+        {"max-spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
+        {"direct", VAL_DIRECT, RANGE_ANY, ALL_TYPES, 0},
+        {"light-samples", VAL_INT, RANGE_1K, ALL_TYPES, 0},
+        {"split", VAL_SPLIT, RANGE_ANY, ALL_TYPES, 0},
+        {"rr", VAL_RR, RANGE_ANY, ALL_TYPES, 0},
+        {"rr-depth", VAL_INT, RANGE_1K, ALL_TYPES, 0},
     }},
-    [STMT_MATERIAL] = {"material", false, {"diffuse", "mirror", "dielectric", NULL}, {
+    [STMT_MATERIAL] = {"material", false, {"diffuse", "mirror", "dielectric", "diffuse-uniform",
+                                           "conductor", "plastic", "unity", NULL}, {
         {"name", VAL_NAME, RANGE_ANY, ALL_TYPES, ALL_TYPES},
         {"type", VAL_TYPE, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"albedo", VAL_VEC3, RANGE_UNIT, T_DIFFUSE, T_DIFFUSE},
-        {"specular", VAL_VEC3, RANGE_UNIT, T_MIRROR | T_DIELECTRIC, 0},
-        {"ior", VAL_NUMBER, RANGE_POSITIVE, T_DIELECTRIC, 0},
+        {"albedo", VAL_VEC3, RANGE_UNIT, T_ALBEDO, T_ALBEDO},
+        {"specular", VAL_VEC3, RANGE_UNIT, T_MIRROR | T_DIELECTRIC | T_CONDUCTOR | T_UNITY, 0},
+        {"ior", VAL_NUMBER, RANGE_POSITIVE, T_DIELECTRIC | T_UNITY, 0},
         {"emission", VAL_VEC3, RANGE_NONNEG, ALL_TYPES, 0},
         {"two-sided", VAL_BOOL, RANGE_ANY, ALL_TYPES, 0},
+        {"roughness", VAL_NUMBER, RANGE_UNIT, T_CONDUCTOR | T_PLASTIC, 0},
+        {"metallic", VAL_NUMBER, RANGE_UNIT, T_PLASTIC, 0},
+        {"reflectance", VAL_NUMBER, RANGE_UNIT, T_PLASTIC, 0},
+        {"smoothness", VAL_NUMBER, RANGE_UNIT, T_UNITY, 0},
+        {"specular-prob", VAL_NUMBER, RANGE_UNIT, T_UNITY, 0},
+        {"glass", VAL_BOOL, RANGE_ANY, T_UNITY, 0},
+        {"checker", VAL_CHECKER, RANGE_UNIT, T_ALBEDO, 0},
+        {"checker-scale", VAL_NUMBER, RANGE_POSITIVE, T_ALBEDO, 0},
+        {"checker-uv", VAL_BOOL, RANGE_ANY, T_ALBEDO, 0},
     }},
     [STMT_MESH] = {"mesh", false, {NULL}, {
         {"file", VAL_PATH, RANGE_ANY, ALL_TYPES, ALL_TYPES},
@@ -433,7 +466,8 @@ static bool check_range(struct parser *ps, const struct param_spec *sp, const st
         break;
     case RANGE_UNIT:
         if (!all_unit)
-            return fail(ps, p->val_col, "expected '%s' components in [0, 1], got %s", sp->key, v);
+            return fail(ps, p->val_col, "expected '%s'%s in [0, 1], got %s", sp->key,
+                        is_vector ? " components" : "", v);
         break;
     case RANGE_NONZERO:
         if (sp->kind == VAL_SCALE && any_zero)
@@ -507,7 +541,7 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
     case VAL_INT: {
         if (!parse_integer(p->text, &u, &is_negative))
             return fail(ps, p->val_col, "expected an integer for '%s', got '%s'", sp->key, v);
-        uint64_t hi = sp->range == RANGE_FILM ? 65535 : UINT32_MAX;
+        uint64_t hi = sp->range == RANGE_FILM ? 65535 : sp->range == RANGE_1K ? 1024 : UINT32_MAX;
         if (is_negative || u < 1 || u > hi)
             return fail(ps, p->val_col, "expected '%s' in 1..%llu, got %s", sp->key,
                         (unsigned long long)hi, v);
@@ -550,6 +584,52 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
                                         "'%s'", v);
         p->u = (uint32_t)idx;
         return true;
+    }
+    case VAL_SAMPLER: {
+        enum sampler_kind kind;
+        if (!sample_sampler_parse(p->text, &kind))
+            return fail(ps, p->val_col, "expected independent, stratified or sobol for '%s', "
+                                        "got '%s'", sp->key, v);
+        p->u = (uint32_t)kind;
+        return true;
+    }
+    case VAL_DIRECT: {
+        enum render_direct direct;
+        if (!scene_direct_parse(p->text, &direct))
+            return fail(ps, p->val_col, "expected mis, light, bsdf, cosine or hemisphere for "
+                                        "'%s', got '%s'", sp->key, v);
+        p->u = (uint32_t)direct;
+        return true;
+    }
+    case VAL_SPLIT: {
+        enum render_split split;
+        if (!scene_split_parse(p->text, &split))
+            return fail(ps, p->val_col, "expected full, direct or indirect for '%s', got '%s'",
+                        sp->key, v);
+        p->u = (uint32_t)split;
+        return true;
+    }
+    case VAL_RR: {
+        float prob = 0.0f;
+        if (strcmp(p->text, "throughput") != 0 &&
+            (parse_number(p->text, strlen(p->text), &prob) != NUMBER_OK ||
+             !(prob > 0.0f && prob <= 1.0f)))
+            return fail(ps, p->val_col, "expected 'throughput' or a probability in (0, 1] for "
+                                        "'%s', got '%s'", sp->key, v);
+        p->f[0] = prob;
+        p->n_f = 1;
+        return true;
+    }
+    case VAL_CHECKER: {
+        p->n_f = 0;
+        if (strcmp(p->text, "true") == 0 || strcmp(p->text, "false") == 0) {
+            p->b = p->text[0] == 't';
+            return true;
+        }
+        struct param_spec colour = *sp;
+        colour.kind = VAL_VEC3;
+        p->b = true;
+        return parse_numbers(ps, &colour, p);
     }
     case VAL_PATH:
     case VAL_TYPE:
@@ -1001,6 +1081,10 @@ static bool do_plane(struct parser *ps, const struct stmt *st)
     return true;
 }
 
+/* material: the kinds of material.h; 'plastic' takes the metallic/roughness parametrisation
+ * of real-time PBR (Burley 2012; Karis 2013; Filament's reflectance: F0 = 0.16 reflectance^2),
+ * 'unity' the Unity tracer's parameters, mapped as docs/scene-format.md, "Unity-style
+ * materials", describes. */
 static bool do_material(struct parser *ps, const struct stmt *st)
 {
     struct material m = {0};
@@ -1008,22 +1092,162 @@ static bool do_material(struct parser *ps, const struct stmt *st)
     m.Le = get_vec3(st, "emission", v3_splat(0.0f));
     m.two_sided_emission = get(st, "two-sided")->key && get(st, "two-sided")->b;
     m.ior = 1.0f;
+    vec3 albedo = get_vec3(st, "albedo", v3_splat(0.0f));
+    bool is_glass = false;
     switch (st->type_idx) {
     case 0:
         m.kind = MAT_DIFFUSE;
-        m.albedo = get_vec3(st, "albedo", v3_splat(0.0f));
+        m.albedo = albedo;
         break;
     case 1:
         m.kind = MAT_MIRROR;
         m.specular = get_vec3(st, "specular", v3_splat(1.0f));
         break;
-    default:
+    case 2:
         m.kind = MAT_DIELECTRIC;
         m.specular = get_vec3(st, "specular", v3_splat(1.0f));
         m.ior = get_number(st, "ior", 1.5f);
         break;
+    case 3:
+        m.kind = MAT_DIFFUSE_UNIFORM;
+        m.albedo = albedo;
+        break;
+    case 4:
+        m.kind = MAT_CONDUCTOR;
+        m.specular = get_vec3(st, "specular", v3_splat(1.0f));
+        m.roughness = get_number(st, "roughness", 0.5f);
+        break;
+    case 5: {
+        /* diffuse = (1 - metallic) base, F0 = lerp(0.16 reflectance^2, base, metallic) */
+        float metallic = get_number(st, "metallic", 0.0f);
+        float reflectance = get_number(st, "reflectance", 0.5f);
+        vec3 F0_dielectric = v3_splat(0.16f * reflectance * reflectance);
+        m.kind = MAT_PLASTIC;
+        m.albedo = v3_scale(albedo, 1.0f - metallic);
+        m.specular = v3_add(v3_scale(F0_dielectric, 1.0f - metallic), v3_scale(albedo, metallic));
+        m.roughness = get_number(st, "roughness", 0.5f);
+        break;
+    }
+    default: {
+        /* unity: glass, else a diffuse base under a coat of F0 = specular-prob * specular and
+         * roughness 1 - smoothness (a plain diffuse when specular-prob is 0) */
+        is_glass = get(st, "glass")->key && get(st, "glass")->b;
+        float prob = get_number(st, "specular-prob", 0.0f);
+        if (is_glass) {
+            m.kind = MAT_DIELECTRIC;
+            m.specular = albedo;
+            m.ior = get_number(st, "ior", 1.5f);
+        } else if (prob == 0.0f) {
+            m.kind = MAT_DIFFUSE;
+            m.albedo = albedo;
+        } else {
+            m.kind = MAT_PLASTIC;
+            m.albedo = albedo;
+            m.specular = v3_scale(get_vec3(st, "specular", v3_splat(1.0f)), prob);
+            m.roughness = 1.0f - get_number(st, "smoothness", 0.0f);
+        }
+        break;
+    }
+    }
+    /* the checker texture alternates the diffuse albedo with a second colour (true: half the
+     * first) */
+    const struct param *ck = get(st, "checker");
+    const struct param *ck_scale = get(st, "checker-scale");
+    const struct param *ck_uv = get(st, "checker-uv");
+    if (ck->key && ck->b) {
+        if (is_glass)
+            return fail(ps, ck->key_col, "expected no 'checker' with 'glass=true' (glass has no "
+                                         "albedo), got 'checker=%s'", ck->text);
+        vec3 second = ck->n_f == 3 ? v3(ck->f[0], ck->f[1], ck->f[2])
+                                   : v3_scale(albedo, 0.5f);
+        /* a plastic's texture is its base colour, of which the diffuse keeps 1 - metallic */
+        float diffuse_share = st->type_idx == 5 ? 1.0f - get_number(st, "metallic", 0.0f) : 1.0f;
+        m.checker_albedo = v3_scale(second, diffuse_share);
+        m.checker_scale = get_number(st, "checker-scale", 1.0f);
+        m.checker_uv = ck_uv->key && ck_uv->b;
+    } else if (!ck->key && (ck_scale->key || ck_uv->key)) {
+        const struct param *p = ck_scale->key ? ck_scale : ck_uv;
+        return fail(ps, p->key_col, "expected 'checker' for '%s' to apply to, got none", p->key);
     }
     return add_material(ps, &m, ps->line);
+}
+
+static const char *const DIRECT_NAMES[RENDER_DIRECT_COUNT] = {"mis", "light", "bsdf", "cosine",
+                                                               "hemisphere"};
+static const char *const SPLIT_NAMES[RENDER_SPLIT_COUNT] = {"full", "direct", "indirect"};
+
+const char *scene_direct_name(enum render_direct direct)
+{
+    return (unsigned)direct < RENDER_DIRECT_COUNT ? DIRECT_NAMES[direct] : "?";
+}
+
+bool scene_direct_parse(const char *name, enum render_direct *direct)
+{
+    for (int k = 0; k < RENDER_DIRECT_COUNT; k++)
+        if (strcmp(name, DIRECT_NAMES[k]) == 0) {
+            *direct = (enum render_direct)k;
+            return true;
+        }
+    return false;
+}
+
+const char *scene_split_name(enum render_split split)
+{
+    return (unsigned)split < RENDER_SPLIT_COUNT ? SPLIT_NAMES[split] : "?";
+}
+
+bool scene_split_parse(const char *name, enum render_split *split)
+{
+    for (int k = 0; k < RENDER_SPLIT_COUNT; k++)
+        if (strcmp(name, SPLIT_NAMES[k]) == 0) {
+            *split = (enum render_split)k;
+            return true;
+        }
+    return false;
+}
+
+/* render: spp, depth, sampler, the adaptive-sampling settings (docs/sampling.md) and the light
+ * transport settings (direct, light-samples, split, rr, rr-depth). */
+static bool do_render(struct parser *ps, const struct stmt *st)
+{
+    struct render_settings *r = &ps->scene->render;
+    const struct param *p;
+    if ((p = get(st, "spp"))->key)
+        r->spp = p->u;
+    if ((p = get(st, "max-depth"))->key)
+        r->max_depth = p->u;
+    if ((p = get(st, "sampler"))->key)
+        r->sampler = (enum sampler_kind)p->u;
+    if ((p = get(st, "adaptive"))->key)
+        r->adaptive = p->b;
+    if ((p = get(st, "tolerance"))->key)
+        r->tolerance = p->f[0];
+    if ((p = get(st, "adaptive-floor"))->key)
+        r->adaptive_floor = p->f[0];
+    if ((p = get(st, "batch"))->key)
+        r->batch = p->u;
+    if ((p = get(st, "max-spp"))->key)
+        r->max_spp = p->u;
+    if ((p = get(st, "direct"))->key)
+        r->direct = (enum render_direct)p->u;
+    if ((p = get(st, "light-samples"))->key)
+        r->light_samples = p->u;
+    if ((p = get(st, "split"))->key)
+        r->split = (enum render_split)p->u;
+    if ((p = get(st, "rr"))->key)
+        r->rr_prob = p->f[0];
+    if ((p = get(st, "rr-depth"))->key)
+        r->rr_depth = p->u;
+    if ((p = get(st, "min-spp"))->key) {
+        /* one sample has no spread: sigma = 0 would stop every lit pixel at once */
+        if (p->u < 2)
+            return fail(ps, p->val_col, "expected 'min-spp' >= 2, got %s", p->text);
+        if (r->max_spp && p->u > r->max_spp)
+            return fail(ps, p->val_col, "expected 'min-spp' <= 'max-spp' (%u), got %s",
+                        r->max_spp, p->text);
+        r->min_spp = p->u;
+    }
+    return true;
 }
 
 static bool do_statement(struct parser *ps, const struct stmt *st)
@@ -1037,11 +1261,7 @@ static bool do_statement(struct parser *ps, const struct stmt *st)
         sc->height = (int)get(st, "height")->u;
         return true;
     case STMT_RENDER:
-        if (get(st, "spp")->key)
-            sc->render.spp = get(st, "spp")->u;
-        if (get(st, "max-depth")->key)
-            sc->render.max_depth = get(st, "max-depth")->u;
-        return true;
+        return do_render(ps, st);
     case STMT_MATERIAL:
         return do_material(ps, st);
     case STMT_MESH:
@@ -1078,7 +1298,7 @@ static bool do_statement(struct parser *ps, const struct stmt *st)
  * relates parameters to each other (in do_statement). */
 static bool parse_line(struct parser *ps, char *line)
 {
-    char list[160], buf[SHOW_BYTES + 4];
+    char list[200], buf[SHOW_BYTES + 4];
     char *cur = line;
     char *kw = next_word(&cur);
     if (!kw)
@@ -1220,7 +1440,9 @@ bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err)
     memset(scene, 0, sizeof *scene);
     scene->width = 512;
     scene->height = 512;
-    scene->render = (struct render_settings){.spp = 64, .max_depth = UINT32_MAX};
+    scene->render = (struct render_settings){.spp = 64, .max_depth = UINT32_MAX,
+                                             .sampler = SAMPLER_DEFAULT,
+                                             .adaptive_floor = -1.0f};
 
     FILE *f = fopen(path, "rb");
     if (!f) {

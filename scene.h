@@ -6,6 +6,7 @@
 
 #include "camera.h"
 #include "material.h"
+#include "sample.h"
 #include "shape.h"
 #include "vec.h"
 
@@ -44,10 +45,52 @@ struct sky {
     vec3 zenith;   /* SKY_GRADIENT */
 };
 
+/* Direct-lighting estimator (trace.c; docs/scene-format.md, "render"): every one converges to
+ * the same image. */
+enum render_direct {
+    RENDER_DIRECT_MIS,        /* light and BSDF sampling, power heuristic (Veach 1997, ch. 9) */
+    RENDER_DIRECT_LIGHT,      /* light sampling only (next-event estimation) */
+    RENDER_DIRECT_BSDF,       /* BSDF sampling only: emission counted where a ray hits it */
+    RENDER_DIRECT_COSINE,     /* cosine-weighted hemisphere directions, emission on hit */
+    RENDER_DIRECT_HEMISPHERE, /* uniform hemisphere directions, emission on hit */
+};
+#define RENDER_DIRECT_COUNT 5
+
+/* Which bounces an image keeps: all, bounces 0-1 (emission seen directly and direct light), or
+ * bounces > 1; direct + indirect = full, sample by sample. */
+enum render_split {
+    RENDER_SPLIT_FULL,
+    RENDER_SPLIT_DIRECT,
+    RENDER_SPLIT_INDIRECT,
+};
+#define RENDER_SPLIT_COUNT 3
+
+/* "mis", "light", "bsdf", "cosine", "hemisphere"; "?" outside the enum. */
+const char *scene_direct_name(enum render_direct direct);
+/* Sets *direct to the estimator called name; false (untouched) when there is none. */
+bool scene_direct_parse(const char *name, enum render_direct *direct);
+/* "full", "direct", "indirect"; "?" outside the enum. */
+const char *scene_split_name(enum render_split split);
+bool scene_split_parse(const char *name, enum render_split *split);
+
 /* Render defaults from the scene's "render" statement; the CLI overrides them. */
 struct render_settings {
     uint32_t spp;       /* samples per pixel */
     uint32_t max_depth; /* longest path in segments from the camera; 0 = emission only */
+    /* sampling (docs/sampling.md); 0 in a count or tolerance: not given, the CLI's default */
+    enum sampler_kind sampler; /* SAMPLER_* */
+    bool adaptive;             /* adaptive sampling on */
+    float tolerance;           /* adaptive: relative 95% half-width T */
+    float adaptive_floor;      /* adaptive: absolute luminance floor; < 0: not given */
+    uint32_t batch;            /* adaptive: samples between tests */
+    uint32_t min_spp;          /* adaptive: samples before the first test */
+    uint32_t max_spp;          /* adaptive: most samples per pixel */
+    /* light transport (trace.c); 0 in a count or probability: not given, the CLI's default */
+    enum render_direct direct; /* direct-lighting estimator (default MIS) */
+    uint32_t light_samples;    /* light samples per path vertex */
+    enum render_split split;   /* bounces kept (default all) */
+    float rr_prob;             /* fixed Russian-roulette continuation probability; 0: by beta */
+    uint32_t rr_depth;         /* bounces before Russian roulette starts */
 };
 
 struct scene {

@@ -1,15 +1,19 @@
 /* trace.c - unidirectional path tracing with next-event estimation and multiple importance
  * sampling, and the tile-scheduled render loop.
  * Estimator: Kajiya 1986, eq. 1, L(x, wo) = Le(x, wo) + int f(x, wo, wi) L(x', -wi) |cos| dwi,
- * sampled one path vertex at a time; direct light at each vertex from one light sample and one
- * BSDF sample combined by the power heuristic (Veach 1997, ch. 9); Russian roulette on the
- * throughput (PBRT 4e, ch. 13, "A Better Path Tracer").
+ * sampled one path vertex at a time.  At each vertex the emitted light that arrives directly is
+ * estimated by N light samples (next-event estimation) and one BSDF sample, combined by the
+ * power heuristic with sample counts (Veach 1997, sec. 9.2.4, eq. 9.13); the teaching
+ * estimators (--direct) drop one strategy or sample directions independently of the BSDF.
+ * Russian roulette on the throughput or with a fixed probability (PBRT 4e, ch. 13, "A Better
+ * Path Tracer").  Lights: emissive triangles, quads, spheres, point lights and the sky, picked by
+ * power with an alias table.
  *
  * Glossary (PBRT's symbols): wo, wi - unit directions away from the surface (wo towards the
  * previous vertex, wi towards the next); n, ng, ns - normals (geometric, shading); L - radiance
  * carried to the camera; Le - emitted radiance; f - BSDF value; beta - path throughput
  * f |cos| / pdf accumulated along the path; pdf_sa, pdf_area - densities per steradian and per
- * unit area; pmf - discrete probability of picking a light. */
+ * unit area; pmf - discrete probability of picking a light; N - light samples per vertex. */
 #include "trace.h"
 
 #include <pthread.h>
@@ -29,7 +33,9 @@ struct trace_scene {
     const struct scene *scene;
     struct bvh *bvh;
     struct camera camera;
-    float *light_cdf;     /* n_lights + 1 entries, cdf[0] = 0, cdf[n] = 1: pick by power */
+    struct sample_alias_bin *light_bins; /* n_lights entries: pick a light by power */
+    uint32_t n_lights;    /* scene->n_lights, plus 1 for the sky when it is not black */
+    uint32_t sky_light;   /* light index of the sky (the last), or NO_LIGHT */
     uint32_t *tri_light;  /* light index of each triangle, or NO_LIGHT */
     uint32_t *quad_light; /* light index of each quad, or NO_LIGHT */
     uint32_t *sphere_light;
@@ -44,23 +50,23 @@ struct hit_record {
 static bool intersect(const struct trace_scene *ts, const struct ray *ray, struct hit_record *hr);
 static bool occluded(const struct trace_scene *ts, const struct ray *ray);
 static vec3 sky_radiance(const struct sky *sky, vec3 d);
-static float light_pmf(const struct trace_scene *ts, uint32_t light_idx);
-static uint32_t pick_light(const struct trace_scene *ts, float u);
-
-/* A light sample seen from a reference point: direction, radiance, density and the shadow ray. */
-struct light_sample {
-    vec3 wi;        /* unit direction from the reference point to the light point */
-    vec3 Le;        /* radiance arriving along -wi (intensity / dist^2 for point lights) */
-    float pdf_sa;   /* solid-angle density of wi; 0 for a delta (point) light */
-    bool is_delta;  /* point light: no MIS */
-    struct ray shadow; /* from the offset reference point to the offset light point */
-};
-
-static bool sample_light(const struct trace_scene *ts, uint32_t light_idx,
-                         const struct surface *ref, vec2 u, struct light_sample *ls);
 static float light_pdf_sa(const struct trace_scene *ts, uint32_t light_idx,
-                          const struct surface *ref, const struct surface *on_light, vec3 wi);
+                          const struct surface *ref, vec3 n_sky, vec3 p_light, vec3 ng_light,
+                          vec3 wi);
+static bool light_is_delta(const struct trace_scene *ts, uint32_t light_idx);
 static struct ray spawn_ray(const struct surface *sf, vec3 d);
+static vec3 sample_one_light(const struct trace_scene *ts, const struct trace_options *opt,
+                             const struct material *m, const struct surface *sf, vec3 wo_world,
+                             vec3 n_sky, float u_choice, vec2 u_light, uint64_t *n_rays);
+static bool sample_direction(const struct material *m, vec3 wo, enum render_direct direct,
+                             float u_lobe, vec2 u, struct mat_sample *s);
+
+/* Does the image keep a contribution that left the light n_bounces scattering events before
+ * reaching the camera?  Direct: 0 (emission seen directly) and 1; indirect: the rest. */
+static bool split_keeps(enum render_split split, uint32_t n_bounces)
+{
+    return split == RENDER_SPLIT_FULL || (split == RENDER_SPLIT_DIRECT) == (n_bounces <= 1);
+}
 
 /* ---- the path loop ---- */
 
@@ -68,89 +74,111 @@ vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *op
                     struct ray ray, struct sampler *sampler, uint64_t *n_rays)
 {
     const struct scene *scene = ts->scene;
+    const uint32_t n_ls = opt->light_samples ? opt->light_samples : 1;
+    const uint32_t rr_depth = opt->rr_depth ? opt->rr_depth : TRACE_RR_DEPTH_DEFAULT;
+    uint32_t depth_cap = opt->max_depth == TRACE_DEPTH_INFINITE ? TRACE_DEPTH_CAP : opt->max_depth;
+    if (opt->split == RENDER_SPLIT_DIRECT && depth_cap > 1)
+        depth_cap = 1; /* nothing beyond the first bounce is kept */
     vec3 L = v3_splat(0.0f);
     vec3 beta = v3_splat(1.0f);
     float eta_scale = 1.0f;     /* product of etap^2 over refractions, undone for roulette */
     bool specular_bounce = false;
-    float pdf_bsdf_prev = 0.0f; /* solid-angle pdf of the BSDF sample that made this ray */
+    float pdf_bsdf_prev = 0.0f; /* solid-angle pdf of the direction sample that made this ray */
     struct surface prev = {0};  /* the vertex the ray left from (used once depth > 0) */
-    uint32_t depth_cap = opt->max_depth == TRACE_DEPTH_INFINITE ? TRACE_DEPTH_CAP : opt->max_depth;
+    vec3 prev_n_sky = v3_splat(0.0f);
+    struct sampler extra;       /* light samples 1 .. N-1 (sample.h, SAMPLE_DIM_LIGHT_EXTRA) */
+    bool extra_started = false;
 
     for (uint32_t depth = 0;;) {
+        /* find the next vertex (depth = bounces so far) */
         struct hit_record hr;
         (*n_rays)++;
-        if (!intersect(ts, &ray, &hr)) {
-            /* escaped: sky radiance (not light-sampled, so BSDF sampling takes it whole) */
-            L = v3_add(L, v3_mul(beta, sky_radiance(&scene->sky, v3_normalize(ray.d))));
-            break;
-        }
-        const struct surface *sf = &hr.sf;
-        const struct material *m = &scene->materials[sf->mat_idx];
+        bool hit = intersect(ts, &ray, &hr);
         vec3 wo_world = v3_normalize(v3_neg(ray.d));
 
-        /* emission at the hit: L += beta Le w_bsdf (w_bsdf = 1 for camera and specular rays) */
-        vec3 Le = mat_emission(m, sf->ng, wo_world);
-        if (!v3_is_zero(Le)) {
-            float w_bsdf = 1.0f;
-            if (depth > 0 && !specular_bounce && hr.light_idx != NO_LIGHT) {
-                float pdf_light = light_pmf(ts, hr.light_idx) *
-                                  light_pdf_sa(ts, hr.light_idx, &prev, sf, v3_neg(wo_world));
-                w_bsdf = mis_power(pdf_bsdf_prev, pdf_light);
+        /* emission where the ray ends, or the sky where it escapes:
+         * L += beta Le w_bsdf, w_bsdf = pdf_bsdf^2 / (pdf_bsdf^2 + (N pmf pdf_light)^2) */
+        vec3 Le = hit ? mat_emission(&scene->materials[hr.sf.mat_idx], hr.sf.ng, wo_world)
+                      : sky_radiance(&scene->sky, v3_neg(wo_world));
+        uint32_t light_idx = hit ? hr.light_idx : ts->sky_light;
+        if (!v3_is_zero(Le) && split_keeps(opt->split, depth)) {
+            float w_bsdf = 1.0f; /* camera rays, specular bounces, emitters no light sample finds */
+            if (depth > 0 && !specular_bounce && light_idx != NO_LIGHT) {
+                if (opt->direct == RENDER_DIRECT_LIGHT) {
+                    w_bsdf = 0.0f; /* light sampling alone counts this emitter */
+                } else if (opt->direct == RENDER_DIRECT_MIS) {
+                    vec3 p_light = hit ? hr.sf.p : v3_splat(0.0f);
+                    vec3 ng_light = hit ? hr.sf.ng : v3_splat(0.0f);
+                    float pdf_light = (float)n_ls * ts->light_bins[light_idx].pmf *
+                                      light_pdf_sa(ts, light_idx, &prev, prev_n_sky, p_light,
+                                                   ng_light, v3_neg(wo_world));
+                    w_bsdf = mis_power(pdf_bsdf_prev, pdf_light);
+                }
             }
             L = v3_add(L, v3_scale(v3_mul(beta, Le), w_bsdf));
         }
-        if (depth++ == depth_cap)
+        if (!hit || depth++ == depth_cap)
             break;
 
-        /* local shading frame: z = ns */
+        /* the material at the vertex, its albedo texture looked up */
+        const struct surface *sf = &hr.sf;
+        const struct material *m = &scene->materials[sf->mat_idx];
+        struct material m_textured;
+        if (m->checker_scale > 0.0f) {
+            m_textured = *m;
+            m_textured.albedo = mat_albedo_at(m, sf->p, sf->uv);
+            m = &m_textured;
+        }
+
+        /* local shading frame: z = ns; the sky is sampled about ns turned to the side of wo */
         vec3 t, b;
         v3_basis(sf->ns, &t, &b);
         vec3 wo = v3(v3_dot(wo_world, t), v3_dot(wo_world, b), v3_dot(wo_world, sf->ns));
-        uint32_t dim0 = SAMPLE_DIM_BOUNCE0 + (depth - 1) * SAMPLE_DIMS_PER_BOUNCE;
+        vec3 n_sky = wo.z >= 0.0f ? sf->ns : v3_neg(sf->ns);
+        uint32_t bounce = depth - 1;
+        uint32_t dim0 = SAMPLE_DIM_BOUNCE0 + bounce * SAMPLE_DIMS_PER_BOUNCE;
 
-        /* sample a light (next-event estimation):
-         * L += beta f |cos theta_i| Le / (pmf pdf_light) * w_light */
-        if (!mat_is_specular(m) && scene->n_lights > 0) {
-            sample_set_dim(sampler, dim0 + SAMPLE_BOUNCE_LIGHT_CHOICE);
-            uint32_t light_idx = pick_light(ts, sample_1d(sampler));
-            vec2 u_light = sample_2d(sampler);
-            struct light_sample ls;
-            if (sample_light(ts, light_idx, sf, u_light, &ls)) {
-                vec3 wi = v3(v3_dot(ls.wi, t), v3_dot(ls.wi, b), v3_dot(ls.wi, sf->ns));
-                /* reflection only towards the geometric side of wo: no leaks through
-                 * surfaces whose shading normal disagrees with the geometry */
-                bool same_side = v3_dot(ls.wi, sf->ng) * v3_dot(wo_world, sf->ng) > 0.0f;
-                vec3 f = same_side ? mat_eval(m, wo, wi) : v3_splat(0.0f);
-                if (!v3_is_zero(f)) {
-                    (*n_rays)++;
-                    if (!occluded(ts, &ls.shadow)) {
-                        float pmf = light_pmf(ts, light_idx);
-                        float cos_i = fabsf(wi.z);
-                        vec3 contrib = v3_scale(v3_mul(v3_mul(beta, f), ls.Le), cos_i / pmf);
-                        if (ls.is_delta) {
-                            L = v3_add(L, contrib);
-                        } else {
-                            float pdf_light = pmf * ls.pdf_sa;
-                            float w_light = mis_power(pdf_light, mat_pdf(m, wo, wi));
-                            L = v3_add(L, v3_scale(contrib, w_light / ls.pdf_sa));
-                        }
+        /* sample the lights (next-event estimation), N samples:
+         * L += beta (1/N) sum_j f |cos theta_i| Le / (pmf pdf_light) w_light,
+         * w_light = (N pmf pdf_light)^2 / ((N pmf pdf_light)^2 + pdf_bsdf^2) */
+        if (!mat_is_specular(m) && ts->n_lights > 0 && split_keeps(opt->split, depth)) {
+            for (uint32_t j = 0; j < n_ls; j++) {
+                struct sampler *s = sampler;
+                if (j == 0) {
+                    sample_set_dim(sampler, dim0 + SAMPLE_BOUNCE_LIGHT_CHOICE);
+                } else {
+                    if (!extra_started) {
+                        extra = *sampler;
+                        extra_started = true;
                     }
+                    s = &extra;
+                    sample_set_dim(&extra, SAMPLE_DIM_LIGHT_EXTRA +
+                                               SAMPLE_DIMS_PER_LIGHT * (bounce * (n_ls - 1) + j - 1));
                 }
+                float u_choice = sample_1d(s);
+                vec2 u_light = sample_2d(s);
+                vec3 Ld = sample_one_light(ts, opt, m, sf, wo_world, n_sky, u_choice, u_light,
+                                           n_rays);
+                L = v3_add(L, v3_mul(beta, Ld));
             }
         }
 
-        /* sample the BSDF: beta *= f |cos theta_i| / pdf */
+        /* sample the next direction: beta *= f |cos theta_i| / pdf */
         sample_set_dim(sampler, dim0 + SAMPLE_BOUNCE_BSDF_LOBE);
         float u_lobe = sample_1d(sampler);
         vec2 u_dir = sample_2d(sampler);
         struct mat_sample bs;
-        if (!mat_sample(m, wo, u_lobe, u_dir, &bs))
+        if (!sample_direction(m, wo, opt->direct, u_lobe, u_dir, &bs))
             break;
         vec3 wi_world = v3_from_local(bs.wi, t, b, sf->ns);
-        if (!bs.is_specular && v3_dot(wi_world, sf->ng) * v3_dot(wo_world, sf->ng) <= 0.0f)
-            break; /* a reflection sample below the geometric surface carries no light */
+        /* the geometric normal decides the side: a reflection must stay on the side of wo, a
+         * refraction must cross, whatever the shading normal says (no leaks) */
+        bool is_reflection = bs.wi.z * wo.z > 0.0f;
+        bool stays = v3_dot(wi_world, sf->ng) * v3_dot(wo_world, sf->ng) > 0.0f;
+        if (is_reflection != stays)
+            break;
         beta = v3_mul(beta, v3_scale(bs.f, fabsf(bs.wi.z) / bs.pdf_sa));
-        if (bs.is_specular && bs.wi.z * wo.z < 0.0f) {
+        if (!is_reflection) {
             /* refraction: f was divided by etap^2; roulette looks at the unscaled beta */
             float eta_rel = wo.z > 0.0f ? m->ior : 1.0f / m->ior;
             eta_scale *= eta_rel * eta_rel;
@@ -158,21 +186,86 @@ vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *op
         specular_bounce = bs.is_specular;
         pdf_bsdf_prev = bs.pdf_sa;
         prev = *sf;
+        prev_n_sky = n_sky;
         ray = spawn_ray(sf, wi_world);
 
-        /* Russian roulette: continue with probability 1 - q, q = max(0, 1 - max(beta eta^2)) */
-        float rr_beta = v3_max_comp(beta) * eta_scale;
-        if (rr_beta < 1.0f && depth > 1) {
-            float q = fmaxf(0.0f, 1.0f - rr_beta);
-            sample_set_dim(sampler, dim0 + SAMPLE_BOUNCE_ROULETTE);
-            if (sample_1d(sampler) < q)
-                break;
-            beta = v3_scale(beta, 1.0f / (1.0f - q));
+        /* Russian roulette after bounce rr_depth: continue with probability p, beta /= p;
+         * p = min(1, max(beta) eta^2) by throughput, or the fixed --rr p */
+        if (depth >= rr_depth) {
+            float p = opt->rr_prob > 0.0f ? opt->rr_prob
+                                          : fminf(1.0f, v3_max_comp(beta) * eta_scale);
+            if (p < 1.0f) {
+                sample_set_dim(sampler, dim0 + SAMPLE_BOUNCE_ROULETTE);
+                if (!(sample_1d(sampler) < p))
+                    break;
+                beta = v3_scale(beta, 1.0f / p);
+            }
         }
         if (v3_is_zero(beta))
             break;
     }
     return L;
+}
+
+/* One light sample at surface sf (next-event estimation), unweighted by beta:
+ *   Ld = f |cos theta_i| Le / (N pmf pdf_light) w_light   (area lights and the sky),
+ *   Ld = f |cos theta_i| I / (N pmf r^2)                 (point lights: delta, no MIS).
+ * The estimators without light sampling still sample point lights here: nothing else can find
+ * a delta light. */
+static vec3 sample_one_light(const struct trace_scene *ts, const struct trace_options *opt,
+                             const struct material *m, const struct surface *sf, vec3 wo_world,
+                             vec3 n_sky, float u_choice, vec2 u_light, uint64_t *n_rays)
+{
+    const vec3 zero = v3_splat(0.0f);
+    const uint32_t n_ls = opt->light_samples ? opt->light_samples : 1;
+    float pmf;
+    uint32_t light_idx = sample_alias_pick(ts->light_bins, ts->n_lights, u_choice, &pmf);
+    bool nee = opt->direct == RENDER_DIRECT_MIS || opt->direct == RENDER_DIRECT_LIGHT;
+    if (!nee && !light_is_delta(ts, light_idx))
+        return zero;
+    struct trace_light_sample ls;
+    if (!trace_sample_light(ts, light_idx, sf, n_sky, u_light, &ls))
+        return zero;
+    /* reflection only towards the geometric side of wo: no leaks through surfaces whose
+     * shading normal disagrees with the geometry (no material has a non-delta transmission) */
+    if (v3_dot(ls.wi, sf->ng) * v3_dot(wo_world, sf->ng) <= 0.0f)
+        return zero;
+    vec3 t, b;
+    v3_basis(sf->ns, &t, &b);
+    vec3 wo = v3(v3_dot(wo_world, t), v3_dot(wo_world, b), v3_dot(wo_world, sf->ns));
+    vec3 wi = v3(v3_dot(ls.wi, t), v3_dot(ls.wi, b), v3_dot(ls.wi, sf->ns));
+    vec3 f = mat_eval(m, wo, wi);
+    if (v3_is_zero(f))
+        return zero;
+    (*n_rays)++;
+    if (occluded(ts, &ls.shadow))
+        return zero;
+    vec3 Ld = v3_scale(v3_mul(f, ls.Le), fabsf(wi.z) / ((float)n_ls * pmf));
+    if (ls.is_delta)
+        return Ld;
+    float w_light = 1.0f;
+    if (opt->direct == RENDER_DIRECT_MIS)
+        w_light = mis_power((float)n_ls * pmf * ls.pdf_sa, mat_pdf(m, wo, wi));
+    return v3_scale(Ld, w_light / ls.pdf_sa);
+}
+
+/* The next direction from wo: the BSDF's own sampling, or for --direct cosine | hemisphere a
+ * direction independent of the BSDF (cosine-weighted or uniform over the hemisphere of wo) at
+ * materials without a delta lobe; a delta lobe can only be found by sampling it. */
+static bool sample_direction(const struct material *m, vec3 wo, enum render_direct direct,
+                             float u_lobe, vec2 u, struct mat_sample *s)
+{
+    bool is_cosine = direct == RENDER_DIRECT_COSINE;
+    if ((!is_cosine && direct != RENDER_DIRECT_HEMISPHERE) || mat_has_delta(m))
+        return mat_sample(m, wo, u_lobe, u, s);
+    if (wo.z == 0.0f)
+        return false;
+    vec3 wi = is_cosine ? sample_cosine_hemisphere(u) : sample_uniform_hemisphere(u);
+    s->pdf_sa = is_cosine ? pdf_cosine_hemisphere(wi.z) : pdf_uniform_hemisphere();
+    s->wi = v3(wi.x, wi.y, wo.z > 0.0f ? wi.z : -wi.z);
+    s->f = mat_eval(m, wo, s->wi);
+    s->is_specular = false;
+    return s->pdf_sa > 0.0f && wi.z > 0.0f;
 }
 
 /* ---- scene queries ---- */
@@ -341,7 +434,8 @@ static float triangle_area(const struct scene *scene, uint32_t tri_idx, vec3 *ng
     return 0.5f * len;
 }
 
-/* Emitted power (luminance) of an area light, for light selection: Phi = pi A Le (one side). */
+/* Emitted power (luminance) of a scene light, for light selection: Phi = pi A Le per emitting
+ * side of an area light, Phi = 4 pi I for a point light. */
 static double light_power(const struct scene *scene, const struct light *l)
 {
     const struct material *m;
@@ -370,25 +464,20 @@ static double light_power(const struct scene *scene, const struct light *l)
     return MCPT_PI * area * sides * v3_luminance(m->Le);
 }
 
-static float light_pmf(const struct trace_scene *ts, uint32_t light_idx)
+/* Power of the sky as PBRT 4e counts an infinite light's (ch. 12, "Uniform Infinite Lights"):
+ * Phi = 4 pi^2 r^2 L_avg for the scene's bounding sphere of radius r; a gradient sky's average
+ * over the sphere is 3/4 horizon + 1/4 zenith (the mean of max(d.y, 0) is 1/4). */
+static double sky_power(const struct sky *sky, double radius)
 {
-    return ts->light_cdf[light_idx + 1] - ts->light_cdf[light_idx];
+    vec3 avg = sky->kind == SKY_CONSTANT
+                   ? sky->radiance
+                   : v3_add(v3_scale(sky->horizon, 0.75f), v3_scale(sky->zenith, 0.25f));
+    return 4.0 * MCPT_PI * MCPT_PI * radius * radius * v3_luminance(avg);
 }
 
-static uint32_t pick_light(const struct trace_scene *ts, float u)
+static bool light_is_delta(const struct trace_scene *ts, uint32_t light_idx)
 {
-    /* binary search for the first cdf entry above u: light i has cdf[i] <= u < cdf[i+1] */
-    uint32_t lo = 0, hi = ts->scene->n_lights;
-    while (hi - lo > 1) {
-        uint32_t mid = lo + (hi - lo) / 2;
-        if (ts->light_cdf[mid] <= u)
-            lo = mid;
-        else
-            hi = mid;
-    }
-    while (light_pmf(ts, lo) == 0.0f && lo + 1 < ts->scene->n_lights)
-        lo++; /* never return a zero-probability light */
-    return lo;
+    return light_idx < ts->scene->n_lights && ts->scene->lights[light_idx].kind == LIGHT_POINT;
 }
 
 /* Sphere cone sampling: PBRT 4e, ch. 6, "Spheres", Sphere::Sample(ctx, u): directions uniform in
@@ -409,10 +498,30 @@ static vec3 sphere_ref_origin(const struct sphere *s, const struct surface *ref)
     return offset_ray_origin(ref->p, ref->p_error, ref->ng, v3_sub(s->center, ref->p));
 }
 
-static bool sample_light(const struct trace_scene *ts, uint32_t light_idx,
-                         const struct surface *ref, vec2 u, struct light_sample *ls)
+uint32_t trace_n_lights(const struct trace_scene *ts) { return ts->n_lights; }
+
+float trace_light_pmf(const struct trace_scene *ts, uint32_t light_idx)
+{
+    return light_idx < ts->n_lights ? ts->light_bins[light_idx].pmf : 0.0f;
+}
+
+bool trace_sample_light(const struct trace_scene *ts, uint32_t light_idx,
+                        const struct surface *ref, vec3 n_sky, vec2 u,
+                        struct trace_light_sample *ls)
 {
     const struct scene *scene = ts->scene;
+    if (light_idx == ts->sky_light) {
+        /* the sky: cosine-weighted about n_sky, pdf_sa = cos theta / pi */
+        vec3 t, b;
+        v3_basis(n_sky, &t, &b);
+        vec3 w = sample_cosine_hemisphere(u);
+        ls->wi = v3_normalize(v3_from_local(w, t, b, n_sky));
+        ls->pdf_sa = pdf_cosine_hemisphere(w.z);
+        ls->Le = sky_radiance(&scene->sky, ls->wi);
+        ls->is_delta = false;
+        ls->shadow = spawn_ray(ref, ls->wi);
+        return ls->pdf_sa > 0.0f && !v3_is_zero(ls->Le);
+    }
     const struct light *l = &scene->lights[light_idx];
     vec3 p, p_error, n;
     const struct material *m;
@@ -431,6 +540,7 @@ static bool sample_light(const struct trace_scene *ts, uint32_t light_idx,
         return true;
     }
     case LIGHT_TRIANGLE: {
+        /* uniform by area: barycentrics by the square-root warp, pdf_area = 1 / A */
         const struct scene_tri *tri = &scene->tris[l->prim_idx];
         vec3 p0 = scene->positions[tri->v[0]];
         vec3 p1 = scene->positions[tri->v[1]];
@@ -448,6 +558,7 @@ static bool sample_light(const struct trace_scene *ts, uint32_t light_idx,
         break;
     }
     case LIGHT_QUAD: {
+        /* uniform by area: p = corner + u0 e1 + u1 e2, pdf_area = 1 / |e1 x e2| */
         const struct quad *q = &scene->quads[l->prim_idx];
         vec3 a = v3_scale(q->e1, u.x), bb = v3_scale(q->e2, u.y);
         p = v3_add(v3_add(q->corner, a), bb);
@@ -472,9 +583,7 @@ static bool sample_light(const struct trace_scene *ts, uint32_t light_idx,
         float dist2 = v3_dot(wc, wc);
         if (dist2 <= s->radius * s->radius) {
             /* inside the sphere: uniform area sampling, converted to solid angle below */
-            float z = 1.0f - 2.0f * u.x, r = sqrtf(fmaxf(0.0f, 1.0f - z * z));
-            float phi = 2.0f * MCPT_PI * u.y;
-            n = v3(r * cosf(phi), r * sinf(phi), z);
+            n = sample_uniform_sphere(u);
             pdf_area = 1.0f / (4.0f * MCPT_PI * s->radius * s->radius);
         } else {
             /* cone sampling, PBRT 4e, ch. 6, "Spheres" */
@@ -537,13 +646,16 @@ static bool sample_light(const struct trace_scene *ts, uint32_t light_idx,
     return isfinite(ls->pdf_sa) && !v3_is_zero(ls->Le);
 }
 
-/* Solid-angle density with which sample_light(light_idx) picks the direction wi from ref_p,
- * given the point on_light that a ray along wi hit. */
+/* Solid-angle density with which trace_sample_light(light_idx) picks the direction wi from ref,
+ * given the point p_light (geometric normal ng_light) that a ray along wi meets on the light;
+ * the sky needs only wi and n_sky. */
 static float light_pdf_sa(const struct trace_scene *ts, uint32_t light_idx,
-                          const struct surface *ref, const struct surface *on_light, vec3 wi)
+                          const struct surface *ref, vec3 n_sky, vec3 p_light, vec3 ng_light,
+                          vec3 wi)
 {
-    vec3 ref_p = ref->p;
     const struct scene *scene = ts->scene;
+    if (light_idx == ts->sky_light)
+        return pdf_cosine_hemisphere(fmaxf(0.0f, v3_dot(wi, n_sky)));
     const struct light *l = &scene->lights[light_idx];
     float pdf_area;
     switch (l->kind) {
@@ -566,14 +678,116 @@ static float light_pdf_sa(const struct trace_scene *ts, uint32_t light_idx,
     default:
         return 0.0f;
     }
-    vec3 d = v3_sub(on_light->p, ref_p);
-    float cos_light = fabsf(v3_dot(on_light->ng, wi));
+    /* area -> solid angle: pdf_sa = pdf_area * dist^2 / |cos theta_light| */
+    vec3 d = v3_sub(p_light, ref->p);
+    float cos_light = fabsf(v3_dot(ng_light, wi));
     if (!(cos_light > 0.0f))
         return 0.0f;
     return pdf_area * v3_dot(d, d) / cos_light;
 }
 
+/* Ray-triangle test for trace_light_pdf (Moller & Trumbore 1997, "Fast, Minimum Storage
+ * Ray/Triangle Intersection"), in double: only tests use it. */
+static bool ray_triangle(vec3 p0, vec3 p1, vec3 p2, const struct ray *ray, float *t_hit)
+{
+    double e1[3] = {p1.x - p0.x, p1.y - p0.y, p1.z - p0.z};
+    double e2[3] = {p2.x - p0.x, p2.y - p0.y, p2.z - p0.z};
+    double d[3] = {ray->d.x, ray->d.y, ray->d.z};
+    double s[3] = {ray->o.x - p0.x, ray->o.y - p0.y, ray->o.z - p0.z};
+    double pv[3] = {d[1] * e2[2] - d[2] * e2[1], d[2] * e2[0] - d[0] * e2[2],
+                    d[0] * e2[1] - d[1] * e2[0]};
+    double det = e1[0] * pv[0] + e1[1] * pv[1] + e1[2] * pv[2];
+    if (det == 0.0)
+        return false;
+    double bu = (s[0] * pv[0] + s[1] * pv[1] + s[2] * pv[2]) / det;
+    double qv[3] = {s[1] * e1[2] - s[2] * e1[1], s[2] * e1[0] - s[0] * e1[2],
+                    s[0] * e1[1] - s[1] * e1[0]};
+    double bv = (d[0] * qv[0] + d[1] * qv[1] + d[2] * qv[2]) / det;
+    double t = (e2[0] * qv[0] + e2[1] * qv[1] + e2[2] * qv[2]) / det;
+    if (bu < 0.0 || bv < 0.0 || bu + bv > 1.0 || !(t > ray->t_min && t < ray->t_max))
+        return false;
+    *t_hit = (float)t;
+    return true;
+}
+
+float trace_light_pdf(const struct trace_scene *ts, uint32_t light_idx,
+                      const struct surface *ref, vec3 n_sky, vec3 wi)
+{
+    const struct scene *scene = ts->scene;
+    if (light_idx >= ts->n_lights || light_is_delta(ts, light_idx))
+        return 0.0f;
+    if (light_idx == ts->sky_light)
+        return light_pdf_sa(ts, light_idx, ref, n_sky, v3_splat(0.0f), v3_splat(0.0f), wi);
+    /* find where the ray along wi meets this light's primitive, alone */
+    const struct light *l = &scene->lights[light_idx];
+    struct ray ray = spawn_ray(ref, wi);
+    struct surface on;
+    float t;
+    switch (l->kind) {
+    case LIGHT_TRIANGLE: {
+        const struct scene_tri *tri = &scene->tris[l->prim_idx];
+        vec3 p0 = scene->positions[tri->v[0]];
+        if (!ray_triangle(p0, scene->positions[tri->v[1]], scene->positions[tri->v[2]], &ray,
+                          &t))
+            return 0.0f;
+        on.p = v3_add(ray.o, v3_scale(ray.d, t));
+        triangle_area(scene, l->prim_idx, &on.ng);
+        break;
+    }
+    case LIGHT_QUAD:
+        if (!shape_quad_intersect(&scene->quads[l->prim_idx], &ray, &t))
+            return 0.0f;
+        on = shape_quad_surface(&scene->quads[l->prim_idx], &ray, t);
+        break;
+    case LIGHT_SPHERE:
+        if (!shape_sphere_intersect(&scene->spheres[l->prim_idx], &ray, &t))
+            return 0.0f;
+        on = shape_sphere_surface(&scene->spheres[l->prim_idx], &ray, t);
+        break;
+    default:
+        return 0.0f;
+    }
+    return light_pdf_sa(ts, light_idx, ref, n_sky, on.p, on.ng, wi);
+}
+
 /* ---- preparation ---- */
+
+/* Radius of a bounding sphere of the scene's finite geometry, point lights and camera (planes
+ * are infinite and left out); 1 when there is nothing to bound. */
+static double scene_radius(const struct scene *scene)
+{
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+#define GROW(P, R)                                                                                \
+    do {                                                                                          \
+        vec3 p_ = (P);                                                                            \
+        double r_ = (R);                                                                          \
+        for (int k_ = 0; k_ < 3; k_++) {                                                          \
+            lo[k_] = fmin(lo[k_], v3_get(p_, k_) - r_);                                           \
+            hi[k_] = fmax(hi[k_], v3_get(p_, k_) + r_);                                           \
+        }                                                                                         \
+    } while (0)
+    for (uint32_t i = 0; i < scene->n_positions; i++)
+        GROW(scene->positions[i], 0.0);
+    for (uint32_t i = 0; i < scene->n_spheres; i++)
+        GROW(scene->spheres[i].center, scene->spheres[i].radius);
+    for (uint32_t i = 0; i < scene->n_quads; i++) {
+        const struct quad *q = &scene->quads[i];
+        GROW(q->corner, 0.0);
+        GROW(v3_add(q->corner, v3_add(q->e1, q->e2)), 0.0);
+        GROW(v3_add(q->corner, q->e1), 0.0);
+        GROW(v3_add(q->corner, q->e2), 0.0);
+    }
+    for (uint32_t i = 0; i < scene->n_lights; i++)
+        if (scene->lights[i].kind == LIGHT_POINT)
+            GROW(scene->lights[i].position, 0.0);
+    GROW(scene->camera.eye, 0.0);
+#undef GROW
+    double d2 = 0.0;
+    for (int k = 0; k < 3; k++)
+        d2 += (hi[k] - lo[k]) * (hi[k] - lo[k]);
+    double r = 0.5 * sqrt(d2);
+    return r > 0.0 && isfinite(r) ? r : 1.0;
+}
 
 struct trace_scene *trace_prepare(const struct scene *scene, int n_threads,
                                   struct mcpt_error *err)
@@ -597,12 +811,16 @@ struct trace_scene *trace_prepare(const struct scene *scene, int n_threads,
     if (!ts->bvh)
         goto oom;
 
+    /* the light table: the scene's lights, then the sky if it shines */
+    bool has_sky = scene->sky.kind != SKY_NONE && sky_power(&scene->sky, 1.0) > 0.0;
+    ts->n_lights = scene->n_lights + (has_sky ? 1u : 0u);
+    ts->sky_light = has_sky ? scene->n_lights : NO_LIGHT;
     ts->tri_light = malloc(sizeof(uint32_t) * (scene->n_tris + 1));
     ts->quad_light = malloc(sizeof(uint32_t) * (scene->n_quads + 1));
     ts->sphere_light = malloc(sizeof(uint32_t) * (scene->n_spheres + 1));
-    ts->light_cdf = malloc(sizeof(float) * (scene->n_lights + 1));
-    power = malloc(sizeof(double) * (scene->n_lights + 1));
-    if (!ts->tri_light || !ts->quad_light || !ts->sphere_light || !ts->light_cdf || !power)
+    ts->light_bins = malloc(sizeof(struct sample_alias_bin) * (ts->n_lights + 1));
+    power = malloc(sizeof(double) * (ts->n_lights + 1));
+    if (!ts->tri_light || !ts->quad_light || !ts->sphere_light || !ts->light_bins || !power)
         goto oom;
     for (uint32_t i = 0; i < scene->n_tris; i++)
         ts->tri_light[i] = NO_LIGHT;
@@ -611,8 +829,7 @@ struct trace_scene *trace_prepare(const struct scene *scene, int n_threads,
     for (uint32_t i = 0; i < scene->n_spheres; i++)
         ts->sphere_light[i] = NO_LIGHT;
 
-    /* light selection proportional to emitted power: pmf_i = Phi_i / sum Phi */
-    double total = 0.0;
+    /* light selection proportional to emitted power: pmf_i = Phi_i / sum Phi (alias table) */
     for (uint32_t i = 0; i < scene->n_lights; i++) {
         const struct light *l = &scene->lights[i];
         if (l->kind == LIGHT_TRIANGLE)
@@ -622,16 +839,11 @@ struct trace_scene *trace_prepare(const struct scene *scene, int n_threads,
         else if (l->kind == LIGHT_SPHERE)
             ts->sphere_light[l->prim_idx] = i;
         power[i] = light_power(scene, l);
-        total += power[i];
     }
-    double acc = 0.0;
-    ts->light_cdf[0] = 0.0f;
-    for (uint32_t i = 0; i < scene->n_lights; i++) {
-        acc += total > 0.0 ? power[i] : 1.0;
-        ts->light_cdf[i + 1] = (float)(acc / (total > 0.0 ? total : (double)scene->n_lights));
-    }
-    if (scene->n_lights > 0)
-        ts->light_cdf[scene->n_lights] = 1.0f;
+    if (has_sky)
+        power[ts->sky_light] = sky_power(&scene->sky, scene_radius(scene));
+    if (ts->n_lights > 0 && !sample_alias_build(power, ts->n_lights, ts->light_bins))
+        goto oom; /* the powers are finite and >= 0: only memory can fail */
     free(power);
     free(indices);
     return ts;
@@ -649,7 +861,7 @@ void trace_free(struct trace_scene *ts)
     if (!ts)
         return;
     bvh_free(ts->bvh);
-    free(ts->light_cdf);
+    free(ts->light_bins);
     free(ts->tri_light);
     free(ts->quad_light);
     free(ts->sphere_light);
@@ -671,8 +883,9 @@ struct render_job {
     struct film *film;
     uint32_t tiles_x;
     uint32_t n_tiles;
+    uint32_t set_spp; /* samples per stratified set (sample_start_spp) */
     atomic_uint next_tile;
-    atomic_uint_fast64_t samples_done;
+    atomic_uint_fast64_t samples_done; /* for progress: taken, plus the budget of stopped pixels */
     atomic_int n_running;
 };
 
@@ -682,6 +895,32 @@ struct worker {
     struct trace_result result;
 };
 
+bool trace_adaptive_stop(double s1, double s2, uint64_t n, double tolerance, double floor_lum)
+{
+    if (n == 0)
+        return false;
+    /* mu = s1 / n, sigma^2 = s2 / n - mu^2, I = 1.96 sigma / sqrt(n): stop when I <= T max(mu,
+     * floor), squared to avoid the square roots: 1.96^2 sigma^2 / n <= (T max(mu, floor))^2 */
+    double dn = (double)n;
+    double mu = s1 / dn;
+    double sigma2 = fmax(0.0, s2 / dn - mu * mu); /* rounding can make a zero variance < 0 */
+    double bound = tolerance * fmax(mu, floor_lum);
+    return 1.96 * 1.96 * sigma2 / dn <= bound * bound;
+}
+
+/* Adaptive sampling: whether pixel px, at a test point (min_spp + k batch samples taken), has
+ * met the stopping rule.  It reads only the pixel's own sums, so the decision is the same
+ * whichever thread, call or resumed run makes it. */
+static bool adaptive_converged(const struct trace_options *opt, const struct film_pixel *px)
+{
+    uint32_t taken = px->n + px->n_dropped;
+    uint32_t batch = opt->batch ? opt->batch : 1;
+    if (!opt->adaptive || taken < opt->min_spp || (taken - opt->min_spp) % batch != 0)
+        return false;
+    return trace_adaptive_stop(film_sum_lum(px), px->sum_lum_sq, px->n, opt->tolerance,
+                               opt->adaptive_floor);
+}
+
 static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, uint32_t y)
 {
     const struct trace_options *opt = job->opt;
@@ -689,14 +928,19 @@ static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, u
     uint32_t pixel_idx = y * (uint32_t)film->width + x;
     struct film_pixel *px = &film->pixels[pixel_idx];
     uint64_t done = 0;
+    uint64_t skipped = 0; /* samples an adaptive stop saved, counted as progress */
     struct sampler sampler;
     while (px->n + px->n_dropped < opt->spp) {
         if (opt->cancel && atomic_load_explicit(opt->cancel, memory_order_relaxed)) {
             w->result.cancelled = true;
             break;
         }
+        if (adaptive_converged(opt, px)) {
+            skipped = opt->spp - (px->n + px->n_dropped);
+            break;
+        }
         uint32_t sample_idx = opt->sample_offset + px->n + px->n_dropped;
-        sample_start(&sampler, opt->sampler, opt->seed, pixel_idx, sample_idx);
+        sample_start_spp(&sampler, opt->sampler, opt->seed, pixel_idx, sample_idx, job->set_spp);
         /* box filter: uniform jitter inside the pixel */
         vec2 u_pixel = sample_2d(&sampler);
         vec2 u_lens = sample_2d(&sampler);
@@ -717,7 +961,7 @@ static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, u
         done++;
     }
     w->result.n_samples += done;
-    atomic_fetch_add_explicit(&job->samples_done, done, memory_order_relaxed);
+    atomic_fetch_add_explicit(&job->samples_done, done + skipped, memory_order_relaxed);
 }
 
 static void *render_worker(void *arg)
@@ -751,6 +995,12 @@ bool trace_render(const struct trace_scene *ts, const struct trace_options *opt,
     memset(result, 0, sizeof *result);
     int n_threads = opt->n_threads > 0 ? opt->n_threads : 1;
     struct render_job job = {.ts = ts, .opt = opt, .film = film};
+    /* stratified sets: as the caller says, else one set per pixel, or per batch when adaptive
+     * (the final count is unknown then; every test point min_spp + k batch with min_spp a
+     * multiple of batch sees whole sets) */
+    job.set_spp = opt->sampler_spp ? opt->sampler_spp
+                  : opt->adaptive  ? (opt->batch ? opt->batch : 1)
+                                   : opt->spp;
     job.tiles_x = ((uint32_t)film->width + TRACE_TILE_SIZE - 1) / TRACE_TILE_SIZE;
     uint32_t tiles_y = ((uint32_t)film->height + TRACE_TILE_SIZE - 1) / TRACE_TILE_SIZE;
     job.n_tiles = job.tiles_x * tiles_y;

@@ -35,7 +35,40 @@ struct trace_options {
     /* called about every 100 ms from the calling thread (may be NULL) */
     void (*progress)(void *user, uint64_t samples_done, uint64_t samples_total);
     void *progress_user;
+    /* sampling (docs/sampling.md) */
+    uint32_t sampler_spp;  /* stratified: samples per stratified set; 0 = spp, or batch when
+                              adaptive.  Progressive renders pass their final spp here so that
+                              the last image equals a one-call render. */
+    bool adaptive;         /* stop each pixel by trace_adaptive_stop; spp is then the maximum */
+    float tolerance;       /* adaptive: T, relative half-width of the 95% interval */
+    float adaptive_floor;  /* adaptive: luminance below which T applies absolutely */
+    uint32_t min_spp;      /* adaptive: samples before the first test */
+    uint32_t batch;        /* adaptive: samples between tests (>= 1) */
+    /* light transport (trace_radiance) */
+    enum render_direct direct; /* direct-lighting estimator; 0 is RENDER_DIRECT_MIS */
+    uint32_t light_samples;    /* light samples (shadow rays) per path vertex; 0 means 1 */
+    enum render_split split;   /* bounces kept; 0 is RENDER_SPLIT_FULL */
+    float rr_prob;             /* Russian roulette: fixed continuation probability in (0, 1], or
+                                  0 for the throughput-based rule (continue with max beta) */
+    uint32_t rr_depth;         /* roulette may end a path after its rr_depth-th bounce and any
+                                  later one; 0 means TRACE_RR_DEPTH_DEFAULT */
 };
+
+#define TRACE_RR_DEPTH_DEFAULT 2u  /* as PBRT 4e: the first two bounces are never cut short */
+#define TRACE_LIGHT_SAMPLES_MAX 1024u /* largest accepted light_samples */
+
+#define TRACE_ADAPTIVE_TOLERANCE 0.05f /* default T */
+#define TRACE_ADAPTIVE_FLOOR 0.01f     /* default floor, luminance in the image's linear units */
+#define TRACE_ADAPTIVE_BATCH 32u       /* default batch */
+#define TRACE_ADAPTIVE_MIN_SPP 64u     /* default minimum spp */
+
+/* The adaptive stopping rule on one pixel's n samples of luminance x, s1 = sum x and
+ * s2 = sum x^2: mu = s1 / n, sigma^2 = s2 / n - mu^2, I = 1.96 sigma / sqrt(n) (the half-width
+ * of the normal 95% confidence interval of the mean); true when I <= T max(mu, floor).  The
+ * floor makes the test absolute (I <= T floor) for pixels darker than floor, which would
+ * otherwise never reach a relative tolerance; n = 0 never stops.  Pure: a pixel's decisions
+ * depend on its own samples only, so adaptive renders are identical for any thread count. */
+bool trace_adaptive_stop(double s1, double s2, uint64_t n, double tolerance, double floor_lum);
 
 struct trace_result {
     uint64_t n_samples;   /* camera samples added to the film by this call */
@@ -48,18 +81,52 @@ struct trace_result {
 };
 
 /* Renders each pixel from its current count film->pixels[i].n up to opt->spp samples (sample
- * indices sample_offset + n), tiles handed out to opt->n_threads threads.  The film's result is
- * bit-identical for any thread count and any split of the work into calls.  Returns false only
- * when threads cannot be started (err filled). */
+ * indices sample_offset + n), tiles handed out to opt->n_threads threads.  With opt->adaptive a
+ * pixel also stops when trace_adaptive_stop holds at a test point, i.e. when n + n_dropped is
+ * min_spp + k batch (k >= 0).  The film's result is bit-identical for any thread count and any
+ * split of the work into calls.  Returns false only when threads cannot be started (err
+ * filled). */
 bool trace_render(const struct trace_scene *ts, const struct trace_options *opt, struct film *film,
                   struct trace_result *result, struct mcpt_error *err);
 
 /* Radiance estimate along the camera ray of (pixel px, py; sample sampler), Kajiya 1986 eq. 1
- * solved by path tracing with NEE and MIS.  n_rays is incremented by rays traced. */
+ * solved by path tracing with the estimator opt->direct (NEE and MIS by default), keeping the
+ * bounces opt->split asks for.  n_rays is incremented by rays traced. */
 vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *opt,
                     struct ray ray, struct sampler *sampler, uint64_t *n_rays);
 
 /* The camera ray of film position (px, py) for this sample's lens dimensions. */
 struct ray trace_camera_ray(const struct trace_scene *ts, float px, float py, vec2 u_lens);
+
+/* ---- lights (exposed for tests: chi-square of light sampling, pmfs) ----
+ * The light table holds the scene's lights (scene->lights, in order) followed by the sky when
+ * it is not black; next-event estimation picks one by power with an alias table. */
+
+/* Number of entries in the light table; the sky, if present, is the last. */
+uint32_t trace_n_lights(const struct trace_scene *ts);
+/* Probability with which next-event estimation picks light light_idx. */
+float trace_light_pmf(const struct trace_scene *ts, uint32_t light_idx);
+
+/* A light sample seen from a reference point. */
+struct trace_light_sample {
+    vec3 wi;           /* unit direction from the reference point to the light point */
+    vec3 Le;           /* radiance arriving along -wi (intensity / dist^2 for point lights) */
+    float pdf_sa;      /* solid-angle density of wi; 0 for a delta (point) light */
+    bool is_delta;     /* point light: no MIS */
+    struct ray shadow; /* from the offset reference point to the offset light point */
+};
+
+/* Samples light light_idx from the surface point ref with uniforms u: area lights uniformly by
+ * area (triangles, quads, and spheres seen from inside), spheres seen from outside by their
+ * cone of directions, the sky cosine-weighted about n_sky (the shading normal turned to the side
+ * being lit).  False when the sample carries no light (back of a one-sided emitter, degenerate
+ * geometry). */
+bool trace_sample_light(const struct trace_scene *ts, uint32_t light_idx,
+                        const struct surface *ref, vec3 n_sky, vec2 u,
+                        struct trace_light_sample *ls);
+/* The solid-angle density with which trace_sample_light picks direction wi (unit) from ref;
+ * 0 where light light_idx does not lie along wi, and for point lights. */
+float trace_light_pdf(const struct trace_scene *ts, uint32_t light_idx,
+                      const struct surface *ref, vec3 n_sky, vec3 wi);
 
 #endif

@@ -20,8 +20,13 @@ if [ -n "$missing" ]; then
         exit 1
     fi
     echo "setup: installing:$missing"
-    $SUDO apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing
+    # env, not a plain assignment: sudo's env_reset would drop DEBIAN_FRONTEND.
+    if ! { $SUDO apt-get update -qq &&
+           $SUDO env DEBIAN_FRONTEND=noninteractive \
+               apt-get install -y -qq --no-install-recommends $missing; }; then
+        echo "setup: error: expected apt-get to install:$missing" >&2
+        exit 1
+    fi
 fi
 
 make -j"$(nproc)"

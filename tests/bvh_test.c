@@ -12,7 +12,7 @@
 #include "bvh.h"
 #include "vec.h"
 
-/* ---- helpers ---------------------------------------------------------------------------------- */
+/* ---- helpers --------------------------------------------------------------------------------- */
 
 /* splitmix64: a small deterministic stream for test inputs */
 struct rng {
@@ -106,8 +106,10 @@ static vec3 tri_vertex(const struct mesh *m, uint32_t prim, int k)
 static vec3 tri_point(const struct mesh *m, uint32_t prim, float b1, float b2)
 {
     float b0 = 1.0f - b1 - b2;
-    return v3_add(v3_add(v3_scale(tri_vertex(m, prim, 0), b0), v3_scale(tri_vertex(m, prim, 1), b1)),
-                  v3_scale(tri_vertex(m, prim, 2), b2));
+    vec3 p0 = tri_vertex(m, prim, 0);
+    vec3 p1 = tri_vertex(m, prim, 1);
+    vec3 p2 = tri_vertex(m, prim, 2);
+    return v3_add(v3_add(v3_scale(p0, b0), v3_scale(p1, b1)), v3_scale(p2, b2));
 }
 
 /* random barycentrics, uniform over the triangle */
@@ -121,6 +123,17 @@ static void rng_bary(struct rng *r, float *b1, float *b2)
     }
     *b1 = u;
     *b2 = v;
+}
+
+static vec3 v3_abs(vec3 a) { return v3(fabsf(a.x), fabsf(a.y), fabsf(a.z)); }
+
+/* PBRT 4e, ch. 6, "Bounding Intersection Point Error": the error of b0 p0 + b1 p1 + b2 p2 is at
+ * most gamma(7) (|b0 p0| + |b1 p1| + |b2 p2|) */
+static vec3 barycentric_error(vec3 p0, vec3 p1, vec3 p2, float b0, float b1, float b2)
+{
+    vec3 sum = v3_add(v3_add(v3_scale(v3_abs(p0), fabsf(b0)), v3_scale(v3_abs(p1), fabsf(b1))),
+                      v3_scale(v3_abs(p2), fabsf(b2)));
+    return v3_scale(sum, mcpt_gamma(7));
 }
 
 /* n random triangles in [-1, 1]^3, edge lengths from about 0.01 to 0.6 */
@@ -298,7 +311,7 @@ static bool expect_close_to_brute(const struct mesh *m, const struct bvh *bvh,
     return true;
 }
 
-/* ---- a single triangle ------------------------------------------------------------------------ */
+/* ---- a single triangle ----------------------------------------------------------------------- */
 
 /* Woop et al. 2013: a ray through b0 p0 + b1 p1 + b2 p2 hits with u = b1, v = b2 (the header's
  * vertex order), from every side and for every major axis of d (the kx/ky swap). */
@@ -308,7 +321,8 @@ Test(bvh, single_triangle_hit_inside)
     mesh_add_tri_pos(&m, v3(0.1f, 0.2f, 0.3f), v3(1.7f, 0.4f, -0.2f), v3(0.5f, 1.9f, 0.8f));
     struct bvh *bvh = build(&m);
     vec3 p0 = tri_vertex(&m, 0, 0);
-    vec3 n = v3_normalize(v3_cross(v3_sub(tri_vertex(&m, 0, 1), p0), v3_sub(tri_vertex(&m, 0, 2), p0)));
+    vec3 n = v3_normalize(
+        v3_cross(v3_sub(tri_vertex(&m, 0, 1), p0), v3_sub(tri_vertex(&m, 0, 2), p0)));
     const vec3 dirs[6] = {v3(1, 0, 0), v3(-1, 0, 0), v3(0, 1, 0),
                           v3(0, -1, 0), v3(0, 0, 1), v3(0, 0, -1)};
     const float barys[4][2] = {{0.2f, 0.3f}, {0.7f, 0.1f}, {0.05f, 0.9f}, {1.0f / 3, 1.0f / 3}};
@@ -475,7 +489,7 @@ Test(bvh, shared_edge_and_vertex_never_missed)
     mesh_free(&fan);
 }
 
-/* ---- BVH versus brute force (STYLE.md §6) ------------------------------------------------------ */
+/* ---- BVH versus brute force (STYLE.md §6) --------------------------------------------------- */
 
 /* 2000 random triangles: random rays and rays aimed at random points on random triangles. */
 Test(bvh, matches_brute_force_random_soup)
@@ -586,7 +600,7 @@ Test(bvh, direction_length_does_not_matter)
     mesh_free(&m);
 }
 
-/* ---- degenerate inputs ------------------------------------------------------------------------- */
+/* ---- degenerate inputs ----------------------------------------------------------------------- */
 
 /* Wald 2007's binning needs a centroid extent; with all centres equal the build cuts the index
  * range in half instead, so the tree stays shallow and leaves bounded: 1000 copies of one
@@ -647,7 +661,8 @@ Test(bvh, zero_area_triangles_never_hit)
     mesh_add_tri_pos(&m, v3(0, 0, 0), v3(1, 1, 1), v3(2, 2, 2));            /* collinear */
     mesh_add_tri_pos(&m, v3(0.5f, 0, 0), v3(0.5f, 0, 0), v3(0.5f, 1, 0.5f)); /* repeated */
     mesh_add_tri_pos(&m, v3(1, 0, 1), v3(1, 0, 1), v3(1, 0, 1));            /* a point */
-    mesh_add_tri_pos(&m, v3(0.1f, 0.3f, 0.7f), v3(0.2f, 0.6f, 1.4f), v3(0.4f, 1.2f, 2.8f)); /* p, 2p, 4p */
+    /* p, 2 p, 4 p: collinear exactly, since scaling by 2 is exact */
+    mesh_add_tri_pos(&m, v3(0.1f, 0.3f, 0.7f), v3(0.2f, 0.6f, 1.4f), v3(0.4f, 1.2f, 2.8f));
     mesh_add_tri_pos(&m, v3(3, 0, 0), v3(4, 0, 0), v3(3, 1, 0)); /* the one real triangle */
     struct bvh *bvh = build(&m);
     struct bvh_stats st = bvh_get_stats(bvh);
@@ -839,10 +854,7 @@ static void check_offset_origins(vec3 location, float size, uint64_t seed)
             rng_bary(&r, &b1, &b2);
             float b0 = 1.0f - b1 - b2;
             vec3 p = tri_point(&m, 0, b1, b2);
-            vec3 abs_sum = v3_add(v3_add(v3_scale(v3(fabsf(p0.x), fabsf(p0.y), fabsf(p0.z)), fabsf(b0)),
-                                         v3_scale(v3(fabsf(p1.x), fabsf(p1.y), fabsf(p1.z)), fabsf(b1))),
-                                  v3_scale(v3(fabsf(p2.x), fabsf(p2.y), fabsf(p2.z)), fabsf(b2)));
-            vec3 p_error = v3_scale(abs_sum, mcpt_gamma(7));
+            vec3 p_error = barycentric_error(p0, p1, p2, b0, b1, b2);
             vec3 w = rng_dir(&r);
             if (j >= 6) { /* grazing: nearly in the plane */
                 vec3 tangent = v3_normalize(v3_cross(n, w));
@@ -894,14 +906,11 @@ Test(bvh, offset_origin_on_mesh)
         vec3 p1 = tri_vertex(&m, prim, 1);
         vec3 p2 = tri_vertex(&m, prim, 2);
         vec3 p = tri_point(&m, prim, b1, b2);
-        vec3 abs_sum = v3_add(v3_add(v3_scale(v3(fabsf(p0.x), fabsf(p0.y), fabsf(p0.z)), b0),
-                                     v3_scale(v3(fabsf(p1.x), fabsf(p1.y), fabsf(p1.z)), b1)),
-                              v3_scale(v3(fabsf(p2.x), fabsf(p2.y), fabsf(p2.z)), b2));
         vec3 n = v3_normalize(v3_cross(v3_sub(p1, p0), v3_sub(p2, p0)));
         vec3 w = rng_dir(&r);
         if (v3_dot(w, n) == 0.0f)
             continue;
-        vec3 o = offset_ray_origin(p, v3_scale(abs_sum, mcpt_gamma(7)), n, w);
+        vec3 o = offset_ray_origin(p, barycentric_error(p0, p1, p2, b0, b1, b2), n, w);
         struct ray ray = make_ray(o, w, 0.0f, INFINITY);
         struct bvh_hit hit;
         bool is_hit = bvh_intersect(bvh, &ray, &hit);
@@ -965,7 +974,7 @@ Test(bvh, watertight_closed_mesh)
     probe_watertight(v3(0.001f, 0.002f, -0.001f), 1e-3f);
 }
 
-/* ---- occlusion, empty BVH, stats ---------------------------------------------------------------- */
+/* ---- occlusion, empty BVH, stats ------------------------------------------------------------- */
 
 /* bvh.h: bvh_occluded reports a hit in (t_min, t_max) exactly when bvh_intersect finds one. */
 Test(bvh, occluded_agrees_with_intersect)

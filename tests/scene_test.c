@@ -419,7 +419,8 @@ Test(scene, error_unknown_parameter)
                 "aperture, focus-dist), got 'zoom'");
     check_error(CAM "material name=m type=diffuse albedo=1,1,1 ior=1.5\n",
                 "scene.txt:2:43: error: expected a parameter of 'material type=diffuse' (name, "
-                "type, albedo, emission, two-sided), got 'ior'");
+                "type, albedo, emission, two-sided, checker, checker-scale, checker-uv), got "
+                "'ior'");
     check_error(CAM MAT "sphere center=0,0,0 radius=1 material=red rotate=0,1,0,9\n",
                 "scene.txt:3:43: error: expected a parameter of 'sphere' (center, radius, "
                 "material, translate, scale), got 'rotate'");
@@ -559,8 +560,8 @@ Test(scene, error_materials)
                     " type=mirror\n",
                 "scene.txt:2:15: error: expected a material name of at most 63 bytes, got 64");
     check_error(CAM "material name=m type=metal\n",
-                "scene.txt:2:22: error: expected a material type (diffuse, mirror, dielectric), "
-                "got 'metal'");
+                "scene.txt:2:22: error: expected a material type (diffuse, mirror, dielectric, "
+                "diffuse-uniform, conductor, plastic, unity), got 'metal'");
     check_error(CAM "light type=area position=0,0,0 intensity=1,1,1\n",
                 "scene.txt:2:12: error: expected a light type (point), got 'area'");
 }

@@ -1,0 +1,142 @@
+/* fuzz/fuzz_scene.c - libFuzzer harness for scene_load (scene.c, and obj.c through `mesh`),
+ * and for what renders an accepted scene (trace_prepare: BVH and light table; trace_radiance on
+ * a few camera rays: shapes, materials, the path loop).  Each input becomes a scene file in a
+ * private temporary folder that also holds a small OBJ with its MTL (a.obj, a.mtl) and a link
+ * to scenes/models, so inputs can reach the mesh loader.  A crash, hang, leak or sanitizer
+ * report is a bug.  A rejected input must carry a one-line message naming a file; an accepted
+ * one must satisfy the struct scene invariants checked below (indices in range, finite
+ * geometry), which the renderer relies on without checking.
+ * Run: make fuzz FUZZ_SECONDS=N (fuzz/run.sh); seeds: scenes/ and tests/bad/. */
+#include "scene.h"
+
+#include "trace.h"
+
+#include <limits.h>
+#include <stdlib.h>
+#include <unistd.h>
+
+static char dir[64];        /* the private folder */
+static char scene_path[96]; /* dir/scene.txt: each input */
+
+static void write_file(const char *path, const char *text)
+{
+    FILE *f = fopen(path, "wb");
+    if (!f || fputs(text, f) < 0 || fclose(f) != 0)
+        abort();
+}
+
+static void remove_dir(void)
+{
+    const char *names[] = {"scene.txt", "a.obj", "a.mtl", "models"};
+    char path[160];
+    for (int i = 0; i < 4; i++) {
+        snprintf(path, sizeof path, "%s/%s", dir, names[i]);
+        unlink(path);
+    }
+    rmdir(dir);
+}
+
+int LLVMFuzzerInitialize(int *argc, char ***argv);
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+
+int LLVMFuzzerInitialize(int *argc, char ***argv)
+{
+    (void)argc;
+    (void)argv;
+    snprintf(dir, sizeof dir, "/tmp/mcpt_fuzz_scene_XXXXXX");
+    if (!mkdtemp(dir))
+        abort();
+    snprintf(scene_path, sizeof scene_path, "%s/scene.txt", dir);
+    char path[160], models[PATH_MAX];
+    snprintf(path, sizeof path, "%s/a.obj", dir);
+    write_file(path, "mtllib a.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvn 0 0 1\nvt 0 0\n"
+                     "usemtl lamp\nf 1/1/1 2/1/1 3/1/1\nusemtl glass\nf 2 4 3\n");
+    snprintf(path, sizeof path, "%s/a.mtl", dir);
+    write_file(path, "newmtl lamp\nKd 0 0 0\nKe 5 5 5\nnewmtl glass\nillum 7\nNi 1.33\n");
+    snprintf(path, sizeof path, "%s/models", dir);
+    if (realpath("scenes/models", models))
+        (void)symlink(models, path);
+    atexit(remove_dir);
+    return 0;
+}
+
+/* The invariants trace.c and bvh.c assume of a loaded scene. */
+static void check_scene(const struct scene *s)
+{
+    if (s->width < 1 || s->height < 1 || s->render.spp < 1)
+        abort();
+    for (uint32_t i = 0; i < s->n_positions; i++)
+        if (!v3_is_finite(s->positions[i]))
+            abort();
+    for (uint32_t i = 0; i < s->n_tris; i++) {
+        const struct scene_tri *t = &s->tris[i];
+        if (t->mat_idx >= s->n_materials)
+            abort();
+        for (int k = 0; k < 3; k++)
+            if (t->v[k] >= s->n_positions || t->vn[k] >= (int32_t)s->n_normals ||
+                t->vt[k] >= (int32_t)s->n_uvs || t->vn[k] < -1 || t->vt[k] < -1)
+                abort();
+    }
+    for (uint32_t i = 0; i < s->n_spheres; i++)
+        if (s->spheres[i].mat_idx >= s->n_materials || !(s->spheres[i].radius > 0.0f))
+            abort();
+    for (uint32_t i = 0; i < s->n_quads; i++)
+        if (s->quads[i].mat_idx >= s->n_materials)
+            abort();
+    for (uint32_t i = 0; i < s->n_planes; i++)
+        if (s->planes[i].mat_idx >= s->n_materials)
+            abort();
+    for (uint32_t i = 0; i < s->n_lights; i++) {
+        const struct light *l = &s->lights[i];
+        uint32_t n = l->kind == LIGHT_TRIANGLE ? s->n_tris
+                     : l->kind == LIGHT_QUAD   ? s->n_quads
+                     : l->kind == LIGHT_SPHERE ? s->n_spheres
+                                               : UINT32_MAX;
+        if (l->prim_idx >= n)
+            abort();
+    }
+}
+
+/* A few camera samples through the whole integrator (no threads: trace_render's scheduler
+ * would cost a 20 ms poll per input).  Depth is capped so an input cannot make one run long. */
+static void render_a_little(const struct scene *scene)
+{
+    struct mcpt_error err;
+    struct trace_scene *ts = trace_prepare(scene, 1, &err);
+    if (!ts) {
+        if (!err.msg[0])
+            abort();
+        return;
+    }
+    struct trace_options opt = {.spp = 1, .seed = 1, .sampler = SAMPLER_INDEPENDENT,
+                                .n_threads = 1};
+    opt.max_depth = scene->render.max_depth < 16 ? scene->render.max_depth : 16;
+    uint64_t n_rays = 0;
+    for (uint32_t i = 0; i < 4; i++) {
+        struct sampler s;
+        sample_start(&s, SAMPLER_INDEPENDENT, opt.seed, i, 0);
+        vec2 u_pixel = sample_2d(&s);
+        vec2 u_lens = sample_2d(&s);
+        float px = u_pixel.x * (float)scene->width, py = u_pixel.y * (float)scene->height;
+        struct ray ray = trace_camera_ray(ts, px, py, u_lens);
+        (void)trace_radiance(ts, &opt, ray, &s, &n_rays); /* NaN is counted, not a crash */
+    }
+    trace_free(ts);
+}
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+    FILE *f = fopen(scene_path, "wb");
+    if (!f || fwrite(data, 1, size, f) != size || fclose(f) != 0)
+        abort();
+    struct scene scene;
+    struct mcpt_error err = {0};
+    if (scene_load(scene_path, &scene, &err)) {
+        check_scene(&scene);
+        render_a_little(&scene);
+        scene_free(&scene);
+    } else if (!err.msg[0] || !err.file[0] || strpbrk(err.msg, "\r\n")) {
+        abort(); /* main prints exactly one line naming a file */
+    }
+    return 0;
+}

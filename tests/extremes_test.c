@@ -1,0 +1,545 @@
+/* tests/extremes_test.c - numerical extremes of the whole renderer (scene.c, obj.c, bvh.c,
+ * shape.c, trace.c, material.c, film.c) on the scenes in tests/extremes/.  Each statistical check
+ * compares region means of two independent renders within 4 combined standard errors, the
+ * standard errors coming from the film's own variance estimates (film_var_of_mean); exact checks
+ * (a black mesh under a white sky renders exactly 0) need no tolerance.  Properties: scale
+ * invariance of robust ray offsets (PBRT 4e, ch. 6, "Robust Spawned Ray Origins"); watertight
+ * triangle intersection (Woop et al. 2013); an interface of IOR 1 is invisible (Fresnel R = 0,
+ * no bending, eta^2 = 1); white furnace (albedo 1 in radiance 1 gives 1); linearity in Le;
+ * double-precision accumulation (film.h); NaN and infinity dropped and counted, never added. */
+#include <criterion/criterion.h>
+
+#include <fcntl.h>
+#include <stdlib.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "bvh.h"
+#include "film.h"
+#include "image.h"
+#include "obj.h"
+#include "scene.h"
+#include "trace.h"
+
+#define DIR "tests/extremes/"
+#define N_SE 4.0 /* tolerance in combined standard errors */
+
+/* Loads and renders path at its own film size, spp and depth with seed, on 2 threads. */
+static void render_file(const char *path, uint64_t seed, struct film *film,
+                        struct trace_result *res)
+{
+    struct scene scene;
+    struct mcpt_error err;
+    cr_assert(scene_load(path, &scene, &err), "%s:%d:%d: %s", err.file, err.line, err.col,
+              err.msg);
+    struct trace_scene *ts = trace_prepare(&scene, 2, &err);
+    cr_assert_not_null(ts, "%s: %s", path, err.msg);
+    cr_assert(film_init(film, scene.width, scene.height, &err));
+    struct trace_options opt = {.spp = scene.render.spp, .max_depth = scene.render.max_depth,
+                                .seed = seed, .sampler = scene.render.sampler, .n_threads = 2};
+    cr_assert(trace_render(ts, &opt, film, res, &err), "%s", err.msg);
+    trace_free(ts);
+    scene_free(&scene);
+}
+
+/* Mean over the pixels [x0, x1) x [y0, y1) of the pixel means of channel c, and the variance
+ * of that mean: sum of the pixels' variances of the mean / n^2 (pixels are independent). */
+struct estimate {
+    double mean;
+    double var;
+};
+
+static struct estimate region(const struct film *f, int x0, int y0, int x1, int y1, int c)
+{
+    double sum = 0.0, var = 0.0;
+    int n = 0;
+    for (int y = y0; y < y1; y++)
+        for (int x = x0; x < x1; x++) {
+            const struct film_pixel *p = &f->pixels[(size_t)y * (size_t)f->width + (size_t)x];
+            sum += film_mean(p, c);
+            var += film_var_of_mean(p, c);
+            n++;
+        }
+    return (struct estimate){sum / n, var / ((double)n * n)};
+}
+
+/* The means of a and b agree within N_SE combined standard errors (plus a relative 1e-6 for
+ * regions without noise) on each of the 2 x 2 quadrants and each channel: 12 comparisons. */
+static void assert_same_image(const struct film *a, const struct film *b, const char *what)
+{
+    cr_assert(a->width == b->width && a->height == b->height);
+    int w = a->width, h = a->height;
+    for (int q = 0; q < 4; q++) {
+        int x0 = q % 2 ? w / 2 : 0, x1 = q % 2 ? w : w / 2;
+        int y0 = q / 2 ? h / 2 : 0, y1 = q / 2 ? h : h / 2;
+        for (int c = 0; c < 3; c++) {
+            struct estimate ea = region(a, x0, y0, x1, y1, c);
+            struct estimate eb = region(b, x0, y0, x1, y1, c);
+            double diff = fabs(ea.mean - eb.mean);
+            double tol = N_SE * sqrt(ea.var + eb.var) + 1e-6 * fmax(fabs(ea.mean), fabs(eb.mean));
+            cr_assert(diff <= tol, "%s: quadrant %d channel %d: %.6g vs %.6g, |diff| %.3g > %.3g "
+                                   "(%.1f SE)", what, q, c, ea.mean, eb.mean, diff, tol,
+                      diff / sqrt(ea.var + eb.var));
+        }
+    }
+}
+
+static uint64_t total_dropped(const struct film *f)
+{
+    uint64_t n = 0;
+    for (size_t i = 0; i < (size_t)f->width * (size_t)f->height; i++)
+        n += f->pixels[i].n_dropped;
+    return n;
+}
+
+/* Renders a (seed 1) and b (seed 2), checks both finite with nothing dropped, compares. */
+static void assert_same_scenes(const char *path_a, const char *path_b)
+{
+    struct film fa, fb;
+    struct trace_result ra, rb;
+    render_file(path_a, 1, &fa, &ra);
+    render_file(path_b, 2, &fb, &rb);
+    cr_assert_eq(ra.n_nonfinite, 0, "%s: %llu samples not finite", path_a,
+                 (unsigned long long)ra.n_nonfinite);
+    cr_assert_eq(rb.n_nonfinite, 0, "%s: %llu samples not finite", path_b,
+                 (unsigned long long)rb.n_nonfinite);
+    char what[300];
+    snprintf(what, sizeof what, "%s vs %s", path_a, path_b);
+    assert_same_image(&fa, &fb, what);
+    film_free(&fa);
+    film_free(&fb);
+}
+
+/* Every pixel of path's render is exactly 0: the scene's only light is a sky its camera
+ * cannot see through a closed or gap-free black surface. */
+static void assert_black(const char *path)
+{
+    struct film f;
+    struct trace_result r;
+    render_file(path, 1, &f, &r);
+    cr_assert_eq(r.n_nonfinite, 0);
+    for (size_t i = 0; i < (size_t)f.width * (size_t)f.height; i++)
+        for (int c = 0; c < 3; c++)
+            cr_assert(f.pixels[i].sum[c] == 0.0, "%s: pixel %zu,%zu channel %d sees %g", path,
+                      i % (size_t)f.width, i / (size_t)f.width, c,
+                      film_mean(&f.pixels[i], c));
+    film_free(&f);
+}
+
+/* ---- scale ---- */
+
+/* The Cornell box at scale 1e-4 and 1e4 (camera scaled too) renders the image of scale 1:
+ * ray offsets scale with the geometry, with no epsilon in scene units. */
+Test(extremes, cornell_scale_1e_minus_4_and_1e4, .timeout = 120)
+{
+    assert_same_scenes(DIR "cornell-1.txt", DIR "cornell-1e-4.txt");
+    assert_same_scenes(DIR "cornell-1.txt", DIR "cornell-1e4.txt");
+}
+
+/* smallpt's box with walls of radius-1e5 spheres renders as the same box with planes: no
+ * self-intersection (acne) from the large hit-point error, no light leaking past the walls. */
+Test(extremes, smallpt_radius_1e5_walls, .timeout = 120)
+{
+    assert_same_scenes(DIR "smallpt-planes.txt", DIR "smallpt-spheres.txt");
+}
+
+/* ---- triangles: slivers, tiny, duplicated, coplanar, closed ---- */
+
+/* A floor of 400 slivers renders as the same floor of 2 triangles. */
+Test(extremes, sliver_floor_renders_as_two_triangles, .timeout = 120)
+{
+    assert_same_scenes(DIR "floor-once.txt", DIR "floor-slivers.txt");
+}
+
+/* A black sliver floor under a white sky seen from above: no ray leaks between slivers. */
+Test(extremes, sliver_floor_does_not_leak)
+{
+    assert_black(DIR "slivers-black.txt");
+}
+
+/* Triangles of area 1e-12 down to exactly 0, some emissive, change nothing and make no NaN. */
+Test(extremes, tiny_and_zero_area_triangles, .timeout = 120)
+{
+    assert_same_scenes(DIR "floor-once.txt", DIR "floor-tiny.txt");
+}
+
+/* Every face duplicated, and a coplanar copy triangulated the other way, render as if each
+ * surface were there once: no stripes, no darkening from hitting the twin after a bounce. */
+Test(extremes, duplicated_and_coplanar_faces, .timeout = 120)
+{
+    assert_same_scenes(DIR "floor-once.txt", DIR "floor-duplicated.txt");
+    assert_same_scenes(DIR "floor-once.txt", DIR "floor-coplanar.txt");
+}
+
+/* A camera inside a closed black mesh under a white sky sees exactly 0 everywhere. */
+Test(extremes, camera_inside_closed_mesh_sees_no_sky)
+{
+    assert_black(DIR "inside-mesh.txt");
+}
+
+/* Rays aimed exactly at the vertices and at points along every edge of a mesh hit it: from the
+ * centre of the closed icosphere (every edge shared by two faces), and from above the sliver fan
+ * (its interior edges).  Woop et al. 2013's test is watertight, so no such ray slips through. */
+Test(extremes, rays_through_vertices_and_edges_hit)
+{
+    struct obj_mesh m;
+    struct mcpt_error err;
+    const char *paths[] = {DIR "icosphere.obj", DIR "floor-slivers.obj"};
+    const vec3 origins[] = {v3(0.0f, 0.0f, 0.0f), v3(0.1f, 1.0f, 0.2f)};
+    for (int k = 0; k < 2; k++) {
+        cr_assert(obj_load(paths[k], &m, &err), "%s", err.msg);
+        uint32_t *idx = malloc(sizeof(uint32_t) * 3 * m.n_tris);
+        for (uint32_t i = 0; i < m.n_tris; i++)
+            for (int j = 0; j < 3; j++)
+                idx[3 * i + j] = m.tris[i].v[j];
+        struct bvh *bvh = bvh_build(m.positions, idx, m.n_tris, 1);
+        cr_assert_not_null(bvh);
+        int n_rays = 0;
+        for (uint32_t i = 0; i < m.n_tris; i++) {
+            for (int j = 0; j < 3; j++) {
+                vec3 a = m.positions[m.tris[i].v[j]], b = m.positions[m.tris[i].v[(j + 1) % 3]];
+                /* the fan's boundary (the square's outline) is not shared: skip it */
+                bool boundary = k == 1 && (fabsf(a.x) == 1.0f || fabsf(a.z) == 1.0f) &&
+                                (fabsf(b.x) == 1.0f || fabsf(b.z) == 1.0f) &&
+                                (a.x == b.x || a.z == b.z);
+                for (int s = boundary ? 1 : 0; s < (boundary ? 0 : 10); s++) {
+                    float f = (float)s / 10.0f;
+                    vec3 p = v3_add(a, v3_scale(v3_sub(b, a), f)); /* s = 0: the vertex */
+                    if (k == 1 && (fabsf(p.x) == 1.0f || fabsf(p.z) == 1.0f))
+                        continue; /* on the outline */
+                    struct ray r = {.o = origins[k], .t_min = 0.0f, .d = v3_sub(p, origins[k]),
+                                    .t_max = INFINITY};
+                    struct bvh_hit hit;
+                    cr_assert(bvh_intersect(bvh, &r, &hit),
+                              "%s: ray through (%.9g, %.9g, %.9g) (face %u, edge %d, %d/10) "
+                              "leaks", paths[k], p.x, p.y, p.z, i, j, s);
+                    cr_assert(fabsf(hit.t - 1.0f) < 1e-3f, "t = %g", hit.t);
+                    n_rays++;
+                }
+            }
+        }
+        cr_assert_gt(n_rays, 1000);
+        bvh_free(bvh);
+        free(idx);
+        obj_free(&m);
+    }
+}
+
+/* ---- materials ---- */
+
+/* Glass of IOR 1 is invisible: Fresnel reflectance 0, no bending, radiance scale eta^2 = 1. */
+Test(extremes, ior_1_glass_is_invisible, .timeout = 120)
+{
+    assert_same_scenes(DIR "ior1-without.txt", DIR "ior1-glass.txt");
+}
+
+/* Albedo 0: black surfaces reflect nothing, so every sample is exactly the sky (0.5), the
+ * lamp (5) or 0.  From each pixel's sum and sum of squares the counts of 0.5 and 5 samples
+ * follow; they must be whole numbers that fit in the pixel's sample count. */
+Test(extremes, albedo_0_reflects_nothing)
+{
+    struct film f;
+    struct trace_result r;
+    render_file(DIR "albedo0.txt", 1, &f, &r);
+    cr_assert_eq(r.n_nonfinite, 0);
+    const double a = 0.5, b = 5.0;
+    int n_sky = 0, n_lamp = 0;
+    for (size_t i = 0; i < (size_t)f.width * (size_t)f.height; i++) {
+        const struct film_pixel *p = &f.pixels[i];
+        for (int c = 0; c < 3; c++) {
+            /* sum = a n_a + b n_b, sum_sq = a^2 n_a + b^2 n_b */
+            double n_a = (b * p->sum[c] - p->sum_sq[c]) / (a * (b - a));
+            double n_b = (p->sum[c] - a * n_a) / b;
+            cr_assert(fabs(n_a - round(n_a)) < 1e-6 && fabs(n_b - round(n_b)) < 1e-6 &&
+                          n_a > -0.5 && n_b > -0.5 && n_a + n_b < p->n + 0.5,
+                      "pixel %zu channel %d: sum %.17g, sum_sq %.17g is not made of 0, 0.5, 5",
+                      i, c, p->sum[c], p->sum_sq[c]);
+            n_sky += c == 0 && n_a > 0.5;
+            n_lamp += c == 0 && n_b > 0.5;
+        }
+    }
+    cr_assert(n_sky > 0 && n_lamp > 0, "the scene shows sky (%d) and lamp (%d)", n_sky, n_lamp);
+    film_free(&f);
+}
+
+/* Albedo 1, white furnace: a white ball in a sky of radiance 1 renders 1 everywhere (within
+ * standard errors, per quadrant and per channel). */
+Test(extremes, albedo_1_white_furnace)
+{
+    struct film f;
+    struct trace_result r;
+    render_file(DIR "furnace.txt", 1, &f, &r);
+    cr_assert_eq(r.n_nonfinite, 0);
+    int w = f.width, h = f.height;
+    for (int q = 0; q < 4; q++) {
+        int x0 = q % 2 ? w / 2 : 0, y0 = q / 2 ? h / 2 : 0;
+        for (int c = 0; c < 3; c++) {
+            struct estimate e = region(&f, x0, y0, x0 + w / 2, y0 + h / 2, c);
+            cr_assert(fabs(e.mean - 1.0) <= N_SE * sqrt(e.var) + 1e-6,
+                      "quadrant %d channel %d: %.6f, SE %.2g", q, c, e.mean, sqrt(e.var));
+        }
+    }
+    film_free(&f);
+}
+
+/* Albedo 1 inside a closed emitting ball: Le / (1 - albedo) diverges and throughput never
+ * drops, so only the path-length cap (TRACE_DEPTH_CAP segments) ends a path: each of them
+ * gathers about Le per segment.  The image is finite and at most Le (cap + 1), up to float
+ * rounding. */
+Test(extremes, albedo_1_closed_emitter_is_finite, .timeout = 120)
+{
+    struct film f;
+    struct trace_result r;
+    render_file(DIR "enclosure.txt", 1, &f, &r);
+    cr_assert_eq(r.n_nonfinite, 0);
+    for (size_t i = 0; i < (size_t)f.width * (size_t)f.height; i++)
+        for (int c = 0; c < 3; c++) {
+            double m = film_mean(&f.pixels[i], c);
+            cr_assert(isfinite(m) && m > 1.0 && m <= ((double)TRACE_DEPTH_CAP + 1.0) * 1.001,
+                      "pixel %zu: %.9g", i, m);
+        }
+    film_free(&f);
+}
+
+/* Emission 1e-6 and 1e8: the same paths (same seed) carry Le linearly, so each pixel of the
+ * 1e8 and 1e-6 renders is 1e8 and 1e-6 times the Le = 1 render up to float rounding (relative
+ * 1e-5), with no overflow in the sums of squares. */
+Test(extremes, emission_1e_minus_6_and_1e8_scale_linearly)
+{
+    struct film f1, f_lo, f_hi;
+    struct trace_result r1, r_lo, r_hi;
+    render_file(DIR "emission-1.txt", 7, &f1, &r1);
+    render_file(DIR "emission-1e-6.txt", 7, &f_lo, &r_lo);
+    render_file(DIR "emission-1e8.txt", 7, &f_hi, &r_hi);
+    cr_assert(r1.n_nonfinite == 0 && r_lo.n_nonfinite == 0 && r_hi.n_nonfinite == 0);
+    int n_lit = 0;
+    for (size_t i = 0; i < (size_t)f1.width * (size_t)f1.height; i++)
+        for (int c = 0; c < 3; c++) {
+            double m = film_mean(&f1.pixels[i], c);
+            double lo = film_mean(&f_lo.pixels[i], c) / 1e-6;
+            double hi = film_mean(&f_hi.pixels[i], c) / 1e8;
+            cr_assert(fabs(lo - m) <= 1e-5 * m && fabs(hi - m) <= 1e-5 * m,
+                      "pixel %zu channel %d: %.9g, 1e-6: %.9g, 1e8: %.9g", i, c, m, lo, hi);
+            cr_assert(isfinite(f_hi.pixels[i].sum_sq[c]) &&
+                      isfinite(film_var_of_mean(&f_hi.pixels[i], c)));
+            n_lit += m > 0.0;
+        }
+    cr_assert_gt(n_lit, 100);
+    film_free(&f1);
+    film_free(&f_lo);
+    film_free(&f_hi);
+}
+
+/* ---- accumulation precision ---- */
+
+/* One pixel accumulating 1e6 real radiance samples (trace_radiance on precision.txt) keeps its
+ * sum to 1e-12 of a long-double reference sum, its variance of the mean to 1e-9 of a two-pass
+ * long-double reference, and its float mean equal to the rounded reference. */
+Test(extremes, million_samples_match_long_double_sum, .timeout = 180)
+{
+    struct scene scene;
+    struct mcpt_error err;
+    cr_assert(scene_load(DIR "precision.txt", &scene, &err), "%s", err.msg);
+    struct trace_scene *ts = trace_prepare(&scene, 1, &err);
+    cr_assert_not_null(ts);
+    struct trace_options opt = {.spp = 1, .max_depth = scene.render.max_depth, .seed = 3,
+                                .sampler = SAMPLER_INDEPENDENT, .n_threads = 1};
+    const uint32_t n = 1000000;
+    float *xs = malloc(sizeof(float) * n);
+    cr_assert_not_null(xs);
+    struct film_pixel px = {0};
+    long double ref_sum = 0.0L;
+    uint64_t n_rays = 0;
+    uint32_t n_kept = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        struct sampler s;
+        sample_start(&s, SAMPLER_INDEPENDENT, opt.seed, 0, i);
+        vec2 u_pixel = sample_2d(&s);
+        vec2 u_lens = sample_2d(&s);
+        struct ray ray = trace_camera_ray(ts, u_pixel.x, u_pixel.y, u_lens);
+        vec3 L = trace_radiance(ts, &opt, ray, &s, &n_rays);
+        cr_assert(v3_is_finite(L));
+        film_add(&px, L);
+        xs[n_kept++] = L.y;
+        ref_sum += (long double)L.y;
+    }
+    cr_assert_eq(px.n, n);
+    long double ref_mean = ref_sum / n;
+    long double ss = 0.0L;
+    for (uint32_t i = 0; i < n; i++)
+        ss += ((long double)xs[i] - ref_mean) * ((long double)xs[i] - ref_mean);
+    double ref_var_of_mean = (double)(ss / (n - 1) / n);
+    double rel_sum = fabs((double)(((long double)px.sum[1] - ref_sum) / ref_sum));
+    double rel_var = fabs(film_var_of_mean(&px, 1) - ref_var_of_mean) / ref_var_of_mean;
+    cr_log_info("1e6 samples: sum relative error %.2g, variance %.2g", rel_sum, rel_var);
+    cr_assert_lt(rel_sum, 1e-12);
+    cr_assert_lt(rel_var, 1e-9);
+    cr_assert_eq((float)film_mean(&px, 1), (float)ref_mean);
+    free(xs);
+    trace_free(ts);
+    scene_free(&scene);
+}
+
+/* The same pixel rendered to 20000 spp in one call and in 20 calls of 1000 holds the same
+ * bytes: each sample is added in sample-index order whatever the split (film.h). */
+Test(extremes, split_accumulation_is_bit_identical, .timeout = 120)
+{
+    struct scene scene;
+    struct mcpt_error err;
+    cr_assert(scene_load(DIR "precision.txt", &scene, &err));
+    struct trace_scene *ts = trace_prepare(&scene, 1, &err);
+    cr_assert_not_null(ts);
+    struct film one, split;
+    cr_assert(film_init(&one, 1, 1, &err) && film_init(&split, 1, 1, &err));
+    struct trace_options opt = {.spp = 20000, .max_depth = scene.render.max_depth, .seed = 5,
+                                .sampler = scene.render.sampler, .n_threads = 1};
+    struct trace_result res;
+    cr_assert(trace_render(ts, &opt, &one, &res, &err));
+    for (uint32_t spp = 1000; spp <= 20000; spp += 1000) {
+        struct trace_options o = opt;
+        o.spp = spp;
+        o.sampler_spp = opt.spp; /* as progressive renders do: the final spp's strata */
+        cr_assert(trace_render(ts, &o, &split, &res, &err));
+    }
+    cr_assert(memcmp(one.pixels, split.pixels, sizeof *one.pixels) == 0);
+    film_free(&one);
+    film_free(&split);
+    trace_free(ts);
+    scene_free(&scene);
+}
+
+/* ---- NaN and infinity ---- */
+
+/* Runs mcpt on a scene; returns the exit status and the stderr text. */
+static int run_mcpt(const char *scene, const char *out, char *err, size_t err_bytes)
+{
+    const char *bin = getenv("MCPT") ? getenv("MCPT") : "./mcpt";
+    char err_path[300];
+    snprintf(err_path, sizeof err_path, "%s.stderr", out);
+    pid_t pid = fork();
+    cr_assert(pid >= 0);
+    if (pid == 0) {
+        int fd = open(err_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        int null_fd = open("/dev/null", O_WRONLY);
+        dup2(fd, 2);
+        dup2(null_fd, 1);
+        alarm(60);
+        execl(bin, bin, scene, "-o", out, "--threads", "2", "--quiet", (char *)NULL);
+        _exit(127);
+    }
+    int status;
+    cr_assert_eq(waitpid(pid, &status, 0), pid);
+    FILE *f = fopen(err_path, "r");
+    size_t len = f ? fread(err, 1, err_bytes - 1, f) : 0;
+    err[len] = '\0';
+    if (f)
+        fclose(f);
+    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+/* The EXR mcpt wrote is finite in every channel; returns the samples dropped, spp - samples
+ * summed over the pixels (each pixel takes spp samples and keeps the finite ones). */
+static uint64_t exr_dropped(const char *path, float spp)
+{
+    struct image img;
+    struct mcpt_error err;
+    cr_assert(image_read_exr(path, &img, &err), "%s", err.msg);
+    int s = image_find_channel(&img, "samples");
+    cr_assert(s >= 0);
+    uint64_t dropped = 0;
+    for (size_t i = 0; i < (size_t)img.width * (size_t)img.height; i++) {
+        for (int c = 0; c < img.n_channels; c++)
+            cr_assert(isfinite(img.data[c][i]), "%s: channel %s pixel %zu", path,
+                      img.names[c], i);
+        dropped += (uint64_t)(spp - img.data[s][i]);
+    }
+    image_free(&img);
+    return dropped;
+}
+
+/* A glowing ball of radiance 3.3e38 that also reflects light: some samples exceed float range
+ * (infinite).  They are dropped, the image is finite (variances beyond float range included),
+ * and mcpt reports the count on one warning line that agrees with the EXR's sample counts. */
+Test(nonfinite, overflow_dropped_counted_reported)
+{
+    char out[] = "/tmp/mcpt_overflow_XXXXXX.exr", err[4096];
+    int fd = mkstemps(out, 4);
+    cr_assert(fd >= 0);
+    close(fd);
+    cr_assert_eq(run_mcpt(DIR "overflow.txt", out, err, sizeof err), 0, "%s", err);
+    uint64_t dropped = exr_dropped(out, 8.0f);
+    unsigned long long n_reported = 0;
+    unsigned x, y, s;
+    cr_assert_eq(sscanf(err, "mcpt: warning: %llu NaN or infinite samples dropped (first at "
+                             "pixel %u,%u sample %u)", &n_reported, &x, &y, &s), 4, "%s", err);
+    cr_assert_gt(n_reported, 0);
+    cr_assert_eq(n_reported, dropped);
+    cr_assert(x < 16 && y < 12 && s < 8);
+    char cmd[400];
+    snprintf(cmd, sizeof cmd, "rm -f '%s' '%.*s.png' '%s.stderr'", out, (int)strlen(out) - 4, out,
+             out);
+    cr_assert_eq(system(cmd), 0);
+}
+
+/* Legal input that invites NaN (zero-length normals, degenerate and denormal faces, edge-on
+ * faces and lights, a point light on a surface, emitters of radius 1e-30 and area 1e-40, a
+ * grazing floor): the image is finite, and the count mcpt reports (none, if no line) is the
+ * number of samples missing from the EXR's sample counts. */
+Test(nonfinite, nan_invitations_finite_and_accounted)
+{
+    char out[] = "/tmp/mcpt_nan_XXXXXX.exr", err[4096];
+    int fd = mkstemps(out, 4);
+    cr_assert(fd >= 0);
+    close(fd);
+    cr_assert_eq(run_mcpt(DIR "nan-invitations.txt", out, err, sizeof err), 0, "%s", err);
+    uint64_t dropped = exr_dropped(out, 16.0f);
+    unsigned long long n_reported = 0;
+    const char *warn = strstr(err, "mcpt: warning: ");
+    if (warn)
+        cr_assert_eq(sscanf(warn, "mcpt: warning: %llu NaN", &n_reported), 1, "%s", err);
+    cr_assert_eq(n_reported, dropped, "reported %llu, EXR short by %llu", n_reported,
+                 (unsigned long long)dropped);
+    cr_log_info("nan-invitations.txt: %llu of %d samples not finite", n_reported, 32 * 32 * 16);
+    char cmd[400];
+    snprintf(cmd, sizeof cmd, "rm -f '%s' '%.*s.png' '%s.stderr'", out, (int)strlen(out) - 4, out,
+             out);
+    cr_assert_eq(system(cmd), 0);
+}
+
+/* A NaN albedo set on a loaded scene (the scene format cannot express one): every path that
+ * reaches the floor is NaN, and trace_render drops each such sample, counts it in the pixel's
+ * n_dropped and in the result with its first pixel, and keeps every mean finite. */
+Test(nonfinite, nan_material_dropped_and_counted)
+{
+    struct scene scene;
+    struct mcpt_error err;
+    cr_assert(scene_load(DIR "floor-once.txt", &scene, &err), "%s", err.msg);
+    for (uint32_t i = 0; i < scene.n_materials; i++)
+        if (strcmp(scene.materials[i].name, "white") == 0)
+            scene.materials[i].albedo.y = NAN;
+    struct trace_scene *ts = trace_prepare(&scene, 2, &err);
+    cr_assert_not_null(ts);
+    struct film f;
+    cr_assert(film_init(&f, scene.width, scene.height, &err));
+    struct trace_options opt = {.spp = 8, .max_depth = 3, .seed = 1,
+                                .sampler = scene.render.sampler, .n_threads = 2};
+    struct trace_result r;
+    cr_assert(trace_render(ts, &opt, &f, &r, &err));
+    cr_assert_gt(r.n_nonfinite, 0);
+    cr_assert_eq(r.n_nonfinite, total_dropped(&f));
+    const struct film_pixel *first = &f.pixels[r.first_bad_y * (uint32_t)f.width + r.first_bad_x];
+    cr_assert_gt(first->n_dropped, 0);
+    cr_assert_lt(r.first_bad_sample, opt.spp);
+    int n_untouched = 0;
+    for (size_t i = 0; i < (size_t)f.width * (size_t)f.height; i++) {
+        cr_assert_eq(f.pixels[i].n + f.pixels[i].n_dropped, opt.spp);
+        for (int c = 0; c < 3; c++)
+            cr_assert(isfinite(film_mean(&f.pixels[i], c)) &&
+                      isfinite(film_var_of_mean(&f.pixels[i], c)));
+        n_untouched += f.pixels[i].n_dropped == 0;
+    }
+    cr_assert_gt(n_untouched, 0, "pixels that see only the sky or the lamp keep every sample");
+    film_free(&f);
+    trace_free(ts);
+    scene_free(&scene);
+}

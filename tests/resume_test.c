@@ -1,0 +1,426 @@
+/* tests/resume_test.c - interrupt and resume: film.c's checkpoints (film_save_checkpoint,
+ * film_load_checkpoint) and main.c's SIGINT/SIGTERM handling and --resume, run through the
+ * binary $MCPT (default ./mcpt).  The property checked is the one the design rests on: each
+ * pixel's samples are added in sample-index order from its own count (film.h), so a render
+ * interrupted any number of times and resumed is bit-identical to an uninterrupted one. */
+#include <criterion/criterion.h>
+
+#include <fcntl.h>
+#include <signal.h>
+#include <stdlib.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "film.h"
+#include "image.h"
+#include "scene.h"
+#include "trace.h"
+
+#define SCENE "tests/data/resume/small.txt"
+#define SIGNAL_SPP "4096" /* long enough (most of a second on 2 threads) to interrupt twice */
+
+static char tmpdir[256];
+
+static void setup(void)
+{
+    snprintf(tmpdir, sizeof tmpdir, "/tmp/mcpt_resume_XXXXXX");
+    cr_assert(mkdtemp(tmpdir));
+}
+
+static void teardown(void)
+{
+    char cmd[512];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmpdir);
+    cr_assert_eq(system(cmd), 0);
+}
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static bool exists(const char *path)
+{
+    struct stat st;
+    return stat(path, &st) == 0;
+}
+
+/* Starts mcpt with args (NULL-terminated), stdout to /dev/null and stderr to err_path. */
+static pid_t start_mcpt(const char *const *args, const char *err_path)
+{
+    const char *bin = getenv("MCPT") ? getenv("MCPT") : "./mcpt";
+    pid_t pid = fork();
+    cr_assert(pid >= 0);
+    if (pid == 0) {
+        int fd = open(err_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        int null_fd = open("/dev/null", O_WRONLY);
+        dup2(fd, 2);
+        dup2(null_fd, 1);
+        const char *argv[32] = {bin};
+        int n = 1;
+        for (; args[n - 1] && n < 31; n++)
+            argv[n] = args[n - 1];
+        argv[n] = NULL;
+        alarm(60); /* a hung run ends instead of hanging the suite */
+        execv(bin, (char *const *)argv);
+        _exit(127);
+    }
+    return pid;
+}
+
+/* Waits for pid; returns its exit status or 128 + signal. */
+static int wait_mcpt(pid_t pid)
+{
+    int status;
+    cr_assert_eq(waitpid(pid, &status, 0), pid);
+    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+static int run_mcpt(const char *const *args, const char *err_path)
+{
+    return wait_mcpt(start_mcpt(args, err_path));
+}
+
+static void read_text(const char *path, char *buf, size_t buf_bytes)
+{
+    FILE *f = fopen(path, "r");
+    size_t n = f ? fread(buf, 1, buf_bytes - 1, f) : 0;
+    buf[n] = '\0';
+    if (f)
+        fclose(f);
+}
+
+/* Polls err_path until mcpt has printed a progress line (it has rendered a quarter of what it
+ * set out to), so the signal lands mid-render; fails after 30 s. */
+static void wait_for_progress(const char *err_path)
+{
+    char buf[4096];
+    for (double t0 = now_s(); now_s() - t0 < 30.0;) {
+        read_text(err_path, buf, sizeof buf);
+        if (strstr(buf, "progress:"))
+            return;
+        nanosleep(&(struct timespec){0, 5 * 1000 * 1000}, NULL);
+    }
+    cr_assert_fail("no progress line within 30 s");
+}
+
+/* Every channel of a holds the same float bytes as the channel of that name in b. */
+static void assert_same_exr(const char *path_a, const char *path_b)
+{
+    struct image a, b;
+    struct mcpt_error err;
+    cr_assert(image_read_exr(path_a, &a, &err), "%s: %s", path_a, err.msg);
+    cr_assert(image_read_exr(path_b, &b, &err), "%s: %s", path_b, err.msg);
+    cr_assert(a.width == b.width && a.height == b.height && a.n_channels == b.n_channels);
+    size_t n = (size_t)a.width * (size_t)a.height;
+    for (int c = 0; c < a.n_channels; c++) {
+        int k = image_find_channel(&b, a.names[c]);
+        cr_assert(k >= 0, "channel %s missing from %s", a.names[c], path_b);
+        cr_assert(memcmp(a.data[c], b.data[k], n * sizeof(float)) == 0,
+                  "channel %s of %s and %s differs", a.names[c], path_a, path_b);
+    }
+    image_free(&a);
+    image_free(&b);
+}
+
+/* A partial image: finite, with some pixels short of spp and some samples taken. */
+static void assert_partial(const char *exr_path, float spp)
+{
+    struct image img;
+    struct mcpt_error err;
+    cr_assert(image_read_exr(exr_path, &img, &err), "%s: %s", exr_path, err.msg);
+    int s = image_find_channel(&img, "samples");
+    cr_assert(s >= 0);
+    size_t n = (size_t)img.width * (size_t)img.height;
+    float lo = spp, hi = 0.0f;
+    for (size_t i = 0; i < n; i++) {
+        lo = fminf(lo, img.data[s][i]);
+        hi = fmaxf(hi, img.data[s][i]);
+        for (int c = 0; c < img.n_channels; c++)
+            cr_assert(isfinite(img.data[c][i]));
+    }
+    cr_assert(lo < spp && hi > 0.0f, "samples in [%g, %g] of %g", lo, hi, spp);
+    image_free(&img);
+}
+
+/* FNV-1a 64 of a file, as main.c records it (docs/reliability.md). */
+static uint64_t fnv1a_file(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    cr_assert_not_null(f);
+    uint64_t h = 0xcbf29ce484222325ull;
+    for (int ch; (ch = fgetc(f)) != EOF;)
+        h = (h ^ (uint64_t)ch) * 0x100000001b3ull;
+    fclose(f);
+    return h;
+}
+
+/* ---- the checkpoint file ---- */
+
+/* Save then load returns the same pixel records and settings; one flipped byte, a truncation
+ * or a count above spp is refused with a message naming the file. */
+Test(checkpoint, round_trip_and_damage, .init = setup, .fini = teardown)
+{
+    struct film film, back;
+    struct mcpt_error err;
+    cr_assert(film_init(&film, 5, 3, &err));
+    for (int i = 0; i < 15; i++) {
+        struct film_pixel *p = &film.pixels[i];
+        for (int c = 0; c < 3; c++) {
+            p->sum[c] = 0.1 * i + c;
+            p->sum_sq[c] = 1.0 / (i + 1);
+        }
+        p->sum_lum_sq = i;
+        p->n = (uint32_t)i;
+        p->n_dropped = i == 7;
+    }
+    struct film_checkpoint_info info = {.scene_hash = 42, .seed = 7, .spp = 16, .max_depth = 3,
+                                        .sampler = 0, .sample_offset = 5, .args_bytes = 9};
+    snprintf(info.scene_path, sizeof info.scene_path, "a/scene.txt");
+    memcpy(info.args, "--spp=16", 9);
+    char path[300];
+    snprintf(path, sizeof path, "%s/x.ckpt", tmpdir);
+    cr_assert(film_save_checkpoint(path, &film, &info, &err), "%s", err.msg);
+    struct film_checkpoint_info got;
+    cr_assert(film_load_checkpoint(path, &back, &got, &err), "%s", err.msg);
+    cr_assert(back.width == 5 && back.height == 3);
+    cr_assert(memcmp(back.pixels, film.pixels, 15 * sizeof(struct film_pixel)) == 0);
+    cr_assert(got.scene_hash == 42 && got.seed == 7 && got.spp == 16 && got.max_depth == 3 &&
+              got.sample_offset == 5 && got.args_bytes == 9);
+    cr_assert_str_eq(got.scene_path, "a/scene.txt");
+    cr_assert_str_eq(got.args, "--spp=16");
+    film_free(&back);
+
+    /* flip one bit of a pixel record: the checksum catches it */
+    FILE *f = fopen(path, "r+b");
+    cr_assert_not_null(f);
+    fseek(f, -100, SEEK_END);
+    int ch = fgetc(f);
+    fseek(f, -100, SEEK_END);
+    fputc(ch ^ 1, f);
+    fclose(f);
+    cr_assert_not(film_load_checkpoint(path, &back, &got, &err));
+    cr_assert(strncmp(err.msg, "expected checksum", 17) == 0, "%s", err.msg);
+    cr_assert_str_eq(err.file, path);
+    cr_assert_null(back.pixels);
+
+    /* a truncated file names the length it expected */
+    cr_assert(film_save_checkpoint(path, &film, &info, &err));
+    cr_assert_eq(truncate(path, 200), 0);
+    cr_assert_not(film_load_checkpoint(path, &back, &got, &err));
+    cr_assert(strstr(err.msg, "bytes for a 5x3 film, got 200"), "%s", err.msg);
+
+    /* a pixel beyond the spp target cannot come from a real run */
+    film.pixels[3].n = 17;
+    cr_assert(film_save_checkpoint(path, &film, &info, &err));
+    cr_assert_not(film_load_checkpoint(path, &back, &got, &err));
+    cr_assert(strstr(err.msg, "at most 16 samples in a pixel"), "%s", err.msg);
+
+    /* writing into a missing folder fails cleanly and leaves nothing */
+    char bad[320];
+    snprintf(bad, sizeof bad, "%s/no/such/dir.ckpt", tmpdir);
+    cr_assert_not(film_save_checkpoint(bad, &film, &info, &err));
+    cr_assert(strncmp(err.msg, "cannot write: ", 14) == 0, "%s", err.msg);
+    film_free(&film);
+}
+
+/* Renders SCENE in-process to spp_done samples per pixel and saves a checkpoint that targets
+ * spp_target, as an interrupted `mcpt SCENE --spp spp_target` would have (its options stored). */
+static void make_checkpoint(const char *path, uint32_t spp_done, uint32_t spp_target)
+{
+    struct scene scene;
+    struct mcpt_error err;
+    cr_assert(scene_load(SCENE, &scene, &err), "%s", err.msg);
+    struct trace_scene *ts = trace_prepare(&scene, 1, &err);
+    cr_assert_not_null(ts, "%s", err.msg);
+    struct film film;
+    cr_assert(film_init(&film, scene.width, scene.height, &err));
+    struct trace_options opt = {.spp = spp_done, .max_depth = scene.render.max_depth,
+                                .seed = 0, .sampler = SAMPLER_INDEPENDENT, .n_threads = 2};
+    struct trace_result res;
+    cr_assert(trace_render(ts, &opt, &film, &res, &err));
+    struct film_checkpoint_info info = {.scene_hash = fnv1a_file(SCENE), .seed = 0,
+                                        .spp = spp_target, .max_depth = opt.max_depth,
+                                        .sampler = SAMPLER_INDEPENDENT};
+    snprintf(info.scene_path, sizeof info.scene_path, "%s", SCENE);
+    int n = snprintf(info.args, sizeof info.args, "--spp=%u", spp_target) + 1;
+    n += snprintf(info.args + n, sizeof info.args - (size_t)n, "--sampler=independent") + 1;
+    info.args_bytes = (uint32_t)n;
+    cr_assert(film_save_checkpoint(path, &film, &info, &err), "%s", err.msg);
+    film_free(&film);
+    trace_free(ts);
+    scene_free(&scene);
+}
+
+/* A checkpoint of 13 of 64 spp, resumed by mcpt (scene named by the checkpoint), gives the
+ * same EXR bytes as one uninterrupted 64-spp run; the spent checkpoint is removed. */
+Test(resume, from_checkpoint_bit_identical, .init = setup, .fini = teardown)
+{
+    char ckpt[300], full[300], resumed[300], err_path[300];
+    snprintf(ckpt, sizeof ckpt, "%s/part.ckpt", tmpdir);
+    snprintf(full, sizeof full, "%s/full.exr", tmpdir);
+    snprintf(resumed, sizeof resumed, "%s/resumed.exr", tmpdir);
+    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
+    make_checkpoint(ckpt, 13, 64);
+    const char *a_full[] = {SCENE, "--spp", "64", "--sampler", "independent", "--threads", "1",
+                            "-o", full, NULL};
+    cr_assert_eq(run_mcpt(a_full, err_path), 0);
+    const char *a_res[] = {"--resume", ckpt, "--threads", "2", "-o", resumed, NULL};
+    char err[4096];
+    int rc = run_mcpt(a_res, err_path);
+    read_text(err_path, err, sizeof err);
+    cr_assert_eq(rc, 0, "%s", err);
+    assert_same_exr(full, resumed);
+    cr_assert_not(exists(ckpt), "the checkpoint of a finished render is removed");
+}
+
+/* A resumed run must render what the interrupted one would have: another seed, film size or
+ * scene is refused (exit 2, one line naming the checkpoint), and nothing is written. */
+Test(resume, mismatch_refused, .init = setup, .fini = teardown)
+{
+    char ckpt[300], out[300], err_path[300], err[4096], want[400];
+    snprintf(ckpt, sizeof ckpt, "%s/part.ckpt", tmpdir);
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
+    make_checkpoint(ckpt, 2, 8);
+    const char *seed[] = {SCENE, "--resume", ckpt, "--seed", "5", "-o", out, NULL};
+    cr_assert_eq(run_mcpt(seed, err_path), 2);
+    read_text(err_path, err, sizeof err);
+    snprintf(want, sizeof want,
+             "%s: error: expected --seed 0 as in the checkpoint, got 5\n", ckpt);
+    cr_assert_str_eq(err, want);
+
+    const char *spp[] = {"--resume", ckpt, "--spp", "9", "-o", out, NULL};
+    cr_assert_eq(run_mcpt(spp, err_path), 2);
+    read_text(err_path, err, sizeof err);
+    snprintf(want, sizeof want, "%s: error: expected --spp 8 as in the checkpoint, got 9\n",
+             ckpt);
+    cr_assert_str_eq(err, want);
+
+    const char *size[] = {"--resume", ckpt, "--width", "8", "-o", out, NULL};
+    cr_assert_eq(run_mcpt(size, err_path), 2);
+    read_text(err_path, err, sizeof err);
+    snprintf(want, sizeof want, "%s: error: expected a 24x16 film as in the checkpoint, got "
+                                "8x16\n", ckpt);
+    cr_assert_str_eq(err, want);
+
+    const char *scene[] = {"tests/data/cli/tiny.txt", "--resume", ckpt, "-o", out, NULL};
+    cr_assert_eq(run_mcpt(scene, err_path), 2);
+    read_text(err_path, err, sizeof err);
+    snprintf(want, sizeof want, "%s: error: expected the scene the checkpoint was made from",
+             ckpt);
+    cr_assert(strncmp(err, want, strlen(want)) == 0, "%s", err);
+    cr_assert_not(exists(out));
+    cr_assert(exists(ckpt), "a refused resume keeps its checkpoint");
+}
+
+/* ---- signals ---- */
+
+/* SIGINT mid-render: exit 130 within a second or so, a valid partial EXR (its samples channel
+ * short of spp somewhere) and a checkpoint.  The resumed run is interrupted again with SIGTERM
+ * (exit 143), then resumed without naming the scene; the final EXR has the same bytes as an
+ * uninterrupted run on another thread count. */
+Test(interrupt, sigint_then_sigterm_then_bit_identical, .init = setup, .fini = teardown,
+     .timeout = 240)
+{
+    char full[300], part[300], ckpt[300], final[300], err_path[300], err[4096];
+    snprintf(full, sizeof full, "%s/full.exr", tmpdir);
+    snprintf(part, sizeof part, "%s/part.exr", tmpdir);
+    snprintf(ckpt, sizeof ckpt, "%s/part.exr.ckpt", tmpdir);
+    snprintf(final, sizeof final, "%s/final.exr", tmpdir);
+    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
+
+    const char *a_full[] = {SCENE, "--spp", SIGNAL_SPP, "--threads", "1", "--quiet", "-o", full,
+                            NULL};
+    cr_assert_eq(run_mcpt(a_full, err_path), 0);
+
+    /* first interruption: SIGINT */
+    snprintf(err_path, sizeof err_path, "%s/stderr1.txt", tmpdir);
+    const char *a_int[] = {SCENE, "--spp", SIGNAL_SPP, "--threads", "2", "-o", part, NULL};
+    pid_t pid = start_mcpt(a_int, err_path);
+    wait_for_progress(err_path);
+    double t0 = now_s();
+    kill(pid, SIGINT);
+    int rc = wait_mcpt(pid);
+    double stop_s = now_s() - t0;
+    read_text(err_path, err, sizeof err);
+    cr_assert_eq(rc, 130, "exit %d: %s", rc, err);
+    cr_assert_lt(stop_s, 2.0, "took %.2f s to stop", stop_s);
+    cr_log_info("SIGINT to exit: %.3f s", stop_s);
+    cr_assert(strstr(err, "mcpt: interrupted by SIGINT"), "%s", err);
+    cr_assert(strstr(err, "--resume"), "%s", err);
+    assert_partial(part, 4096.0f);
+    cr_assert(exists(ckpt));
+
+    /* second interruption, of the resumed run: SIGTERM */
+    snprintf(err_path, sizeof err_path, "%s/stderr2.txt", tmpdir); /* no old progress lines */
+    const char *a_res[] = {SCENE, "--resume", ckpt, "--threads", "2", NULL};
+    pid = start_mcpt(a_res, err_path);
+    wait_for_progress(err_path);
+    kill(pid, SIGTERM);
+    rc = wait_mcpt(pid);
+    read_text(err_path, err, sizeof err);
+    cr_assert_eq(rc, 143, "exit %d: %s", rc, err);
+    cr_assert(strstr(err, "mcpt: interrupted by SIGTERM"), "%s", err);
+    assert_partial(part, 4096.0f); /* the stored -o: the same partial image, further on */
+    cr_assert(exists(ckpt));
+
+    /* the last resume names no scene and writes elsewhere */
+    const char *a_fin[] = {"--resume", ckpt, "--threads", "2", "--quiet", "-o", final, NULL};
+    rc = run_mcpt(a_fin, err_path);
+    read_text(err_path, err, sizeof err);
+    cr_assert_eq(rc, 0, "exit %d: %s", rc, err);
+    assert_same_exr(full, final);
+    cr_assert_not(exists(ckpt));
+}
+
+/* A second signal exits at once (status 128 + its number) without finishing the render or the
+ * writes, and leaves no corrupt file: OUT.exr is the earlier file or a whole new image, and a
+ * checkpoint, if one was written, loads.  The two signals differ (SIGTERM, then SIGINT) because
+ * a second SIGINT sent while the first is still pending would merge with it. */
+Test(interrupt, second_signal_exits_at_once, .init = setup, .fini = teardown, .timeout = 120)
+{
+    char out[300], ckpt[300], err_path[300], err[4096];
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(ckpt, sizeof ckpt, "%s/out.exr.ckpt", tmpdir);
+    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
+    FILE *f = fopen(out, "w");
+    fputs("earlier", f);
+    fclose(f);
+    const char *args[] = {SCENE, "--spp", SIGNAL_SPP, "--threads", "2", "-o", out, NULL};
+    pid_t pid = start_mcpt(args, err_path);
+    wait_for_progress(err_path);
+    double t0 = now_s();
+    kill(pid, SIGTERM);
+    kill(pid, SIGINT);
+    int rc = wait_mcpt(pid);
+    double stop_s = now_s() - t0;
+    read_text(err_path, err, sizeof err);
+    cr_assert(rc == 130 || rc == 143, "exit %d: %s", rc, err);
+    cr_assert_not(strstr(err, "interrupted by"), "the first signal's path ran to the end: %s",
+                  err);
+    cr_assert_lt(stop_s, 1.0, "took %.2f s", stop_s);
+
+    char buf[16] = {0};
+    f = fopen(out, "rb");
+    cr_assert_not_null(f);
+    cr_assert(fread(buf, 1, sizeof buf - 1, f) > 0);
+    fclose(f);
+    if (strcmp(buf, "earlier") != 0) {
+        struct image img;
+        struct mcpt_error e;
+        cr_assert(image_read_exr(out, &img, &e), "%s", e.msg);
+        image_free(&img);
+    }
+    if (exists(ckpt)) {
+        struct film film;
+        struct film_checkpoint_info info;
+        struct mcpt_error e;
+        cr_assert(film_load_checkpoint(ckpt, &film, &info, &e), "%s", e.msg);
+        film_free(&film);
+    }
+}

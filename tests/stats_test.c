@@ -1,0 +1,631 @@
+/* tests/stats_test.c - stats.c: image metrics, the reference-noise correction, line fits with
+ * their confidence intervals, the convergence outputs and the sampler laboratory.
+ * - Metrics on synthetic images with known answers: constant offsets (exact MSE, MAE, relMSE,
+ *   pbrt's MRSE, PSNR, bias) and Gaussian noise of known variance (MSE and its standard error).
+ * - E[(a - r)^2] = MSE(a) + Var(r) for independent a, r (Whittle et al. 2017): the corrected MSE
+ *   recovers the true MSE within its standard error; the uncorrected one does not.
+ * - Student's t quantiles against numerical integration of the t density; OLS slopes exact on
+ *   power laws; the 95% interval covers the true slope in about 95% of noisy trials.
+ * - A run with --snapshots and --curve writes the same EXR bytes as a plain run; CSV header and
+ *   JSON keys as documented in docs/convergence.md; compare reproduces a CSV row.
+ * - The integrands' exact integrals against quadrature; independent sampling gives MSE ~ N^-1. */
+#include <criterion/criterion.h>
+
+#include <fcntl.h>
+#include <stdlib.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "film.h"
+#include "image.h"
+#include "sample.h"
+#include "stats.h"
+
+/* ---- helpers ---- */
+
+/* A standard normal deviate (Box & Muller 1958) from two PCG32 uniforms in (0, 1). */
+static double gauss(struct pcg32 *rng)
+{
+    double u1 = ((double)sample_pcg32_next(rng) + 0.5) * 0x1p-32;
+    double u2 = ((double)sample_pcg32_next(rng) + 0.5) * 0x1p-32;
+    return sqrt(-2.0 * log(u1)) * cos(2.0 * 3.14159265358979323846 * u2);
+}
+
+/* Planar image storage for the synthetic tests: R, G, B, then variances. */
+struct planes {
+    int width;
+    int height;
+    float *data; /* 6 planes */
+};
+
+static struct stats_image planes_image(struct planes *p, int width, int height, bool with_var)
+{
+    size_t n = (size_t)width * (size_t)height;
+    p->width = width;
+    p->height = height;
+    p->data = calloc(6 * n, sizeof(float));
+    cr_assert(p->data);
+    struct stats_image img = {.width = width, .height = height};
+    for (int c = 0; c < 3; c++) {
+        img.rgb[c] = p->data + (size_t)c * n;
+        img.var[c] = with_var ? p->data + (size_t)(3 + c) * n : NULL;
+    }
+    return img;
+}
+
+static float *plane(struct planes *p, int k)
+{
+    return p->data + (size_t)k * (size_t)p->width * (size_t)p->height;
+}
+
+/* ---- metrics ---- */
+
+/* a = r + (0.1, -0.2, 0.05) on r = 0.5: every metric has a closed form. */
+Test(stats, metrics_constant_offset)
+{
+    struct planes pa, pr;
+    struct stats_image a = planes_image(&pa, 8, 4, false), r = planes_image(&pr, 8, 4, false);
+    const double delta[3] = {0.1, -0.2, 0.05};
+    for (int c = 0; c < 3; c++)
+        for (int i = 0; i < 32; i++) {
+            plane(&pr, c)[i] = 0.5f;
+            plane(&pa, c)[i] = (float)(0.5 + delta[c]);
+        }
+    struct stats_metrics m;
+    struct mcpt_error err;
+    cr_assert(stats_compare(&a, &r, &m, &err));
+    double d2 = 0.0, d1 = 0.0;
+    for (int c = 0; c < 3; c++) {
+        double d = (double)(float)(0.5 + delta[c]) - 0.5; /* the offset as stored in float */
+        d2 += d * d / 3.0;
+        d1 += fabs(d) / 3.0;
+        cr_assert_float_eq(m.bias[c], d, 1e-12);
+    }
+    cr_assert_eq(m.n_values, 96u);
+    cr_assert_float_eq(m.mse, d2, 1e-12);
+    cr_assert_float_eq(m.rmse, sqrt(d2), 1e-12);
+    cr_assert_float_eq(m.mae, d1, 1e-12);
+    cr_assert_float_eq(m.relmse, d2 / (0.25 + 0.01), 1e-12);        /* (a-r)^2 / (r^2 + 0.01) */
+    cr_assert_float_eq(m.mrse_pbrt, d2 / (0.51 * 0.51), 1e-12);     /* (a-r)^2 / (r + 0.01)^2 */
+    cr_assert_float_eq(m.psnr_db, -10.0 * log10(d2), 1e-9);         /* peak 1 */
+    cr_assert_float_eq(m.mse_se, 0.0, 1e-15);                        /* every pixel alike */
+    cr_assert(isnan(m.noise_floor) && isnan(m.mse_corrected));       /* r has no variance */
+    free(pa.data);
+    free(pr.data);
+}
+
+/* a = r + N(0, sigma^2) per value: MSE -> sigma^2 within 4 standard errors, and the standard
+ * error itself matches theory, sqrt(2 / (3 n_pixels)) sigma^2 (a pixel's three squared
+ * Gaussian errors sum to a scaled chi-square with 3 degrees of freedom). */
+Test(stats, metrics_known_noise)
+{
+    const int w = 128, h = 64;
+    const double sigma = 0.05;
+    struct planes pa, pr;
+    struct stats_image a = planes_image(&pa, w, h, false), r = planes_image(&pr, w, h, false);
+    struct pcg32 rng;
+    sample_pcg32_seed(&rng, 12345, 1);
+    for (int c = 0; c < 3; c++)
+        for (int i = 0; i < w * h; i++) {
+            double truth = 0.2 + 0.6 * (double)(i % w) / w;
+            plane(&pr, c)[i] = (float)truth;
+            plane(&pa, c)[i] = (float)(truth + sigma * gauss(&rng));
+        }
+    struct stats_metrics m;
+    struct mcpt_error err;
+    cr_assert(stats_compare(&a, &r, &m, &err));
+    double se_theory = sqrt(2.0 / (3.0 * w * h)) * sigma * sigma;
+    cr_assert(fabs(m.mse_se / se_theory - 1.0) < 0.1, "se %g, theory %g", m.mse_se, se_theory);
+    cr_assert(fabs(m.mse - sigma * sigma) < 4.0 * m.mse_se, "mse %g +- %g, expected %g", m.mse,
+              m.mse_se, sigma * sigma);
+    free(pa.data);
+    free(pr.data);
+}
+
+/* Films of Gaussian samples around a known image: the reference has 16 samples a pixel, the
+ * image 4, so the reference's noise (sigma^2 / 16) is a quarter of the image's true MSE
+ * (sigma^2 / 4).  The corrected MSE recovers sigma^2 / 4 within 3 standard errors using the
+ * reference's estimated variance of the mean; the uncorrected one is off by many. */
+Test(stats, noise_correction_recovers_true_mse)
+{
+    const int w = 96, h = 96;
+    const double sigma = 0.2;
+    struct film fa, fr;
+    struct mcpt_error err;
+    cr_assert(film_init(&fa, w, h, &err));
+    cr_assert(film_init(&fr, w, h, &err));
+    struct pcg32 rng;
+    sample_pcg32_seed(&rng, 777, 3);
+    for (int i = 0; i < w * h; i++) {
+        vec3 truth = v3(0.5f + 0.3f * (float)(i % w) / w, 0.4f, 0.3f + 0.2f * (float)(i / w) / h);
+        for (int k = 0; k < 16; k++) {
+            vec3 x = v3(truth.x + (float)(sigma * gauss(&rng)),
+                        truth.y + (float)(sigma * gauss(&rng)),
+                        truth.z + (float)(sigma * gauss(&rng)));
+            film_add(&fr.pixels[i], x);
+            if (k < 4) {
+                vec3 y = v3(truth.x + (float)(sigma * gauss(&rng)),
+                            truth.y + (float)(sigma * gauss(&rng)),
+                            truth.z + (float)(sigma * gauss(&rng)));
+                film_add(&fa.pixels[i], y);
+            }
+        }
+    }
+    float *pa = malloc(sizeof(float) * 7 * w * h), *pr = malloc(sizeof(float) * 7 * w * h);
+    cr_assert(pa && pr);
+    struct stats_image a, r;
+    stats_image_from_film(&fa, pa, &a);
+    stats_image_from_film(&fr, pr, &r);
+    struct stats_metrics m;
+    cr_assert(stats_compare(&a, &r, &m, &err));
+    double truth = sigma * sigma / 4.0;
+    cr_assert(fabs(m.noise_floor / (sigma * sigma / 16.0) - 1.0) < 0.05, "floor %g",
+              m.noise_floor);
+    cr_assert(fabs(m.mse_corrected - truth) < 3.0 * m.mse_corrected_se,
+              "corrected %g +- %g, true MSE %g", m.mse_corrected, m.mse_corrected_se, truth);
+    cr_assert(fabs(m.mse - truth) > 10.0 * m.mse_se, "uncorrected %g should be biased", m.mse);
+    /* the image's own variance estimates its MSE too */
+    cr_assert(fabs(m.mean_variance / truth - 1.0) < 0.05, "own variance %g", m.mean_variance);
+    free(pa);
+    free(pr);
+    film_free(&fa);
+    film_free(&fr);
+}
+
+/* Images of different sizes are refused with an "expected ..., got ..." message. */
+Test(stats, compare_size_mismatch)
+{
+    struct planes pa, pr;
+    struct stats_image a = planes_image(&pa, 4, 4, false), r = planes_image(&pr, 4, 5, false);
+    struct stats_metrics m;
+    struct mcpt_error err;
+    cr_assert(!stats_compare(&a, &r, &m, &err));
+    cr_assert_str_eq(err.msg, "expected a reference of the image's size 4x4, got 4x5");
+    free(pa.data);
+    free(pr.data);
+}
+
+/* ---- fits ---- */
+
+/* Student's t density, for checking the quantiles. */
+static double t_pdf(double t, double v)
+{
+    return exp(lgamma((v + 1.0) / 2.0) - lgamma(v / 2.0)) / sqrt(v * 3.14159265358979323846) *
+           pow(1.0 + t * t / v, -(v + 1.0) / 2.0);
+}
+
+/* P(T <= q) = 1/2 + int_0^q pdf (composite Simpson, 20000 intervals) is 0.975 at the quantile,
+ * for the table (dof <= 30) and the Cornish-Fisher expansion (dof > 30). */
+Test(stats, t_quantile_matches_integral)
+{
+    const unsigned dofs[] = {1, 2, 3, 5, 8, 11, 20, 29, 30, 31, 40, 100, 1000};
+    for (size_t k = 0; k < sizeof dofs / sizeof dofs[0]; k++) {
+        double v = dofs[k], q = stats_t_quantile_975(dofs[k]);
+        const int m = 20000;
+        double h = q / m, sum = t_pdf(0.0, v) + t_pdf(q, v);
+        for (int i = 1; i < m; i++)
+            sum += (i % 2 ? 4.0 : 2.0) * t_pdf(i * h, v);
+        double cdf = 0.5 + sum * h / 3.0;
+        cr_assert(fabs(cdf - 0.975) < 2e-5, "dof %u: t %.5f has cdf %.6f", dofs[k], q, cdf);
+    }
+    cr_assert(isnan(stats_t_quantile_975(0)));
+}
+
+/* y = 3.7 x^-0.73 at x = 1, 2, ..., 4096: the log-log slope is -0.73 and R^2 is 1. */
+Test(stats, fit_exact_power_law)
+{
+    double x[13], y[13];
+    for (int i = 0; i < 13; i++) {
+        x[i] = log(exp2(i));
+        y[i] = log(3.7 * pow(exp2(i), -0.73));
+    }
+    struct stats_fit fit;
+    cr_assert(stats_fit_line(x, y, 13, &fit));
+    cr_assert_eq(fit.n, 13u);
+    cr_assert_float_eq(fit.slope, -0.73, 1e-12);
+    cr_assert_float_eq(fit.intercept, log(3.7), 1e-12);
+    cr_assert_float_eq(fit.r2, 1.0, 1e-12);
+    cr_assert(fit.ci_lo <= -0.73 && fit.ci_hi >= -0.73 && fit.ci_hi - fit.ci_lo < 1e-9);
+    /* non-finite points are left out */
+    y[5] = NAN;
+    cr_assert(stats_fit_line(x, y, 13, &fit));
+    cr_assert_eq(fit.n, 12u);
+    cr_assert_float_eq(fit.slope, -0.73, 1e-12);
+}
+
+/* y = 1 - 0.5 x + N(0, 0.1^2) at 6 points (4 degrees of freedom, where the t quantile 2.776
+ * differs most from the normal's 1.96, which would cover only 88%): over 4000 trials the 95%
+ * interval covers -0.5 in 95% of them, within 3.5 binomial standard deviations
+ * (sqrt(0.95 0.05 / 4000) = 0.0034); the mean slope is unbiased. */
+Test(stats, fit_ci_coverage)
+{
+    const int trials = 4000;
+    struct pcg32 rng;
+    sample_pcg32_seed(&rng, 2024, 7);
+    int covered = 0;
+    double sum_slope = 0.0;
+    for (int t = 0; t < trials; t++) {
+        double x[6], y[6];
+        for (int i = 0; i < 6; i++) {
+            x[i] = i * log(2.0);
+            y[i] = 1.0 - 0.5 * x[i] + 0.1 * gauss(&rng);
+        }
+        struct stats_fit fit;
+        cr_assert(stats_fit_line(x, y, 6, &fit));
+        covered += fit.ci_lo <= -0.5 && -0.5 <= fit.ci_hi;
+        sum_slope += fit.slope;
+    }
+    double coverage = (double)covered / trials;
+    cr_assert(fabs(coverage - 0.95) < 3.5 * 0.0034, "coverage %.4f", coverage);
+    cr_assert(fabs(sum_slope / trials + 0.5) < 0.002, "mean slope %.5f", sum_slope / trials);
+}
+
+/* Snapshots fall at the powers of two and at the final spp. */
+Test(stats, next_pow2)
+{
+    cr_assert_eq(stats_next_pow2(0, 4096), 1u);
+    cr_assert_eq(stats_next_pow2(1, 4096), 2u);
+    cr_assert_eq(stats_next_pow2(3, 4096), 4u);
+    cr_assert_eq(stats_next_pow2(2048, 4096), 4096u);
+    cr_assert_eq(stats_next_pow2(512, 1000), 1000u);
+    cr_assert_eq(stats_next_pow2(0, 1), 1u);
+    cr_assert_eq(stats_next_pow2(0x80000000u, UINT32_MAX), UINT32_MAX);
+}
+
+/* ---- curve outputs ---- */
+
+/* The keys of the first JSON object at depth want_depth of s (1: the object s starts with),
+ * comma-separated in order. */
+static void json_keys(const char *s, int want_depth, char *out, size_t out_bytes)
+{
+    int depth = 0;
+    bool in_str = false, done_first = false;
+    const char *str_start = NULL;
+    out[0] = '\0';
+    for (const char *p = s; *p && !done_first; p++) {
+        if (in_str) {
+            if (*p == '\\')
+                p++;
+            else if (*p == '"') {
+                in_str = false;
+                const char *q = p + 1;
+                while (*q == ' ')
+                    q++;
+                if (*q == ':' && depth == want_depth) {
+                    size_t len = strlen(out);
+                    snprintf(out + len, out_bytes - len, "%s%.*s", len ? "," : "",
+                             (int)(p - str_start), str_start);
+                }
+            }
+            continue;
+        }
+        if (*p == '"') {
+            in_str = true;
+            str_start = p + 1;
+        } else if (*p == '{' || *p == '[') {
+            depth++;
+        } else if (*p == '}' || *p == ']') {
+            done_first = depth == want_depth; /* the first object at that depth is over */
+            depth--;
+        }
+    }
+}
+
+static char *read_text(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    cr_assert(f, "cannot open %s", path);
+    static char buf[1 << 16];
+    size_t n = fread(buf, 1, sizeof buf - 1, f);
+    buf[n] = '\0';
+    fclose(f);
+    return buf;
+}
+
+/* A synthetic curve of three points written as CSV and JSON: the header line and the keys are
+ * the documented ones (golden strings, docs/convergence.md). */
+Test(stats, csv_json_formats)
+{
+    struct film film;
+    struct mcpt_error err;
+    cr_assert(film_init(&film, 8, 8, &err));
+    struct planes pr;
+    struct stats_image ref = planes_image(&pr, 8, 8, true);
+    for (int c = 0; c < 3; c++)
+        for (int i = 0; i < 64; i++) {
+            plane(&pr, c)[i] = 0.5f;
+            plane(&pr, 3 + c)[i] = 1e-4f;
+        }
+    struct stats_run_info info = {.scene = "s.txt", .reference = "ref.exr", .sampler = "sobol",
+                                  .integrator = "path-mis", .max_depth = UINT32_MAX, .width = 8,
+                                  .height = 8};
+    struct stats_curve curve;
+    stats_curve_init(&curve, &info);
+    struct pcg32 rng;
+    sample_pcg32_seed(&rng, 5, 5);
+    for (uint32_t spp = 1; spp <= 4; spp *= 2) {
+        for (int i = 0; i < 64; i++)
+            while (film.pixels[i].n < spp)
+                film_add(&film.pixels[i], v3_splat(0.5f + 0.3f * (float)gauss(&rng)));
+        cr_assert(stats_curve_add(&curve, &film, &ref, 9, spp, 0.1 * spp, true, 0.0f, &err));
+    }
+    struct stats_summary sum;
+    cr_assert(stats_summarize(&curve, 0.0, &sum));
+    char dir[] = "/tmp/mcpt_stats_XXXXXX";
+    cr_assert(mkdtemp(dir));
+    char csv[300], json[300], svg[300], sheet[300];
+    snprintf(csv, sizeof csv, "%s/c.csv", dir);
+    snprintf(json, sizeof json, "%s/c.json", dir);
+    snprintf(svg, sizeof svg, "%s/c.svg", dir);
+    snprintf(sheet, sizeof sheet, "%s/sheet.png", dir);
+    cr_assert(stats_write_csv(csv, &curve, &err), "%s", err.msg);
+    cr_assert(stats_write_json(json, &curve, &sum, &err), "%s", err.msg);
+    cr_assert(stats_write_svg(svg, &curve, &sum, &err), "%s", err.msg);
+    cr_assert(stats_write_contact_sheet(sheet, &curve, &err), "%s", err.msg);
+
+    const char *text = read_text(csv);
+    const char *golden_header =
+        "spp,seconds,mse,rmse,relmse,psnr_db,mean_variance,efficiency,sampler,integrator,seed,"
+        "error_source,time_to_unit_variance,mse_raw,psnr_raw_db,noise_floor,mrse_pbrt,mae,"
+        "max_depth\n";
+    cr_assert(strncmp(text, golden_header, strlen(golden_header)) == 0, "header: %.200s", text);
+    int n_lines = 0;
+    for (const char *p = text; *p; p++)
+        n_lines += *p == '\n';
+    cr_assert_eq(n_lines, 4);
+    const char *row2 = strchr(strchr(text, '\n') + 1, '\n') + 1; /* the 2-spp row */
+    cr_assert(strncmp(row2, "2,0.2,", 6) == 0, "row: %.80s", row2);
+    cr_assert(strstr(row2, ",sobol,path-mis,9,reference-corrected,") != NULL, "%.200s", row2);
+    cr_assert(strstr(row2, ",inf\n") != NULL, "max_depth inf: %.200s", row2);
+
+    text = read_text(json);
+    char keys[1024];
+    json_keys(text, 1, keys, sizeof keys);
+    cr_assert_str_eq(keys, "format,scene,reference,width,height,sampler,integrator,max_depth,"
+                           "seeds,error_source,noise_floor,mse_fit,rmse_fit,mse_raw_fit,"
+                           "seconds_per_spp,overhead_seconds,time_fit_r2,target,rows");
+    json_keys(strstr(text, "\"rows\""), 2, keys, sizeof keys);
+    cr_assert_str_eq(keys, "spp,n_seeds,seconds,mse_mean,mse_std,rmse,psnr_db,mean_variance,"
+                           "efficiency,time_to_unit_variance,mse_raw_mean,noise_floor");
+    json_keys(strstr(text, "\"mse_fit\""), 1, keys, sizeof keys);
+    cr_assert_str_eq(keys, "slope,intercept,r2,slope_se,ci95,n_points");
+    cr_assert(strstr(text, "\"format\": \"mcpt-convergence-1\"") != NULL);
+    cr_assert(strstr(read_text(svg), "</svg>") != NULL);
+
+    stats_summary_free(&sum);
+    stats_curve_free(&curve);
+    film_free(&film);
+    free(pr.data);
+    char cmd[400];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+    cr_assert_eq(system(cmd), 0);
+}
+
+/* ---- the command line: snapshots, compare, integrate ---- */
+
+static char tmpdir[256];
+
+static void setup(void)
+{
+    snprintf(tmpdir, sizeof tmpdir, "/tmp/mcpt_stats_cli_XXXXXX");
+    cr_assert(mkdtemp(tmpdir));
+}
+
+static void teardown(void)
+{
+    char cmd[512];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmpdir);
+    cr_assert_eq(system(cmd), 0);
+}
+
+/* Runs mcpt with args (NULL-terminated), stdout to tmpdir/stdout.txt; returns the exit status. */
+static int run_mcpt(const char *const *args)
+{
+    const char *bin = getenv("MCPT") ? getenv("MCPT") : "./mcpt";
+    char out_path[300];
+    snprintf(out_path, sizeof out_path, "%s/stdout.txt", tmpdir);
+    pid_t pid = fork();
+    cr_assert(pid >= 0);
+    if (pid == 0) {
+        int fd = open(out_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        int null_fd = open("/dev/null", O_WRONLY);
+        dup2(fd, 1);
+        dup2(null_fd, 2);
+        const char *argv[40] = {bin};
+        int n = 1;
+        for (; args[n - 1] && n < 39; n++)
+            argv[n] = args[n - 1];
+        argv[n] = NULL;
+        execv(bin, (char *const *)argv);
+        _exit(127);
+    }
+    int status;
+    cr_assert_eq(waitpid(pid, &status, 0), pid);
+    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+static bool same_bytes(const char *a, const char *b)
+{
+    FILE *fa = fopen(a, "rb"), *fb = fopen(b, "rb");
+    cr_assert(fa && fb);
+    bool same = true;
+    for (;;) {
+        int ca = fgetc(fa), cb = fgetc(fb);
+        if (ca != cb) {
+            same = false;
+            break;
+        }
+        if (ca == EOF)
+            break;
+    }
+    fclose(fa);
+    fclose(fb);
+    return same;
+}
+
+/* The channel data of two EXRs are identical, byte for byte. */
+static void assert_same_exr_data(const char *a, const char *b)
+{
+    struct image ia, ib;
+    struct mcpt_error err;
+    cr_assert(image_read_exr(a, &ia, &err), "%s", err.msg);
+    cr_assert(image_read_exr(b, &ib, &err), "%s", err.msg);
+    cr_assert_eq(ia.n_channels, ib.n_channels);
+    size_t n = (size_t)ia.width * (size_t)ia.height;
+    cr_assert_eq(ia.width, ib.width);
+    cr_assert_eq(ia.height, ib.height);
+    for (int c = 0; c < ia.n_channels; c++) {
+        cr_assert_str_eq(ia.names[c], ib.names[c]);
+        cr_assert(memcmp(ia.data[c], ib.data[c], n * sizeof(float)) == 0, "channel %s differs",
+                  ia.names[c]);
+    }
+    image_free(&ia);
+    image_free(&ib);
+}
+
+/* trace_render continues each pixel from its count, so a progressive run with snapshots at
+ * 1, 2, 4, 8, 12 spp ends on the same image as one call: identical EXR bytes, for the default
+ * sampler and for the stratified one (whose strata must be those of the final spp). */
+Test(stats, snapshot_run_equals_plain_run, .init = setup, .fini = teardown, .timeout = 60)
+{
+    const char *samplers[] = {"sobol", "stratified", "independent"};
+    for (int k = 0; k < 3; k++) {
+        char plain[300], snap[300], curve[300];
+        snprintf(plain, sizeof plain, "%s/plain-%s.exr", tmpdir, samplers[k]);
+        snprintf(snap, sizeof snap, "%s/snap-%s.exr", tmpdir, samplers[k]);
+        snprintf(curve, sizeof curve, "%s/curve-%s.csv", tmpdir, samplers[k]);
+        const char *a[] = {"scenes/cornell-box.txt", "--width", "16", "--height", "12", "--spp",
+                           "12", "--seed", "5", "--sampler", samplers[k], "-o", plain, "--quiet",
+                           NULL};
+        cr_assert_eq(run_mcpt(a), 0);
+        const char *b[] = {"scenes/cornell-box.txt", "--width", "16", "--height", "12", "--spp",
+                           "12", "--seed", "5", "--sampler", samplers[k], "-o", snap,
+                           "--snapshots", "pow2", "--curve", curve, "--preview-every", "0.001",
+                           NULL};
+        cr_assert_eq(run_mcpt(b), 0);
+        assert_same_exr_data(plain, snap);
+        cr_assert(same_bytes(plain, snap), "%s: EXR files differ", samplers[k]);
+    }
+    /* the snapshots and the curve's companions exist; the CSV has the 5 measured rows */
+    const char *files[] = {"snap-sobol-spp01.exr", "snap-sobol-spp08.png", "snap-sobol-spp12.exr",
+                           "snap-sobol-contact.png", "curve-sobol.json", "curve-sobol.svg"};
+    for (size_t i = 0; i < sizeof files / sizeof files[0]; i++) {
+        char path[400];
+        struct stat st;
+        snprintf(path, sizeof path, "%s/%s", tmpdir, files[i]);
+        cr_assert(stat(path, &st) == 0, "missing %s", files[i]);
+    }
+    char path[400];
+    snprintf(path, sizeof path, "%s/curve-sobol.csv", tmpdir);
+    const char *text = read_text(path);
+    int n_lines = 0;
+    for (const char *p = text; *p; p++)
+        n_lines += *p == '\n';
+    cr_assert_eq(n_lines, 6, "%s", text);
+    cr_assert(strstr(text, "\n12,") != NULL);
+}
+
+/* mcpt compare on a snapshot against the reference of its run prints, as JSON, the documented
+ * keys and exactly the CSV row's mse_raw (the same floats, the same formula). */
+Test(stats, compare_reproduces_curve_row, .init = setup, .fini = teardown, .timeout = 60)
+{
+    char ref[300], out[300], curve[300], snap4[300], heat[300];
+    snprintf(ref, sizeof ref, "%s/ref.exr", tmpdir);
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(curve, sizeof curve, "%s/curve.csv", tmpdir);
+    snprintf(snap4, sizeof snap4, "%s/out-spp4.exr", tmpdir);
+    snprintf(heat, sizeof heat, "%s/heat.png", tmpdir);
+    const char *a[] = {"scenes/cornell-box.txt", "--width", "16", "--height", "16", "--spp", "64",
+                       "--seed", "99", "-o", ref, "--quiet", NULL};
+    cr_assert_eq(run_mcpt(a), 0);
+    const char *b[] = {"scenes/cornell-box.txt", "--width", "16", "--height", "16", "--spp", "8",
+                       "--seed", "1", "-o", out, "--snapshots", "pow2", "--reference", ref,
+                       "--curve", curve, "--quiet", NULL};
+    cr_assert_eq(run_mcpt(b), 0);
+    const char *text = read_text(curve);
+    const char *row = strstr(text, "\n4,");
+    cr_assert(row);
+    char mse_raw[64] = "";
+    const char *p = row + 1;
+    for (int col = 0; col < 13; col++)
+        p = strchr(p, ',') + 1;
+    snprintf(mse_raw, sizeof mse_raw, "%.*s", (int)(strchr(p, ',') - p), p);
+
+    const char *c[] = {"compare", snap4, ref, "--json", "--heatmap", heat, NULL};
+    cr_assert_eq(run_mcpt(c), 0);
+    char stdout_path[300];
+    snprintf(stdout_path, sizeof stdout_path, "%s/stdout.txt", tmpdir);
+    text = read_text(stdout_path);
+    char keys[1024];
+    json_keys(text, 1, keys, sizeof keys);
+    cr_assert_str_eq(keys, "image,reference,width,height,n_values,n_skipped,mse,mse_se,rmse,"
+                           "relmse,mrse_pbrt,mae,psnr_db,bias,noise_floor,mse_corrected,"
+                           "mse_corrected_se,rmse_corrected,relmse_corrected,psnr_corrected_db,"
+                           "mean_variance,relmse_own");
+    char want[96];
+    snprintf(want, sizeof want, "\"mse\": %s,", mse_raw);
+    cr_assert(strstr(text, want) != NULL, "want %s in %s", want, text);
+    struct stat st;
+    cr_assert(stat(heat, &st) == 0 && st.st_size > 0);
+
+    /* bad input: exit 2 (missing file, wrong size, missing argument) */
+    const char *missing[] = {"compare", snap4, "no-such.exr", NULL};
+    cr_assert_eq(run_mcpt(missing), 2);
+    char small[300];
+    snprintf(small, sizeof small, "%s/small.exr", tmpdir);
+    const char *d[] = {"scenes/cornell-box.txt", "--width", "8", "--height", "8", "--spp", "1",
+                       "-o", small, "--quiet", NULL};
+    cr_assert_eq(run_mcpt(d), 0);
+    const char *mismatch[] = {"compare", small, ref, NULL};
+    cr_assert_eq(run_mcpt(mismatch), 2);
+    const char *one[] = {"compare", small, NULL};
+    cr_assert_eq(run_mcpt(one), 2);
+    const char *bad_ref[] = {"scenes/cornell-box.txt", "--width", "8", "--height", "8", "--spp",
+                             "2", "-o", out, "--reference", ref, "--quiet", NULL};
+    cr_assert_eq(run_mcpt(bad_ref), 2);
+}
+
+/* ---- the sampler laboratory ---- */
+
+/* Each exact integral against the midpoint rule on a 2000 x 2000 grid: to 1e-6 for the smooth
+ * integrands, to 1e-3 for the discontinuous ones (the grid misclassifies cells along an edge). */
+Test(stats, integrand_exact_values)
+{
+    for (int f = 0; f < STATS_FN_COUNT; f++) {
+        const int n = 2000;
+        double sum = 0.0;
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++)
+                sum += stats_integrand_eval((enum stats_integrand)f, (i + 0.5) / n, (j + 0.5) / n);
+        double quad = sum / ((double)n * n), exact = stats_integrand_exact((enum stats_integrand)f);
+        bool smooth = f == STATS_FN_GAUSSIAN || f == STATS_FN_POLYNOMIAL;
+        cr_assert(fabs(quad - exact) < (smooth ? 1e-6 : 1e-3), "%s: quadrature %.7f, exact %.7f",
+                  stats_integrand_name((enum stats_integrand)f), quad, exact);
+        enum stats_integrand back;
+        cr_assert(stats_integrand_parse(stats_integrand_name((enum stats_integrand)f), &back));
+        cr_assert_eq((int)back, f);
+    }
+}
+
+/* Independent points: MSE = Var f / N exactly in expectation, so the fitted slope over
+ * N = 1 .. 1024 (64 seeds) is -1 within its 95% interval (widened by 0.05 for the fit's own
+ * noise), and the MSE at N = 1 is Var f = I - I^2 for the disk's 0/1 integrand within 4
+ * standard errors. */
+Test(stats, integrate_independent_is_n_to_minus_one)
+{
+    struct stats_integrate_row rows[11];
+    size_t n = stats_integrate(STATS_FN_DISK, SAMPLER_INDEPENDENT, 1024, 64, 0, rows);
+    cr_assert_eq(n, 11u);
+    double x[11], y[11];
+    for (size_t i = 0; i < n; i++) {
+        x[i] = log((double)rows[i].spp);
+        y[i] = log(rows[i].mse);
+    }
+    struct stats_fit fit;
+    cr_assert(stats_fit_line(x, y, n, &fit));
+    cr_assert(fit.ci_lo - 0.05 <= -1.0 && -1.0 <= fit.ci_hi + 0.05, "slope %.3f [%.3f, %.3f]",
+              fit.slope, fit.ci_lo, fit.ci_hi);
+    double i_disk = stats_integrand_exact(STATS_FN_DISK);
+    cr_assert(fabs(rows[0].mse - (i_disk - i_disk * i_disk)) < 4.0 * rows[0].mse_se);
+}
