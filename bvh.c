@@ -12,6 +12,12 @@
 #include <stdlib.h>
 #include <time.h>
 
+/* The watertight test needs a * b - c * d rounded as two products and a difference, never fused
+ * into an FMA (see tri_hit).  gcc does not contract under -std=c11; clang does unless told. */
+#if defined(__clang__)
+#pragma STDC FP_CONTRACT OFF
+#endif
+
 /* ---- Layout and invariants ------------------------------------------------------------------
  * struct bvh_node (bvh.h): 32 bytes, box min/max plus left_first and n_tris.
  * nodes[0] is the root; an empty BVH (n_tris == 0) has no nodes at all.  nodes[1] is unused, so
@@ -408,7 +414,7 @@ fail:
 /* Per-ray constants, computed once per ray and shared by every box and triangle test. */
 struct ray_pre {
     float o[3];        /* origin */
-    float inv_d[3];    /* 1 / d per axis; +inf where d is +0 or -0 */
+    float inv_d[3];    /* 1 / d per axis; +-inf where d is +-0 */
     int is_neg[3];     /* inv_d[a] < 0: the slab's near plane is max[a], the far plane min[a] */
     float far_scale;   /* 1 + 2 gamma(3), PBRT 4e, ch. 6, "Conservative Ray-Bounds Intersections" */
     int kx, ky, kz;    /* Woop et al. 2013: kz = argmax |d|, (kx, ky) swapped when d[kz] < 0 */
@@ -433,9 +439,7 @@ static void ray_setup(const struct ray *ray, struct ray_pre *rp)
     float d[3] = {ray->d.x, ray->d.y, ray->d.z};
     for (int a = 0; a < 3; a++) {
         rp->o[a] = o[a];
-        /* d == -0 would give -inf and pick max as the near plane, and a NaN there could then
-         * not be told from a real bound; map both zeros to +inf (near = min, far = max). */
-        rp->inv_d[a] = d[a] == 0.0f ? INFINITY : 1.0f / d[a];
+        rp->inv_d[a] = 1.0f / d[a]; /* +-inf for d = +-0 (IEEE 754) */
         rp->is_neg[a] = rp->inv_d[a] < 0.0f;
     }
     rp->far_scale = 1.0f + 2.0f * mcpt_gamma(3);
@@ -458,13 +462,15 @@ static void ray_setup(const struct ray *ray, struct ray_pre *rp)
     rp->sz = 1.0f / d[kz];
 }
 
-/* Slab test, Kay and Kajiya's slabs in the (min - o) * inv_d form of PBRT 4e, ch. 6,
- * "Conservative Ray-Bounds Intersections":
+/* Slab test (Kay, Kajiya 1986, "Ray Tracing Complex Scenes") in the (min - o) * inv_d form of
+ * PBRT 4e, ch. 6, "Conservative Ray-Bounds Intersections":
  *   t_near_a = (near_a - o_a) * inv_d_a
  *   t_far_a  = (far_a - o_a) * inv_d_a * (1 + 2 gamma(3))   (covers the rounding of both ops)
  *   hit  iff  max(t_min, t_near_x, t_near_y, t_near_z) <= min(t_max, t_far_x, t_far_y, t_far_z)
- * With d_a == 0, inv_d_a = +inf: an origin outside the slab gives +-inf on both planes (miss),
- * one strictly inside gives -inf, +inf (no constraint), and an origin exactly on a plane gives
+ * The near plane is min_a for inv_d_a >= 0 and max_a otherwise, chosen by sign, never by
+ * comparing the two t values.  With d_a == +-0, inv_d_a = +-inf: an origin outside the slab
+ * gives the same infinity on both planes (miss), one strictly inside gives -inf for the near
+ * and +inf for the far plane (no constraint), and an origin exactly on a plane gives
  * 0 * inf = NaN for that plane, which max_num/min_num ignore: the ray lies in the face of a
  * closed box and is treated as inside.  A flat box (min_a == max_a) is therefore hit both by
  * rays crossing it and by rays lying in it.  *t_entry gets the entry distance. */
@@ -624,12 +630,13 @@ bool bvh_occluded(const struct bvh *bvh, const struct ray *ray)
  * Two triangles sharing an edge evaluate that edge's function on the same sheared endpoints with
  * the operands swapped, and fl(a b - c d) = -fl(c d - a b), so no ray can slip between them
  * (watertight along edges and at vertices).  This needs the products not to be contracted into
- * FMAs: -std=c11 keeps gcc's -ffp-contract=off.  Where a float edge function is exactly 0 the
+ * FMAs (see the pragma at the top of the file).  Where a float edge function is exactly 0 the
  * sign is unreliable and all three are recomputed in double (the paper's double-precision
  * fallback; the products of floats are exact in double).  Both signs are accepted (no culling).
  *   det = U + V + W,  T = U Az + V Bz + W Cz,  t = T / det,  u = V / det,  v = W / det
  * A hit needs t_min < t < t_max and t > delta_t, PBRT's bound on the rounding error of t (a hit
- * that close may lie behind the origin); det == 0 (ray parallel to, or in, the plane) is a miss. */
+ * that close may lie behind the origin, so a negative t_min finds nothing behind it either);
+ * det == 0 (ray parallel to, or in, the plane) is a miss. */
 static inline float max_abs3(float a, float b, float c)
 {
     float m = fabsf(a) > fabsf(b) ? fabsf(a) : fabsf(b);

@@ -221,6 +221,20 @@ static bool image_is_writable(const char *path, const struct image *img, struct 
             }
         }
     }
+    if (img->n_attrs < 0 || img->n_attrs > IMAGE_MAX_ATTRS) {
+        mcpt_error_set(err, path, 0, 0, "expected 0 to %d attributes, got %d", IMAGE_MAX_ATTRS,
+                       img->n_attrs);
+        return false;
+    }
+    for (int a = 0; a < img->n_attrs; a++) {
+        size_t len = strnlen(img->attr_names[a], sizeof img->attr_names[a]);
+        if (len == 0 || len == sizeof img->attr_names[a] ||
+            strnlen(img->attr_values[a], IMAGE_ATTR_BYTES) == IMAGE_ATTR_BYTES) {
+            mcpt_error_set(err, path, 0, 0, "expected attribute %d to have a name of 1 to 31 "
+                           "characters and a NUL-terminated value", a);
+            return false;
+        }
+    }
     return true;
 }
 
@@ -259,6 +273,8 @@ bool image_write_exr(const char *path, const struct image *img, struct mcpt_erro
     for (int c = 0; c < img->n_channels && rv == EXR_ERR_SUCCESS; c++)
         rv = exr_add_channel(ctxt, part_idx, img->names[c], EXR_PIXEL_FLOAT,
                              EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1);
+    for (int a = 0; a < img->n_attrs && rv == EXR_ERR_SUCCESS; a++)
+        rv = exr_attr_set_string(ctxt, part_idx, img->attr_names[a], img->attr_values[a]);
     if (rv == EXR_ERR_SUCCESS)
         rv = exr_write_header(ctxt);
     if (rv == EXR_ERR_SUCCESS)
@@ -442,6 +458,32 @@ static bool image_alloc_from_header(const char *path, exr_storage_t storage,
     return true;
 }
 
+/* Keeps the string attributes of part 0 that fit in img (see image.h); skips the others and
+ * the structural "type" and "name" that the library writes and reads itself. */
+static void read_string_attrs(exr_context_t ctxt, struct image *img)
+{
+    int32_t n_attrs = 0;
+    if (exr_get_attribute_count(ctxt, 0, &n_attrs) != EXR_ERR_SUCCESS)
+        return;
+    for (int32_t i = 0; i < n_attrs && img->n_attrs < IMAGE_MAX_ATTRS; i++) {
+        const exr_attribute_t *attr = NULL;
+        if (exr_get_attribute_by_index(ctxt, 0, EXR_ATTR_LIST_FILE_ORDER, i, &attr) !=
+                EXR_ERR_SUCCESS ||
+            !attr || attr->type != EXR_ATTR_STRING || !attr->string || !attr->string->str)
+            continue;
+        size_t name_len = strlen(attr->name);
+        int32_t value_len = attr->string->length;
+        if (name_len == 0 || name_len >= sizeof img->attr_names[0] || value_len < 0 ||
+            value_len >= IMAGE_ATTR_BYTES || strcmp(attr->name, "type") == 0 ||
+            strcmp(attr->name, "name") == 0)
+            continue;
+        memcpy(img->attr_names[img->n_attrs], attr->name, name_len + 1);
+        memcpy(img->attr_values[img->n_attrs], attr->string->str, (size_t)value_len);
+        img->attr_values[img->n_attrs][value_len] = '\0';
+        img->n_attrs++;
+    }
+}
+
 bool image_read_exr(const char *path, struct image *img, struct mcpt_error *err)
 {
     struct exr_stream s = {.fd = -1};
@@ -487,6 +529,7 @@ bool image_read_exr(const char *path, struct image *img, struct mcpt_error *err)
     }
     if (!image_alloc_from_header(path, storage, &dw, chlist, img, err))
         goto fail;
+    read_string_attrs(ctxt, img);
     rv = decode_part(ctxt, storage, &dw, img);
     if (rv != EXR_ERR_SUCCESS) {
         exr_error_set(err, path, "cannot read OpenEXR pixels", &s, rv);
@@ -511,6 +554,15 @@ int image_find_channel(const struct image *img, const char *name)
             return c;
     }
     return -1;
+}
+
+const char *image_find_attr(const struct image *img, const char *name)
+{
+    for (int a = 0; a < img->n_attrs && a < IMAGE_MAX_ATTRS; a++) {
+        if (strncmp(img->attr_names[a], name, sizeof img->attr_names[a]) == 0)
+            return img->attr_values[a];
+    }
+    return NULL;
 }
 
 void image_free(struct image *img)

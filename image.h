@@ -6,7 +6,9 @@
 
 #include "vec.h"
 
-#define IMAGE_MAX_CHANNELS 16
+#define IMAGE_MAX_CHANNELS 32 /* mcpt's partial renders (partial.h) write 24 */
+#define IMAGE_MAX_ATTRS 8      /* string attributes kept per image */
+#define IMAGE_ATTR_BYTES 256   /* longest attribute value kept, including the NUL */
 
 /* A planar float image: channel c of pixel (x, y) is data[c][y * width + x]. */
 struct image {
@@ -15,19 +17,30 @@ struct image {
     int n_channels;
     char names[IMAGE_MAX_CHANNELS][32]; /* EXR channel names, e.g. "R", "G", "B" */
     float *data[IMAGE_MAX_CHANNELS];    /* owned by the image when read by image_read_exr */
+    /* header attributes of type string, e.g. "mcpt.sample-ranges" = "0:64" (partial.h) */
+    int n_attrs;
+    char attr_names[IMAGE_MAX_ATTRS][32];
+    char attr_values[IMAGE_MAX_ATTRS][IMAGE_ATTR_BYTES];
 };
 
 /* Writes img as a scanline EXR, 32-bit float channels, ZIP compression, channels in the given
- * order (the EXR file stores them sorted by name, as the format requires).  Returns false and
- * fills *err (file only, line 0) on an I/O failure. */
+ * order (the EXR file stores them sorted by name, as the format requires), and img's string
+ * attributes in the header.  Returns false and fills *err (file only, line 0) on an I/O
+ * failure. */
 bool image_write_exr(const char *path, const struct image *img, struct mcpt_error *err);
 
 /* Reads every channel of a scanline or tiled EXR (half, float or uint channels are converted
- * to float).  On success *img owns its data (free with image_free). */
+ * to float) and the first IMAGE_MAX_ATTRS string attributes of its header that fit (name of
+ * at most 31 bytes, value of at most IMAGE_ATTR_BYTES - 1; others are skipped, and so are the
+ * structural "type" and "name").  On success
+ * *img owns its data (free with image_free). */
 bool image_read_exr(const char *path, struct image *img, struct mcpt_error *err);
 
 /* Finds a channel by name; returns its index or -1. */
 int image_find_channel(const struct image *img, const char *name);
+
+/* Finds a string attribute by name; returns its value (owned by img) or NULL. */
+const char *image_find_attr(const struct image *img, const char *name);
 
 /* Writes an 8-bit sRGB PNG of linear rgb (interleaved, 3 floats a pixel), multiplied by
  * 2^exposure, then the sRGB transfer function (IEC 61966-2-1), clamped to [0, 1], rounded. */

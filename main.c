@@ -11,6 +11,7 @@
 
 #include "film.h"
 #include "image.h"
+#include "partial.h"
 #include "scene.h"
 #include "stats.h"
 #include "trace.h"
@@ -19,12 +20,13 @@ static const char USAGE[] =
     "usage: mcpt SCENE [options]\n"
     "       mcpt compare A.exr REF.exr [--heatmap ERR.png] [--json]   (mcpt compare --help)\n"
     "       mcpt integrate FUNCTION [--sampler S] [--spp N] [--seeds K]  (mcpt integrate --help)\n"
+    "       mcpt merge PART.exr... -o OUT.exr   (mcpt merge --help)\n"
     "Render SCENE (see docs/scene-format.md) to OUT.exr (linear float RGB, with per-pixel\n"
     "variance of the mean and sample count) and OUT.png (sRGB preview).\n"
     "\n"
     "  -o, --output OUT.exr   output image (default: the scene's name with .exr, here)\n"
     "      --spp N            samples per pixel (default: the scene's render spp, else 64)\n"
-    "      --max-depth D      longest path in segments; 0 = emission only, 1 = direct light,\n"
+    "      --max-depth D      most bounces per path; 0 = emission only, 1 = direct light,\n"
     "                         inf = until Russian roulette ends it (default: scene, else inf)\n"
     "      --direct E         direct-light estimator: mis (default), light, bsdf, cosine or\n"
     "                         hemisphere; every one converges to the same image\n"
@@ -59,6 +61,9 @@ static const char USAGE_MORE[] =
     "                         with its options (later options override; render settings must\n"
     "                         match); the result is bit-identical to an uninterrupted run;\n"
     "                         SCENE may be left out (the checkpoint names it)\n"
+    "      --sample-range A:B render only sample indices A..B-1 of every pixel of the --spp\n"
+    "                         render (0 <= A < B <= spp); the EXR carries the sums that\n"
+    "                         mcpt merge adds up (docs/distributed.md)\n"
     "convergence (docs/convergence.md):\n"
     "      --snapshots pow2   write OUT-sppN.exr/.png at 1, 2, 4, ... spp and OUT-contact.png\n"
     "      --reference REF    measure the error against REF.exr (noise-corrected when REF has\n"
@@ -115,6 +120,8 @@ struct options {
     uint32_t light_samples;      /* --light-samples N; 0: from the scene, else 1 */
     uint32_t rr_depth;           /* --rr-depth D; 0: from the scene, else the default */
     const char *resume_path;     /* --resume CKPT, or NULL */
+    bool has_range;              /* --sample-range A:B given */
+    struct partial_range range;  /* its sample indices */
     uint32_t args_bytes;         /* bytes used in args */
     char args[FILM_CHECKPOINT_ARGS_BYTES]; /* every option but --resume as "--name[=value]",
                                               NUL-ended: what a checkpoint stores */
@@ -189,6 +196,7 @@ static int parse_args(int argc, char **argv, struct options *o)
     enum { OPT_SNAPSHOTS = 768, OPT_REFERENCE, OPT_CURVE, OPT_SEEDS, OPT_TARGET_RMSE,
            OPT_PREVIEW_EVERY };
     enum { OPT_DIRECT = 1024, OPT_LIGHT_SAMPLES, OPT_SPLIT, OPT_RR, OPT_RR_DEPTH };
+    enum { OPT_SAMPLE_RANGE = 1280 };
     static const struct option long_opts[] = {
         {"output", required_argument, NULL, 'o'},
         {"spp", required_argument, NULL, OPT_SPP},
@@ -222,6 +230,7 @@ static int parse_args(int argc, char **argv, struct options *o)
         {"seeds", required_argument, NULL, OPT_SEEDS},
         {"target-rmse", required_argument, NULL, OPT_TARGET_RMSE},
         {"preview-every", required_argument, NULL, OPT_PREVIEW_EVERY},
+        {"sample-range", required_argument, NULL, OPT_SAMPLE_RANGE},
         {NULL, 0, NULL, 0},
     };
     memset(o, 0, sizeof *o);
@@ -384,6 +393,12 @@ static int parse_args(int argc, char **argv, struct options *o)
             *(c == OPT_TARGET_RMSE ? &o->target_rmse : &o->preview_every) = f;
             break;
         }
+        case OPT_SAMPLE_RANGE:
+            if (!partial_parse_range(optarg, &o->range))
+                return usage_error("expected --sample-range A:B with integers 0 <= A < B <= "
+                                   "4294967295, got '%s'", optarg);
+            o->has_range = true;
+            break;
         case 'h':
             fputs(USAGE, stdout);
             fputs(USAGE_MORE, stdout);
@@ -508,6 +523,40 @@ static int sampling_options(const struct options *o, const struct render_setting
     if (topt->min_spp > topt->spp)
         return usage_error("expected --min-spp <= the most samples per pixel (%u), got %u",
                            topt->spp, topt->min_spp);
+    return -1;
+}
+
+/* --sample-range A:B: renders sample indices A..B-1 of the topt->spp-sample render, i.e.
+ * B - A samples a pixel from sample offset A, in the stratified sets of the whole render (so
+ * disjoint ranges hold exactly the whole render's samples), and fills *info with the range and
+ * every setting the parts of one render must share.  Returns -1 to go on, else EXIT_USAGE. */
+static int sample_range_options(const struct options *o, bool measuring, uint64_t scene_hash,
+                                const struct film *film, struct trace_options *topt,
+                                struct partial_info *info)
+{
+    if (topt->adaptive)
+        return usage_error("expected no adaptive sampling with --sample-range (where a pixel "
+                           "stops depends on all its samples), got it");
+    if (measuring)
+        return usage_error("expected no --snapshots, --curve, --reference or --seeds with "
+                           "--sample-range, got one");
+    if (o->range.end > topt->spp)
+        return usage_error("expected --sample-range within the render's %u samples per pixel "
+                           "(--spp sets them), got %u:%u", topt->spp, o->range.begin,
+                           o->range.end);
+    memset(info, 0, sizeof *info);
+    info->n_ranges = 1;
+    info->ranges[0] = o->range;
+    snprintf(info->render, sizeof info->render,
+             "scene=%016llx film=%dx%d spp=%u seed=%llu sampler=%s max-depth=%u direct=%s "
+             "light-samples=%u split=%s rr=%.9g rr-depth=%u", (unsigned long long)scene_hash,
+             film->width, film->height, topt->spp, (unsigned long long)topt->seed,
+             sample_sampler_name(topt->sampler), topt->max_depth, scene_direct_name(topt->direct),
+             topt->light_samples ? topt->light_samples : 1u, scene_split_name(topt->split),
+             (double)topt->rr_prob, topt->rr_depth ? topt->rr_depth : TRACE_RR_DEPTH_DEFAULT);
+    topt->sampler_spp = topt->spp; /* the whole render's stratified sets */
+    topt->sample_offset = o->range.begin;
+    topt->spp = o->range.end - o->range.begin;
     return -1;
 }
 
@@ -1067,10 +1116,98 @@ static int cmd_integrate(int argc, char **argv)
     return fflush(stdout) == 0 ? EXIT_OK : EXIT_RUNTIME;
 }
 
+/* ---- mcpt merge PART.exr... -o OUT.exr ---- */
+
+static const char MERGE_USAGE[] =
+    "usage: mcpt merge PART.exr... -o OUT.exr [--exposure E] [--quiet]\n"
+    "Merges partial renders (mcpt SCENE --sample-range A:B) of one scene and one set of render\n"
+    "settings over disjoint sample ranges into OUT.exr and OUT.png: per pixel the sums, sums\n"
+    "of squares and counts add, so parts covering 0:N give the N-spp render to within float\n"
+    "rounding (docs/distributed.md).  OUT.exr is itself a partial render and can be merged.\n"
+    "  -o, --output OUT.exr  the merged image (required)\n"
+    "      --exposure E      PNG preview exposure in stops (default 0)\n"
+    "      --quiet           print errors only\n";
+
+static int cmd_merge(int argc, char **argv)
+{
+    enum { OPT_EXPOSURE = 256, OPT_QUIET };
+    static const struct option long_opts[] = {
+        {"output", required_argument, NULL, 'o'},
+        {"exposure", required_argument, NULL, OPT_EXPOSURE},
+        {"quiet", no_argument, NULL, OPT_QUIET},
+        {"help", no_argument, NULL, 'h'},
+        {NULL, 0, NULL, 0},
+    };
+    const char *out = NULL;
+    float exposure = 0.0f;
+    bool quiet = false;
+    opterr = 0;
+    optind = 0;
+    int c;
+    while ((c = getopt_long(argc, argv, ":o:h", long_opts, NULL)) != -1) {
+        switch (c) {
+        case 'o':
+            if (!*optarg)
+                return usage_error("expected a file name after -o, got ''");
+            out = optarg;
+            break;
+        case OPT_EXPOSURE:
+            if (!parse_float(optarg, -64.0f, 64.0f, &exposure))
+                return usage_error("expected --exposure to be a number in -64..64, got '%s'",
+                                   optarg);
+            break;
+        case OPT_QUIET:
+            quiet = true;
+            break;
+        case 'h':
+            fputs(MERGE_USAGE, stdout);
+            return EXIT_OK;
+        case ':':
+            return usage_error("expected a value after %s, got nothing", argv[optind - 1]);
+        default:
+            return usage_error("expected an option of mcpt merge, got '%s'", argv[optind - 1]);
+        }
+    }
+    if (!out)
+        return usage_error("expected -o OUT.exr for mcpt merge, got none");
+    if (optind >= argc)
+        return usage_error("expected partial renders to merge, got none");
+    struct film film;
+    struct partial_info info;
+    struct mcpt_error err = {0};
+    if (!partial_merge_files((const char *const *)argv + optind, argc - optind, &film, &info,
+                             &err)) {
+        print_error(&err);
+        return EXIT_USAGE;
+    }
+    int status = EXIT_OK;
+    if (!partial_write_exr(out, &film, &info, &err) ||
+        !write_preview(&film, out, exposure, &err)) {
+        print_error(&err);
+        status = EXIT_RUNTIME;
+    } else if (!quiet) {
+        char ranges[PARTIAL_RENDER_BYTES];
+        partial_format_ranges(&info, ranges, sizeof ranges);
+        const char *spp_word = strstr(info.render, " spp=");
+        unsigned spp_total = 0;
+        bool is_complete = spp_word && sscanf(spp_word, " spp=%u", &spp_total) == 1 &&
+                           info.n_ranges == 1 && info.ranges[0].begin == 0 &&
+                           info.ranges[0].end == spp_total;
+        printf("mcpt merge: %d part%s, %dx%d, sample ranges %s (%llu spp%s); wrote %s\n",
+               argc - optind, argc - optind == 1 ? "" : "s", film.width, film.height, ranges,
+               (unsigned long long)partial_n_samples(&info),
+               is_complete ? ", the whole render" : ", not yet the whole render", out);
+    }
+    film_free(&film);
+    return status;
+}
+
 int main(int argc, char **argv)
 {
     if (argc > 1 && strcmp(argv[1], "compare") == 0)
         return cmd_compare(argc - 1, argv + 1);
+    if (argc > 1 && strcmp(argv[1], "merge") == 0)
+        return cmd_merge(argc - 1, argv + 1);
     if (argc > 1 && strcmp(argv[1], "integrate") == 0)
         return cmd_integrate(argc - 1, argv + 1);
     struct options o;
@@ -1149,6 +1286,10 @@ int main(int argc, char **argv)
     };
     if ((status = sampling_options(&o, &scene.render, &topt)) >= 0)
         goto done;
+    struct partial_info part_info; /* --sample-range: what the EXR records */
+    if (o.has_range && (status = sample_range_options(&o, cv.measuring, scene_hash, &film,
+                                                      &topt, &part_info)) >= 0)
+        goto done;
     status = EXIT_USAGE;
     struct progress prog = {.is_tty = isatty(STDERR_FILENO), .quiet = o.quiet,
                             .t_start = now_seconds()};
@@ -1190,7 +1331,9 @@ int main(int argc, char **argv)
         print_error(&err);
         goto done;
     }
-    if (!write_images(&film, exr_path, o.exposure, &err)) {
+    if (o.has_range ? !partial_write_exr(exr_path, &film, &part_info, &err) ||
+                          !write_preview(&film, exr_path, o.exposure, &err)
+                    : !write_images(&film, exr_path, o.exposure, &err)) {
         print_error(&err);
         goto done;
     }

@@ -209,7 +209,8 @@ static uint32_t kensler_permute(uint32_t i, uint32_t l, uint32_t p)
         i &= w;
         i ^= i >> 5;
     } while (i >= l);
-    return (uint32_t)(((uint64_t)i + p) % l);
+    return (uint32_t)(((uint64_t)i + p) % l); /* 64-bit: Kensler's 32-bit (i + p) % l can wrap
+                                                   and map two i to one value */
 }
 
 /* 32 hashed bits of (i, p): the jitter inside a stratum, as a 32-bit fraction. */
@@ -301,9 +302,8 @@ uint32_t sample_sobol_u32(uint32_t index, uint32_t dim)
     if (dim == 1)
         return reverse_bits32(pascal_digits(index));
     uint32_t x = 0;
-    for (const uint32_t *c = SOBOL_MATRICES[dim]; index; index >>= 1, c++)
-        if (index & 1u)
-            x ^= *c;
+    for (int k = 0; k < 32; k++) /* branch-free: shuffled indices have random bits */
+        x ^= SOBOL_MATRICES[dim][k] & (0u - (index >> k & 1u));
     return x;
 }
 
@@ -359,17 +359,34 @@ static float sobol_joint_1d(const struct sampler *s, uint32_t dim)
 /* Padding (Burley 2020): a request at dimension dim >= the joint ones reads Sobol' dimensions
  * 0 (and 1), a (0,2)-sequence, with its own index shuffle and its own scrambles, so requests
  * are mutually independent and each is stratified in itself. */
+struct pad_seeds {
+    uint32_t index; /* shuffle of the sample index */
+    uint32_t x;     /* scramble of the first coordinate */
+    uint32_t y;     /* scramble of the second */
+};
+
+/* The three seeds of a padding request from one 64-bit hash: its halves lo and hi, and
+ * lo ^ mix(hi); each uniform, and pairwise independent for a uniform hash. */
+static struct pad_seeds pad_seeds(const struct sampler *s, uint32_t dim)
+{
+    uint64_t h = sample_hash64(s->pixel_hash ^ ((uint64_t)dim << 32 | 2u));
+    uint32_t lo = (uint32_t)h, hi = (uint32_t)(h >> 32);
+    return (struct pad_seeds){lo, hi, lo ^ (hi * 0x9e3779b9u + 0x7f4a7c15u)};
+}
+
 static float sobol_pad_1d(const struct sampler *s, uint32_t dim)
 {
-    uint32_t index = nested_uniform_scramble(s->sample_idx, dim_seed(s, dim, 2));
-    return fraction_to_float(scrambled_sobol(index, 0, dim_seed(s, dim, 3)));
+    struct pad_seeds seed = pad_seeds(s, dim);
+    uint32_t index = nested_uniform_scramble(s->sample_idx, seed.index);
+    return fraction_to_float(scrambled_sobol(index, 0, seed.x));
 }
 
 static vec2 sobol_pad_2d(const struct sampler *s, uint32_t dim)
 {
-    uint32_t index = nested_uniform_scramble(s->sample_idx, dim_seed(s, dim, 2));
-    uint32_t x = scrambled_sobol(index, 0, dim_seed(s, dim, 3));
-    uint32_t y = scrambled_sobol(index, 1, dim_seed(s, dim, 4));
+    struct pad_seeds seed = pad_seeds(s, dim);
+    uint32_t index = nested_uniform_scramble(s->sample_idx, seed.index);
+    uint32_t x = scrambled_sobol(index, 0, seed.x);
+    uint32_t y = scrambled_sobol(index, 1, seed.y);
     return (vec2){fraction_to_float(x), fraction_to_float(y)};
 }
 

@@ -73,9 +73,11 @@ enum {
     SAMPLE_DIMS_PER_LIGHT = 3      /* light choice 1, light position 2 */
 };
 
-/* Dimensions the Sobol' sampler draws from one Sobol' point (pixel and lens: a joint 4D
- * net); every later 1D or 2D request is a separately shuffled and scrambled padding sequence. */
-#define SAMPLE_SOBOL_JOINT_DIMS 4
+/* Dimensions the Sobol' sampler draws from one Sobol' point: pixel, lens and the first
+ * bounce (direct light at the first hit), 11 dimensions; every later 1D or 2D request is a
+ * separately shuffled and scrambled padding sequence.  docs/sampling.md measures this against
+ * a joint pixel and lens only (4, Burley 2020's choice). */
+#define SAMPLE_SOBOL_JOINT_DIMS (SAMPLE_DIM_BOUNCE0 + SAMPLE_DIMS_PER_BOUNCE)
 #define SAMPLE_SOBOL_MAX_DIMS 16 /* dimensions in the generator-matrix table */
 
 /* The unscrambled Sobol' point of index in dimension dim < SAMPLE_SOBOL_MAX_DIMS, as a 32-bit

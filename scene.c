@@ -626,6 +626,12 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
             p->b = p->text[0] == 't';
             return true;
         }
+        int n_commas = 0;
+        for (const char *c = p->text; *c; c++)
+            n_commas += *c == ',';
+        if (n_commas != 2)
+            return fail(ps, p->val_col, "expected true, false or 3 comma-separated numbers for "
+                                        "'%s', got '%s'", sp->key, v);
         struct param_spec colour = *sp;
         colour.kind = VAL_VEC3;
         p->b = true;

@@ -613,10 +613,74 @@ uint32_t stats_next_pow2(uint32_t spp_done, uint32_t spp_final)
 
 /* ---- summary: the curve over seeds, and its fits ---- */
 
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
 static int cmp_u32(const void *a, const void *b)
 {
     uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
     return (x > y) - (x < y);
+}
+
+/* The seed bootstrap of the MSE slope (Efron & Tibshirani 1993, "An Introduction to the
+ * Bootstrap", ch. 13, percentile interval): resample whole seeds with replacement, average
+ * their MSE per spp, refit; the 2.5th and 97.5th percentiles of the refitted slopes bound it.
+ * Resampling whole runs keeps each run's correlation across spp (its later snapshots contain
+ * its earlier samples), which the OLS interval ignores.  seeds: the n_seeds distinct seeds. */
+static void seed_bootstrap(const struct stats_curve *c, struct stats_summary *s,
+                           const uint64_t *seeds)
+{
+    s->mse_slope_boot_lo = s->mse_slope_boot_hi = NAN;
+    size_t k = s->n_seeds, n = s->n_rows, b_max = STATS_BOOTSTRAP_RESAMPLES;
+    if (k < STATS_BOOTSTRAP_MIN_SEEDS || n < 3)
+        return;
+    double *mse = malloc(k * n * sizeof *mse); /* mse[seed * n + row] */
+    double *x = malloc(n * sizeof *x), *y = malloc(n * sizeof *y);
+    double *slopes = malloc(b_max * sizeof *slopes);
+    if (!mse || !x || !y || !slopes)
+        goto done;
+    for (size_t i = 0; i < k * n; i++)
+        mse[i] = NAN;
+    for (size_t i = 0; i < c->n_points; i++) {
+        size_t si = 0, r = 0;
+        while (seeds[si] != c->points[i].seed)
+            si++;
+        while (s->rows[r].spp != c->points[i].spp)
+            r++;
+        mse[si * n + r] = c->points[i].mse;
+    }
+    for (size_t r = 0; r < n; r++)
+        x[r] = log((double)s->rows[r].spp);
+    struct pcg32 rng;
+    sample_pcg32_seed(&rng, 0x5eedb007u, 1); /* fixed: the same curve gives the same interval */
+    size_t n_slopes = 0;
+    for (size_t b = 0; b < b_max; b++) {
+        for (size_t r = 0; r < n; r++)
+            y[r] = 0.0;
+        for (size_t j = 0; j < k; j++) {
+            size_t si = sample_pcg32_bounded(&rng, (uint32_t)k);
+            for (size_t r = 0; r < n; r++)
+                y[r] += mse[si * n + r] / (double)k;
+        }
+        for (size_t r = 0; r < n; r++)
+            y[r] = y[r] > 0.0 ? log(y[r]) : NAN;
+        struct stats_fit fit;
+        if (stats_fit_line(x, y, n, &fit) && fit.n == s->mse_fit.n)
+            slopes[n_slopes++] = fit.slope;
+    }
+    if (n_slopes >= b_max / 2) {
+        qsort(slopes, n_slopes, sizeof *slopes, cmp_double);
+        s->mse_slope_boot_lo = slopes[(size_t)(0.025 * (double)(n_slopes - 1) + 0.5)];
+        s->mse_slope_boot_hi = slopes[(size_t)(0.975 * (double)(n_slopes - 1) + 0.5)];
+    }
+done:
+    free(mse);
+    free(x);
+    free(y);
+    free(slopes);
 }
 
 bool stats_summarize(const struct stats_curve *c, double target_rmse, struct stats_summary *s)
@@ -625,6 +689,7 @@ bool stats_summarize(const struct stats_curve *c, double target_rmse, struct sta
     s->source = c->n_points ? c->points[0].source : STATS_ERR_OWN_VARIANCE;
     double nan = NAN;
     s->target_rmse = s->target_spp = s->target_seconds = nan;
+    s->mse_slope_boot_lo = s->mse_slope_boot_hi = nan;
     size_t cap = c->n_points + 1;
     uint32_t *spps = calloc(cap, sizeof *spps);
     double *x = calloc(cap, sizeof *x);
@@ -694,6 +759,7 @@ bool stats_summarize(const struct stats_curve *c, double target_rmse, struct sta
     } else {
         stats_fit_line(NULL, NULL, 0, &s->mse_raw_fit);
     }
+    seed_bootstrap(c, s, seeds);
     /* seconds = overhead + (seconds per spp) spp */
     for (size_t r = 0; r < s->n_rows; r++) {
         x[r] = (double)s->rows[r].spp;
@@ -813,6 +879,16 @@ bool stats_write_json(const char *path, const struct stats_curve *c, const struc
     json_fit(f, "mse_fit", &s->mse_fit);
     json_fit(f, "rmse_fit", &s->rmse_fit);
     json_fit(f, "mse_raw_fit", &s->mse_raw_fit);
+    fputs("  \"mse_slope_bootstrap_ci95\": ", f);
+    if (isnan(s->mse_slope_boot_lo)) {
+        fputs("null,\n", f);
+    } else {
+        fputc('[', f);
+        json_num(f, s->mse_slope_boot_lo);
+        fputs(", ", f);
+        json_num(f, s->mse_slope_boot_hi);
+        fputs("],\n", f);
+    }
     fputs("  \"seconds_per_spp\": ", f);
     json_num(f, s->time_fit.slope);
     fputs(",\n  \"overhead_seconds\": ", f);
@@ -879,6 +955,9 @@ void stats_print_summary(FILE *f, const struct stats_curve *c, const struct stat
                 fmt_num(b[4], 40, row->time_to_unit_variance));
     }
     print_fit(f, "MSE", &s->mse_fit);
+    if (!isnan(s->mse_slope_boot_lo))
+        fprintf(f, "%-16s   seed-bootstrap 95%% CI of the MSE slope [%+.4f, %+.4f] (%zu seeds)\n",
+                "", s->mse_slope_boot_lo, s->mse_slope_boot_hi, s->n_seeds);
     print_fit(f, "RMSE", &s->rmse_fit);
     if (s->source == STATS_ERR_REFERENCE_CORRECTED)
         print_fit(f, "uncorrected MSE", &s->mse_raw_fit);
@@ -1069,9 +1148,9 @@ bool stats_write_svg(const char *path, const struct stats_curve *c, const struct
     }
     FILE *f = o.f;
     fputs("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<svg xmlns=\"http://www.w3.org/2000/svg\" "
-          "width=\"1000\" height=\"570\" viewBox=\"0 0 1000 570\" "
+          "width=\"1000\" height=\"600\" viewBox=\"0 0 1000 600\" "
           "font-family=\"Helvetica, Arial, sans-serif\">\n"
-          "<rect width=\"1000\" height=\"570\" fill=\"white\"/>\n", f);
+          "<rect width=\"1000\" height=\"600\" fill=\"white\"/>\n", f);
     char depth[16];
     depth_name(c->max_depth, depth, sizeof depth);
     fprintf(f, "<text x=\"500\" y=\"24\" text-anchor=\"middle\" font-size=\"15\">");
@@ -1134,6 +1213,11 @@ bool stats_write_svg(const char *path, const struct stats_curve *c, const struct
         snprintf(line, sizeof line, "fit: slope %.3f [%.3f, %.3f], R^2 %.4f", s->rmse_fit.slope,
                  s->rmse_fit.ci_lo, s->rmse_fit.ci_hi, s->rmse_fit.r2);
         svg_legend(f, lx, ly, row++, "#1f77b4", "6,3", line);
+    }
+    if (!isnan(s->mse_slope_boot_lo)) {
+        snprintf(line, sizeof line, "seed-bootstrap 95%% CI of the slope [%.3f, %.3f]",
+                 s->mse_slope_boot_lo / 2.0, s->mse_slope_boot_hi / 2.0);
+        svg_legend(f, lx, ly, row++, "none", NULL, line);
     }
     svg_legend(f, lx, ly, row++, "#666", "2,4", "ideal N^-1/2 through the points");
     if (corrected) {
@@ -1384,12 +1468,6 @@ static void viridis8(double t, uint8_t out[3])
     double w = f - k;
     for (int c = 0; c < 3; c++)
         out[c] = (uint8_t)(STOPS[k][c] + w * (STOPS[k + 1][c] - STOPS[k][c]) + 0.5);
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
 }
 
 #define HEATMAP_MIN_WIDTH 256 /* pixels: narrower images are scaled up by a whole factor */

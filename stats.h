@@ -209,11 +209,16 @@ struct stats_summary {
     struct stats_fit mse_fit;     /* ln mse_mean = intercept + slope ln spp */
     struct stats_fit rmse_fit;    /* ln rmse = intercept + slope ln spp */
     struct stats_fit mse_raw_fit; /* uncorrected, against the reference (n = 0 without one) */
+    double mse_slope_boot_lo;     /* seed-bootstrap 95% interval of mse_fit.slope; NAN with */
+    double mse_slope_boot_hi;     /*   fewer than STATS_BOOTSTRAP_MIN_SEEDS seeds */
     struct stats_fit time_fit;    /* seconds = intercept (overhead) + slope (s per spp) spp */
     double target_rmse;           /* the RMSE extrapolated to */
     double target_spp;            /* spp the rmse fit needs for it; NAN when unknown */
     double target_seconds;        /* time_fit at target_spp */
 };
+
+#define STATS_BOOTSTRAP_RESAMPLES 2000 /* resamples of whole seeds for the slope's interval */
+#define STATS_BOOTSTRAP_MIN_SEEDS 4    /* fewer seeds: no bootstrap interval */
 
 /* Groups the curve's points by spp over seeds and fits them.  target_rmse <= 0 picks half the
  * RMSE of the last row (which the N^-1/2 law reaches at 4 times its spp).  False when out of

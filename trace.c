@@ -152,8 +152,8 @@ vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *op
                         extra_started = true;
                     }
                     s = &extra;
-                    sample_set_dim(&extra, SAMPLE_DIM_LIGHT_EXTRA +
-                                               SAMPLE_DIMS_PER_LIGHT * (bounce * (n_ls - 1) + j - 1));
+                    uint32_t slot = bounce * (n_ls - 1) + j - 1; /* sample.h's extra block */
+                    sample_set_dim(&extra, SAMPLE_DIM_LIGHT_EXTRA + SAMPLE_DIMS_PER_LIGHT * slot);
                 }
                 float u_choice = sample_1d(s);
                 vec2 u_light = sample_2d(s);

@@ -1,6 +1,7 @@
 #!/bin/sh
 # fuzz/run.sh SECONDS [BUILD] - runs each libFuzzer harness (fuzz_scene, fuzz_obj) for SECONDS
-# seconds from the repo root, seeded with scenes/, tests/data/ and the bad corpus tests/bad/.
+# seconds from the repo root, seeded with scenes/, tests/data/, tests/extremes/ and the bad
+# corpus tests/bad/.
 # New inputs accumulate in BUILD/corpus-*/ between runs.  Prints each harness's final line
 # (executions "#N", coverage "cov:", features "ft:", corpus size) and fails when a harness
 # found a crash, leak or hang: the input is BUILD/crash-*; turn it into a tests/bad/ case.
@@ -21,9 +22,9 @@ seed_copy() {
 
 mkdir -p "$B/seeds-scene" "$B/seeds-obj" "$B/corpus-scene" "$B/corpus-obj"
 seed_copy "$B/seeds-scene" scenes/*.txt tests/data/scene/*.txt tests/data/cli/*.txt \
-    tests/bad/scene/*.txt tests/bad/obj/*.txt tests/bad/mtl/*.txt
+    tests/bad/scene/*.txt tests/bad/obj/*.txt tests/bad/mtl/*.txt tests/extremes/*.txt
 seed_copy "$B/seeds-obj" scenes/models/*.obj tests/data/obj/*.obj tests/data/scene/*.obj \
-    tests/bad/obj/*.obj
+    tests/bad/obj/*.obj tests/extremes/*.obj
 # an OBJ with its MTL as one input: "mtllib NAME" becomes "mtllib a.mtl", the MTL follows #MTL
 for obj in tests/bad/mtl/*.obj tests/data/obj/*.obj scenes/models/*.obj; do
     mtl=$(sed -n 's/^mtllib[ \t]*\([^ \t\r]*\).*/\1/p' "$obj" | head -n 1)

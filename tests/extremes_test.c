@@ -5,7 +5,8 @@
  * (a black mesh under a white sky renders exactly 0) need no tolerance.  Properties: scale
  * invariance of robust ray offsets (PBRT 4e, ch. 6, "Robust Spawned Ray Origins"); watertight
  * triangle intersection (Woop et al. 2013); an interface of IOR 1 is invisible (Fresnel R = 0,
- * no bending, eta^2 = 1); white furnace (albedo 1 in radiance 1 gives 1); linearity in Le;
+ * no bending, eta^2 = 1); a GGX conductor of roughness 0 is a mirror; white furnace (albedo 1
+ * in radiance 1 gives 1, microfacets of roughness 0 and 1 at most 1); linearity in Le;
  * double-precision accumulation (film.h); NaN and infinity dropped and counted, never added. */
 #include <criterion/criterion.h>
 
@@ -231,6 +232,41 @@ Test(extremes, rays_through_vertices_and_edges_hit)
 Test(extremes, ior_1_glass_is_invisible, .timeout = 120)
 {
     assert_same_scenes(DIR "ior1-without.txt", DIR "ior1-glass.txt");
+}
+
+/* Roughness 0: a GGX conductor with alpha below MAT_ALPHA_SMOOTH and F0 = 1 is a perfect
+ * mirror (PBRT 4e, ch. 9, "Roughness Using Microfacet Theory": effectively smooth). */
+Test(extremes, roughness_0_conductor_is_a_mirror, .timeout = 120)
+{
+    assert_same_scenes(DIR "mirror-ball.txt", DIR "conductor-roughness-0.txt");
+}
+
+/* The largest roughness (1) and the smallest (0) in a white furnace: a conductor with F0 = 1
+ * and plastics of albedo 1 stay finite and never exceed 1 (single-scattering microfacets lose
+ * energy, they never create it: GGX at alpha = 1 keeps only about 0.3 to 0.5 of it, Kulla and
+ * Conty 2017, "Revisiting Physically Based Shading at Imageworks"), but do not go black. */
+Test(extremes, roughness_0_and_1_in_white_furnace, .timeout = 120)
+{
+    const char *paths[] = {DIR "furnace-conductor-roughness-1.txt",
+                           DIR "furnace-plastic-roughness-0.txt",
+                           DIR "furnace-plastic-roughness-1.txt"};
+    for (int k = 0; k < 3; k++) {
+        struct film f;
+        struct trace_result r;
+        render_file(paths[k], 1, &f, &r);
+        cr_assert_eq(r.n_nonfinite, 0, "%s", paths[k]);
+        int w = f.width, h = f.height;
+        for (int q = 0; q < 4; q++) { /* the quadrants of the central window: the ball */
+            int x0 = w / 4 + (q % 2) * (w / 4), y0 = h / 4 + (q / 2) * (h / 4);
+            for (int c = 0; c < 3; c++) {
+                struct estimate e = region(&f, x0, y0, x0 + w / 4, y0 + h / 4, c);
+                cr_assert(e.mean <= 1.0 + N_SE * sqrt(e.var) + 1e-6 && e.mean > 0.2,
+                          "%s: quadrant %d channel %d: %.6f, SE %.2g", paths[k], q, c, e.mean,
+                          sqrt(e.var));
+            }
+        }
+        film_free(&f);
+    }
 }
 
 /* Albedo 0: black surfaces reflect nothing, so every sample is exactly the sky (0.5), the

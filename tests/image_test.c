@@ -213,6 +213,51 @@ Test(image, exr_one_pixel_round_trip)
     free(img.data[0]);
 }
 
+/* String attributes go into the header and come back by name (EXR "string" attribute type);
+ * a file without them reads with none; IMAGE_MAX_CHANNELS channels write and read. */
+Test(image, exr_string_attributes_and_many_channels_round_trip)
+{
+    const char *names[IMAGE_MAX_CHANNELS];
+    char name_buf[IMAGE_MAX_CHANNELS][16];
+    for (int c = 0; c < IMAGE_MAX_CHANNELS; c++) {
+        snprintf(name_buf[c], sizeof name_buf[c], "c%02d", c);
+        names[c] = name_buf[c];
+    }
+    struct image img;
+    image_make(&img, 3, 2, IMAGE_MAX_CHANNELS, names);
+    for (int c = 0; c < IMAGE_MAX_CHANNELS; c++)
+        for (int i = 0; i < 6; i++)
+            img.data[c][i] = (float)(c * 10 + i);
+    img.n_attrs = 2;
+    snprintf(img.attr_names[0], sizeof img.attr_names[0], "mcpt.sample-ranges");
+    snprintf(img.attr_values[0], sizeof img.attr_values[0], "0:16,32:48");
+    snprintf(img.attr_names[1], sizeof img.attr_names[1], "mcpt.render");
+    memset(img.attr_values[1], 'x', IMAGE_ATTR_BYTES - 1); /* the longest value kept */
+    img.attr_values[1][IMAGE_ATTR_BYTES - 1] = '\0';
+    char path[256];
+    struct mcpt_error err;
+    cr_assert(image_write_exr(scratch_path(path, sizeof path, "attrs.exr"), &img, &err), "%s",
+              err.msg);
+    struct image back;
+    cr_assert(image_read_exr(path, &back, &err), "%s", err.msg);
+    cr_assert_eq(back.n_channels, IMAGE_MAX_CHANNELS);
+    for (int c = 0; c < IMAGE_MAX_CHANNELS; c++)
+        cr_assert_eq(back.data[image_find_channel(&back, names[c])][5], (float)(c * 10 + 5));
+    cr_assert_str_eq(image_find_attr(&back, "mcpt.sample-ranges"), "0:16,32:48");
+    cr_assert_str_eq(image_find_attr(&back, "mcpt.render"), img.attr_values[1]);
+    cr_assert_null(image_find_attr(&back, "mcpt.nothing"));
+    image_free(&back);
+
+    img.n_attrs = 0;
+    cr_assert(image_write_exr(path, &img, &err), "%s", err.msg);
+    cr_assert(image_read_exr(path, &back, &err), "%s", err.msg);
+    cr_assert_eq(back.n_attrs, 0);
+    cr_assert_null(image_find_attr(&back, "mcpt.sample-ranges"));
+    image_free(&back);
+    for (int c = 0; c < IMAGE_MAX_CHANNELS; c++)
+        free(img.data[c]);
+}
+
 /* A second write replaces the first (rename over an existing file) and leaves one file. */
 Test(image, exr_overwrite_replaces_file)
 {
@@ -459,9 +504,12 @@ Test(image, exr_write_rejects_invalid_images)
     struct mcpt_error err;
     cr_assert_not(image_write_exr(path, &img, &err));
     cr_assert_str_eq(err.msg, "expected unique channel names, got 'R' twice");
-    img.n_channels = 17;
+    img.n_channels = IMAGE_MAX_CHANNELS + 1;
     cr_assert_not(image_write_exr(path, &img, &err));
-    cr_assert_str_eq(err.msg, "expected 1 to 16 channels, got 17");
+    char want[64];
+    snprintf(want, sizeof want, "expected 1 to %d channels, got %d", IMAGE_MAX_CHANNELS,
+             IMAGE_MAX_CHANNELS + 1);
+    cr_assert_str_eq(err.msg, want);
     img.n_channels = 1;
     img.width = 0;
     cr_assert_not(image_write_exr(path, &img, &err));

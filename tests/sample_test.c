@@ -228,10 +228,12 @@ Test(sample, sobol_power_of_two_prefixes_stratified)
 }
 
 /* sample_2d of the Sobol' sampler gives (0,m,2)-nets for the first 2^m samples, at the joint
- * pixel dimensions and at padded pairs: scrambling and shuffling keep Sobol's 2D nets. */
+ * pixel dimensions (Sobol' dimensions 0 and 1) and at padded pairs: scrambling and shuffling
+ * keep Sobol's 2D nets. */
 Test(sample, sobol_2d_requests_are_02_nets)
 {
-    static const uint32_t dims[] = {0, 5, 8, SAMPLE_DIM_LIGHT_EXTRA + 1};
+    cr_assert(SAMPLE_SOBOL_JOINT_DIMS <= 11, "dims below are padded");
+    static const uint32_t dims[] = {0, 11, 14, SAMPLE_DIM_LIGHT_EXTRA + 1};
     static uint32_t x[1024], y[1024];
     for (size_t d = 0; d < 4; d++)
         for (int m = 1; m <= 10; m++) {
@@ -358,16 +360,16 @@ Test(sample, samplers_uniform_and_independent_in_expectation)
     }
 }
 
-/* Padding decorrelates dimensions within a pixel: over one pixel's first 1024 samples the
- * correlation of two padded requests (dims 5 and 8), and of a joint and a padded dimension
- * (0 and 4), is that of a random pairing, |r| < 4 / sqrt(n - 1).  Sobol' without its per-
- * request shuffle, or strata paired identically, would give r near 1. */
+/* Dimensions within a pixel are decorrelated: over one pixel's first 1024 samples the
+ * correlation of two joint dimensions (5 and 8), of a joint and a padded one (0 and 12) and of
+ * two padded requests (11 and 14) is at most that of a random pairing, |r| < 4 / sqrt(n - 1).
+ * Sobol' without its per-request shuffle, or strata paired identically, would give r near 1. */
 Test(sample, padding_decorrelates_dimensions)
 {
     const int n = 1024;
     for (int k = 1; k < SAMPLER_COUNT; k++) {
-        const uint32_t pairs[2][2] = {{5, 8}, {0, 4}};
-        for (int q = 0; q < 2; q++) {
+        const uint32_t pairs[3][2] = {{5, 8}, {0, 12}, {11, 14}};
+        for (int q = 0; q < 3; q++) {
             double sa = 0, sb = 0, saa = 0, sbb = 0, sab = 0;
             for (int i = 0; i < n; i++) {
                 struct sampler s;

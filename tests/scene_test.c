@@ -678,3 +678,87 @@ Test(scene, error_mesh_passes_obj_errors)
               golden);
     check_file_error("tests/data/scene/missing-mesh.txt", golden);
 }
+
+/* ---- materials and light-transport settings of the light-transport issue ------------------ */
+
+/* Each material type maps its parameters as docs/scene-format.md says: plastic's
+ * metallic/reflectance parametrisation (F0 = (1 - m) 0.16 r^2 + m base, diffuse = (1 - m) base),
+ * the Unity-style mapping (glass; specular-prob 0: diffuse; else plastic with F0 = P specular,
+ * roughness 1 - smoothness), conductor defaults, and the checker texture. */
+Test(scene, light_transport_materials)
+{
+    struct scene sc;
+    load_ok(CAM "material name=a type=diffuse-uniform albedo=0.5,0.5,0.5\n"
+                "material name=b type=conductor specular=0.9,0.6,0.3\n"
+                "material name=c type=plastic albedo=1,0.5,0 metallic=0.25 reflectance=0.5 "
+                "roughness=0.3 checker=0,0,1 checker-scale=2 checker-uv=true\n"
+                "material name=d type=unity albedo=0.2,0.4,0.6 glass=true ior=1.33\n"
+                "material name=e type=unity albedo=0.2,0.4,0.6 checker=true\n"
+                "material name=f type=unity albedo=0.2,0.4,0.6 specular=1,0.5,0.5 "
+                "specular-prob=0.5 smoothness=0.75\n"
+                "render direct=hemisphere light-samples=16 split=indirect rr=0.75 rr-depth=3\n",
+            &sc);
+    cr_assert_eq(sc.n_materials, 6u);
+    const struct material *m = sc.materials;
+    cr_assert_eq(m[0].kind, MAT_DIFFUSE_UNIFORM);
+    cr_assert_eq(m[1].kind, MAT_CONDUCTOR);
+    assert_vec3(m[1].specular, 0.9f, 0.6f, 0.3f, "conductor F0");
+    cr_assert_eq(m[1].roughness, 0.5f, "default roughness");
+    cr_assert_eq(m[2].kind, MAT_PLASTIC);
+    assert_vec3_near(m[2].albedo, 0.75f, 0.375f, 0.0f, "plastic diffuse = (1 - m) base");
+    float f0 = 0.75f * 0.16f * 0.25f;
+    assert_vec3_near(m[2].specular, f0 + 0.25f, f0 + 0.125f, f0, "plastic F0");
+    cr_assert_eq(m[2].roughness, 0.3f);
+    assert_vec3_near(m[2].checker_albedo, 0.0f, 0.0f, 0.75f, "checker colour, diffuse share");
+    cr_assert(m[2].checker_scale == 2.0f && m[2].checker_uv);
+    cr_assert_eq(m[3].kind, MAT_DIELECTRIC);
+    cr_assert_eq(m[3].ior, 1.33f);
+    assert_vec3(m[3].specular, 0.2f, 0.4f, 0.6f, "glass tint");
+    cr_assert_eq(m[4].kind, MAT_DIFFUSE);
+    assert_vec3_near(m[4].checker_albedo, 0.1f, 0.2f, 0.3f, "checker=true: half the albedo");
+    cr_assert(m[4].checker_scale == 1.0f && !m[4].checker_uv);
+    cr_assert_eq(m[5].kind, MAT_PLASTIC);
+    assert_vec3(m[5].albedo, 0.2f, 0.4f, 0.6f, "unity diffuse");
+    assert_vec3(m[5].specular, 0.5f, 0.25f, 0.25f, "unity F0 = P specular");
+    cr_assert_eq(m[5].roughness, 0.25f);
+    cr_assert_eq(sc.render.direct, RENDER_DIRECT_HEMISPHERE);
+    cr_assert_eq(sc.render.light_samples, 16u);
+    cr_assert_eq(sc.render.split, RENDER_SPLIT_INDIRECT);
+    cr_assert_eq(sc.render.rr_prob, 0.75f);
+    cr_assert_eq(sc.render.rr_depth, 3u);
+    scene_free(&sc);
+    load_ok(CAM "render rr=throughput\n", &sc);
+    cr_assert_eq(sc.render.rr_prob, 0.0f);
+    cr_assert_eq(sc.render.direct, RENDER_DIRECT_MIS, "the default");
+    scene_free(&sc);
+}
+
+/* The new parameters' error messages (golden strings, as in docs/scene-format.md). */
+Test(scene, error_light_transport_parameters)
+{
+    check_error(CAM "material name=m type=diffuse albedo=1,1,1 checker-scale=2\n",
+                "scene.txt:2:43: error: expected 'checker' for 'checker-scale' to apply to, got "
+                "none");
+    check_error(CAM "material name=m type=unity albedo=1,1,1 glass=true checker=true\n",
+                "scene.txt:2:52: error: expected no 'checker' with 'glass=true' (glass has no "
+                "albedo), got 'checker=true'");
+    check_error(CAM "material name=m type=unity albedo=1,1,1 checker=yes\n",
+                "scene.txt:2:49: error: expected true, false or 3 comma-separated numbers for "
+                "'checker', got 'yes'");
+    check_error(CAM "material name=m type=conductor roughness=2\n",
+                "scene.txt:2:42: error: expected 'roughness' in [0, 1], got 2");
+    check_error(CAM "material name=m type=conductor albedo=1,1,1\n",
+                "scene.txt:2:32: error: expected a parameter of 'material type=conductor' (name, "
+                "type, specular, emission, two-sided, roughness), got 'albedo'");
+    check_error(CAM "render direct=nee\n",
+                "scene.txt:2:15: error: expected mis, light, bsdf, cosine or hemisphere for "
+                "'direct', got 'nee'");
+    check_error(CAM "render rr=0\n",
+                "scene.txt:2:11: error: expected 'throughput' or a probability in (0, 1] for "
+                "'rr', got '0'");
+    check_error(CAM "render split=both\n",
+                "scene.txt:2:14: error: expected full, direct or indirect for 'split', got "
+                "'both'");
+    check_error(CAM "render light-samples=2000\n",
+                "scene.txt:2:22: error: expected 'light-samples' in 1..1024, got 2000");
+}

@@ -261,6 +261,72 @@ Test(stats, fit_ci_coverage)
     cr_assert(fabs(sum_slope / trials + 0.5) < 0.002, "mean slope %.5f", sum_slope / trials);
 }
 
+/* A curve of n_seeds runs at spp 1 .. 4096 with mse = (1/N)^(1 + delta_s) exp(eta) per seed:
+ * delta_s the run's own slope offset, eta independent noise per point. */
+static void synthetic_curve(struct stats_curve *c, size_t n_seeds, double sd_delta,
+                            double sd_eta, struct pcg32 *rng)
+{
+    struct stats_run_info info = {.scene = "synthetic", .sampler = "independent",
+                                  .integrator = "path-mis", .width = 1, .height = 1};
+    stats_curve_init(c, &info);
+    c->cap_points = n_seeds * 13;
+    c->points = calloc(c->cap_points, sizeof *c->points);
+    cr_assert(c->points);
+    for (size_t k = 0; k < n_seeds; k++) {
+        double delta = sd_delta * gauss(rng);
+        for (int e = 0; e <= 12; e++) {
+            double n = exp2(e);
+            c->points[c->n_points++] = (struct stats_point){
+                .seed = 100 + k, .spp = (uint32_t)n, .seconds = 0.01 * n,
+                .source = STATS_ERR_REFERENCE,
+                .mse = pow(n, -(1.0 + delta)) * exp(sd_eta * gauss(rng))};
+        }
+    }
+}
+
+/* The seed bootstrap of the MSE slope: on exact power laws it collapses onto the slope; with
+ * runs whose own slopes scatter (sd 0.05) but whose points lie on their lines, it sees the
+ * scatter between runs (width about 2 1.96 0.05 / sqrt(16) = 0.05) where the OLS interval of
+ * the averaged curve does not; fewer than 4 seeds give none. */
+Test(stats, seed_bootstrap_interval)
+{
+    struct pcg32 rng;
+    sample_pcg32_seed(&rng, 99, 9);
+    struct stats_curve c;
+    struct stats_summary s;
+    synthetic_curve(&c, 8, 0.0, 0.0, &rng);
+    cr_assert(stats_summarize(&c, 0.0, &s));
+    cr_assert_eq(s.n_seeds, 8u);
+    cr_assert_eq(s.n_rows, 13u);
+    cr_assert_float_eq(s.mse_fit.slope, -1.0, 1e-12);
+    cr_assert_float_eq(s.rmse_fit.slope, -0.5, 1e-12);
+    cr_assert_float_eq(s.mse_slope_boot_lo, -1.0, 1e-12);
+    cr_assert_float_eq(s.mse_slope_boot_hi, -1.0, 1e-12);
+    cr_assert_float_eq(s.time_fit.slope, 0.01, 1e-12);   /* seconds per spp */
+    cr_assert_float_eq(s.time_fit.intercept, 0.0, 1e-12); /* no overhead */
+    /* half the last RMSE needs 4x the spp under N^-1/2, 4 x 4096 x 0.01 s */
+    cr_assert_float_eq(s.target_spp, 16384.0, 1e-6);
+    cr_assert_float_eq(s.target_seconds, 163.84, 1e-8);
+    stats_summary_free(&s);
+    stats_curve_free(&c);
+
+    synthetic_curve(&c, 16, 0.05, 0.01, &rng);
+    cr_assert(stats_summarize(&c, 0.0, &s));
+    double boot = s.mse_slope_boot_hi - s.mse_slope_boot_lo;
+    double ols = s.mse_fit.ci_hi - s.mse_fit.ci_lo;
+    cr_assert(boot > 0.025 && boot < 0.1, "bootstrap width %g", boot);
+    cr_assert(boot > 5.0 * ols, "bootstrap %g vs OLS %g", boot, ols);
+    cr_assert(s.mse_slope_boot_lo < s.mse_fit.slope && s.mse_fit.slope < s.mse_slope_boot_hi);
+    stats_summary_free(&s);
+    stats_curve_free(&c);
+
+    synthetic_curve(&c, 3, 0.05, 0.01, &rng);
+    cr_assert(stats_summarize(&c, 0.0, &s));
+    cr_assert(isnan(s.mse_slope_boot_lo) && isnan(s.mse_slope_boot_hi));
+    stats_summary_free(&s);
+    stats_curve_free(&c);
+}
+
 /* Snapshots fall at the powers of two and at the final spp. */
 Test(stats, next_pow2)
 {
@@ -384,7 +450,8 @@ Test(stats, csv_json_formats)
     json_keys(text, 1, keys, sizeof keys);
     cr_assert_str_eq(keys, "format,scene,reference,width,height,sampler,integrator,max_depth,"
                            "seeds,error_source,noise_floor,mse_fit,rmse_fit,mse_raw_fit,"
-                           "seconds_per_spp,overhead_seconds,time_fit_r2,target,rows");
+                           "mse_slope_bootstrap_ci95,seconds_per_spp,overhead_seconds,"
+                           "time_fit_r2,target,rows");
     json_keys(strstr(text, "\"rows\""), 2, keys, sizeof keys);
     cr_assert_str_eq(keys, "spp,n_seeds,seconds,mse_mean,mse_std,rmse,psnr_db,mean_variance,"
                            "efficiency,time_to_unit_variance,mse_raw_mean,noise_floor");
