@@ -32,7 +32,7 @@ TEST_SRCS := $(wildcard tests/*_test.c)
 LIB_OBJS := $(LIB_SRCS:%.c=$(BUILD)/%.o)
 TEST_OBJS := $(TEST_SRCS:%.c=$(BUILD)/%.o)
 
-.PHONY: all test check-sanitize check-valgrind fuzz clean sobol-table
+.PHONY: all test check-sanitize check-valgrind fuzz clean sobol-table gallery install uninstall
 all: mcpt
 
 mcpt: $(BUILD)/main.o $(LIB_OBJS)
@@ -96,6 +96,24 @@ SOBOL_DIRECTIONS ?= ../shared/data/new-joe-kuo-6.21201
 sobol-table:
 	python3 scripts/gen_sobol_table.py $(SOBOL_DIRECTIONS) 16 > sobol_matrices.h.tmp
 	mv sobol_matrices.h.tmp sobol_matrices.h
+
+# The gallery: renders every scene at its default spp (GALLERY_THREADS threads, default 2) and
+# writes docs/gallery.md with docs/gallery/*.png and each render's time (scripts/gallery.sh).
+GALLERY_THREADS ?= 2
+gallery: mcpt
+	MCPT=./mcpt GALLERY_THREADS=$(GALLERY_THREADS) GALLERY_SCENES="$(GALLERY_SCENES)" \
+	    scripts/gallery.sh
+
+# `make install PREFIX=/opt/mcpt` (DESTDIR for staged installs): the binary to PREFIX/bin, the
+# man page (docs/mcpt.1) to PREFIX/share/man/man1.
+PREFIX ?= /usr/local
+install: mcpt
+	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/man/man1
+	install -m 755 mcpt $(DESTDIR)$(PREFIX)/bin/mcpt
+	install -m 644 docs/mcpt.1 $(DESTDIR)$(PREFIX)/share/man/man1/mcpt.1
+
+uninstall:
+	rm -f $(DESTDIR)$(PREFIX)/bin/mcpt $(DESTDIR)$(PREFIX)/share/man/man1/mcpt.1
 
 clean:
 	rm -rf build build-san build-fuzz build-vg mcpt

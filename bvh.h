@@ -1,6 +1,8 @@
 /* bvh.h - bounding volume hierarchy over triangles: binned SAH build (Wald 2007), flattened
  * nodes, triangles stored in BVH order, watertight ray-triangle test (Woop, Benthin, Wald 2013).
- * Analytic shapes (spheres, quads, planes) are not in the BVH; trace.c tests them directly. */
+ * Two traversal layouts: the scalar binary reference, and an 8-wide layout (SoA child boxes,
+ * SoA leaves, SIMD) converted from it, which the renderer uses.  Analytic shapes (spheres,
+ * quads, planes) are not in the BVH; trace.c tests them directly. */
 #ifndef MCPT_BVH_H
 #define MCPT_BVH_H
 
@@ -31,19 +33,47 @@ struct bvh_hit {
 
 struct bvh_stats {
     uint32_t n_tris;
-    uint32_t n_nodes;
-    uint32_t n_leaves;
-    uint32_t max_depth;
-    double sah_cost;     /* SAH cost of the tree, in units of one node traversal */
-    double build_ms;     /* wall-clock build time */
-    size_t bytes;        /* nodes + triangle data */
+    uint32_t n_nodes;    /* binary nodes (the tree every layout is converted from) */
+    uint32_t n_leaves;   /* binary leaves */
+    uint32_t max_depth;  /* of the binary tree, root = 0 */
+    double sah_cost;     /* SAH cost of the binary tree, in units of one node traversal */
+    double build_ms;     /* wall-clock build time, conversion to the wide layout included */
+    size_t bytes;        /* what the BVH keeps: nodes + triangle data of every layout it carries */
+    /* the 8-wide layout (0 when the BVH carries none) */
+    uint32_t n_wide_nodes;  /* 8-wide nodes */
+    uint32_t n_wide_leaves; /* leaves of the wide tree (non-empty binary leaves) */
+    size_t wide_bytes;      /* wide nodes + SoA leaf triangles + their prim_idx */
+    size_t binary_bytes;    /* binary nodes + triangles + prim_idx, 0 when not kept */
+    double convert_ms;      /* converting the binary tree into the wide layout (in build_ms) */
+    int n_threads;          /* threads the build used */
+};
+
+/* Traversal layouts.  A BVH carries one or both; bvh_intersect uses the wide one if present. */
+enum bvh_layout {
+    BVH_LAYOUT_BINARY = 1, /* the scalar reference: binary tree of struct bvh_node */
+    BVH_LAYOUT_WIDE = 2,   /* 8-wide nodes, SoA boxes and leaves, converted from the binary tree */
+};
+
+struct bvh_build_options {
+    int n_threads;    /* <= 1: build on the calling thread; the tree is the same for any count */
+    unsigned layouts; /* OR of enum bvh_layout; 0 means BVH_LAYOUT_WIDE */
 };
 
 /* Builds a BVH over n_tris triangles whose vertex indices are indices[3i .. 3i+2] into
- * positions.  n_threads <= 1 builds on the calling thread.  Degenerate (zero-area) triangles
- * are kept (they never report a hit).  Returns NULL only when out of memory.  n_tris may be 0. */
+ * positions, with the wide layout only (bvh_build_with, default options).  Degenerate
+ * (zero-area) triangles are kept in the binary layout and dropped from the wide one (they never
+ * report a hit in either).  Returns NULL only when out of memory.  n_tris may be 0.  The tree
+ * is identical for every n_threads. */
 struct bvh *bvh_build(const vec3 *positions, const uint32_t *indices, uint32_t n_tris,
                       int n_threads);
+
+/* The same with explicit options (opt NULL: the defaults).  The wide layout needs
+ * n_tris < 2^28; beyond that only the binary layout is built, whatever opt asks. */
+struct bvh *bvh_build_with(const vec3 *positions, const uint32_t *indices, uint32_t n_tris,
+                           const struct bvh_build_options *opt);
+
+/* Which layouts the BVH carries (OR of enum bvh_layout; 0 for an empty BVH that has none). */
+unsigned bvh_layouts(const struct bvh *bvh);
 
 /* Closest hit with t in (ray->t_min, ray->t_max).  On a hit fills *hit and returns true. */
 bool bvh_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *hit);
@@ -51,10 +81,52 @@ bool bvh_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit 
 /* Any hit with t in (ray->t_min, ray->t_max): shadow rays.  Returns true when occluded. */
 bool bvh_occluded(const struct bvh *bvh, const struct ray *ray);
 
+/* The same through one given layout, which the BVH must carry (see bvh_layouts): the tests and
+ * the benchmark compare the layouts on the same rays. */
+bool bvh_intersect_layout(const struct bvh *bvh, enum bvh_layout layout, const struct ray *ray,
+                          struct bvh_hit *hit);
+bool bvh_occluded_layout(const struct bvh *bvh, enum bvh_layout layout, const struct ray *ray);
+
 /* Brute-force reference: tests every triangle (the teaching O(n) baseline and test oracle). */
 bool bvh_intersect_brute(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *hit);
 
+/* Ray packets: BVH_PACKET_SIZE rays in SoA form, traversed together through the wide layout
+ * (each node's boxes are tested against all active rays at once).  They pay for coherent rays
+ * (primary rays of a tile, shadow rays toward one light); see docs/bvh.md for the measured
+ * choice.  Every ray gets exactly what bvh_intersect / bvh_occluded would report (up to which
+ * of several triangles hit at the same t).  Lane i is active when bit i of `active` is set. */
+#define BVH_PACKET_SIZE 8
+
+struct bvh_packet {
+    _Alignas(32) float o[3][BVH_PACKET_SIZE]; /* origins, o[axis][lane] */
+    _Alignas(32) float d[3][BVH_PACKET_SIZE]; /* directions */
+    _Alignas(32) float t_min[BVH_PACKET_SIZE];
+    _Alignas(32) float t_max[BVH_PACKET_SIZE];
+}; /* 256 bytes */
+
+struct bvh_packet_hit {
+    _Alignas(32) float t[BVH_PACKET_SIZE];
+    _Alignas(32) float u[BVH_PACKET_SIZE];
+    _Alignas(32) float v[BVH_PACKET_SIZE];
+    _Alignas(32) uint32_t prim_idx[BVH_PACKET_SIZE];
+}; /* 128 bytes */
+
+/* Closest hit for each active lane; returns the mask of lanes that hit (their hit fields are
+ * filled; the others are left unspecified). */
+uint32_t bvh_intersect_packet(const struct bvh *bvh, const struct bvh_packet *packet,
+                              uint32_t active, struct bvh_packet_hit *hit);
+
+/* Any hit for each active lane; returns the mask of occluded lanes. */
+uint32_t bvh_occluded_packet(const struct bvh *bvh, const struct bvh_packet *packet,
+                             uint32_t active);
+
+/* Fills lane i of *packet with ray (for building packets from struct ray). */
+void bvh_packet_set(struct bvh_packet *packet, int lane, const struct ray *ray);
+
 struct bvh_stats bvh_get_stats(const struct bvh *bvh);
+
+/* "avx2" or "scalar": the kernels bvh.c was compiled with. */
+const char *bvh_simd_name(void);
 
 void bvh_free(struct bvh *bvh);
 

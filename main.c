@@ -887,6 +887,17 @@ done:
     return ok;
 }
 
+/* The estimator as the convergence CSV names it: "path-" and the direct-lighting mode, then the
+ * split ("-direct", "-indirect") and the light samples ("-ls4") when not the defaults. */
+static void integrator_name(const struct trace_options *topt, char *out, size_t out_bytes)
+{
+    int n = snprintf(out, out_bytes, "path-%s", scene_direct_name(topt->direct));
+    if (topt->split != RENDER_SPLIT_FULL && n > 0 && (size_t)n < out_bytes)
+        n += snprintf(out + n, out_bytes - (size_t)n, "-%s", scene_split_name(topt->split));
+    if (topt->light_samples > 1 && n > 0 && (size_t)n < out_bytes)
+        snprintf(out + n, out_bytes - (size_t)n, "-ls%u", topt->light_samples);
+}
+
 /* Reads --reference REF.exr, which must have the film's size. */
 static bool load_reference(const char *path, const struct film *film, struct convergence *cv,
                            struct mcpt_error *err)
@@ -1303,9 +1314,11 @@ int main(int argc, char **argv)
     catch_signals();
     struct trace_result res;
     status = EXIT_RUNTIME;
+    char integrator[64]; /* the CSV's name of the estimator: path-DIRECT[-SPLIT][-lsN] */
+    integrator_name(&topt, integrator, sizeof integrator);
     struct stats_run_info run_info = {
         .scene = o.scene_path, .reference = o.reference_path,
-        .sampler = sample_sampler_name(topt.sampler), .integrator = "path-mis",
+        .sampler = sample_sampler_name(topt.sampler), .integrator = integrator,
         .max_depth = topt.max_depth, .width = film.width, .height = film.height};
     stats_curve_init(&cv.curve, &run_info);
     if (!render_passes(&o, ts, &topt, &film, exr_path, &cv, &prog, &res, &err)) {

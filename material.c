@@ -362,25 +362,20 @@ static vec3 conductor_f(vec3 F0, float alpha, vec3 wo, vec3 wi)
  *   f_base = albedo / pi (1 - E(mu_o)) (1 - E(mu_i)) / (1 - E_avg),  E_avg = 2 int E(mu) mu dmu,
  * reciprocal, and its albedo is exactly albedo (1 - E(mu_o)); E bounds the coat's true albedo
  * from above, so coat + base never reflect more than arrives. */
+static float coupled_base(float albedo, float e_o, float e_i, float e_avg)
+{
+    float denom = 1.0f - e_avg; /* 0 only for a perfect mirror coat, which leaves no base */
+    return denom > 1e-6f ? albedo * MCPT_INV_PI * (1.0f - e_o) * (1.0f - e_i) / denom : 0.0f;
+}
+
 static vec3 plastic_diffuse_f(const struct material *m, vec3 wo, vec3 wi)
 {
     vec3 e_o = coat_albedo(m->specular, fabsf(wo.z), m->roughness);
     vec3 e_i = coat_albedo(m->specular, fabsf(wi.z), m->roughness);
     vec3 e_avg = coat_albedo_avg(m->specular, m->roughness);
-    vec3 f;
-    for (int c = 0; c < 3; c++) {
-        float denom = 1.0f - v3_get(e_avg, c);
-        float v = denom > 1e-6f ? v3_get(m->albedo, c) * MCPT_INV_PI * (1.0f - v3_get(e_o, c)) *
-                                      (1.0f - v3_get(e_i, c)) / denom
-                                : 0.0f;
-        if (c == 0)
-            f.x = v;
-        else if (c == 1)
-            f.y = v;
-        else
-            f.z = v;
-    }
-    return f;
+    return v3(coupled_base(m->albedo.x, e_o.x, e_i.x, e_avg.x),
+              coupled_base(m->albedo.y, e_o.y, e_i.y, e_avg.y),
+              coupled_base(m->albedo.z, e_o.z, e_i.z, e_avg.z));
 }
 
 /* Probability of sampling the coat: its share of the directional albedo (the Fresnel-weighted

@@ -166,7 +166,10 @@ struct sample_alias_bin {
  * weight is never picked.  Returns false when n == 0, a weight is negative or not finite, or
  * memory runs out (bins then unspecified). */
 bool sample_alias_build(const double *weights, uint32_t n, struct sample_alias_bin *bins);
-/* The index picked by u in [0, 1); *pmf (may be NULL) receives its probability. */
+/* The index picked by u in [0, 1); *pmf (may be NULL) receives its probability.  One float u
+ * carries 24 bits: floor(u n) takes log2(n) of them and the rest decide between a bin and its
+ * alias, so the pick frequencies match the pmfs to about 2 n 2^-24 relative (1e-3 at 10^4
+ * bins); scenes with far more emissive triangles would need a second uniform. */
 uint32_t sample_alias_pick(const struct sample_alias_bin *bins, uint32_t n, float u, float *pmf);
 
 /* Veach 1997, sec. 9.2.4: power heuristic, beta = 2, one sample from each of two strategies. */

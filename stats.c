@@ -333,8 +333,8 @@ void stats_write_metrics_json(FILE *f, const struct stats_metrics *m, const char
 
 /* ---- line fits ---- */
 
-/* t(0.975, dof) for dof = 1 .. 30, to 4 decimals (e.g. Abramowitz & Stegun 1964, table 26.10;
- * checked against numerical integration of the t density in tests/stats_test.c). */
+/* t(0.975, dof) for dof = 1 .. 30, to 4 decimals, as in the standard tables (computed by
+ * integrating the t density; tests/stats_test.c checks them the same way). */
 static const double T975[31] = {
     NAN,    12.7062, 4.3027, 3.1824, 2.7764, 2.5706, 2.4469, 2.3646, 2.3060, 2.2622, 2.2281,
     2.2010, 2.1788,  2.1604, 2.1448, 2.1314, 2.1199, 2.1098, 2.1009, 2.0930, 2.0860, 2.0796,

@@ -76,7 +76,9 @@ vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *op
     const struct scene *scene = ts->scene;
     const uint32_t n_ls = opt->light_samples ? opt->light_samples : 1;
     const uint32_t rr_depth = opt->rr_depth ? opt->rr_depth : TRACE_RR_DEPTH_DEFAULT;
-    uint32_t depth_cap = opt->max_depth == TRACE_DEPTH_INFINITE ? TRACE_DEPTH_CAP : opt->max_depth;
+    /* inf (TRACE_DEPTH_INFINITE) and anything deeper stop at the cap, which also keeps the
+     * bounce dimensions below sample.h's SAMPLE_DIM_LIGHT_EXTRA */
+    uint32_t depth_cap = opt->max_depth < TRACE_DEPTH_CAP ? opt->max_depth : TRACE_DEPTH_CAP;
     if (opt->split == RENDER_SPLIT_DIRECT && depth_cap > 1)
         depth_cap = 1; /* nothing beyond the first bounce is kept */
     vec3 L = v3_splat(0.0f);

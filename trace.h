@@ -12,7 +12,7 @@
 #include "scene.h"
 
 #define TRACE_DEPTH_INFINITE UINT32_MAX /* max_depth meaning "until Russian roulette ends it" */
-#define TRACE_DEPTH_CAP 1024u /* hard cap on path segments when max_depth is infinite */
+#define TRACE_DEPTH_CAP 1024u /* hard cap on bounces, whatever max_depth says */
 #define TRACE_TILE_SIZE 16    /* tile edge in pixels */
 
 struct trace_scene; /* opaque: scene + BVH + camera + light-selection table */
@@ -27,7 +27,7 @@ struct bvh_stats trace_bvh_stats(const struct trace_scene *ts);
 struct trace_options {
     uint32_t spp;           /* render every pixel up to this many samples */
     uint32_t sample_offset; /* sample index of a pixel's first film sample (split renders) */
-    uint32_t max_depth;     /* path segments from the camera; TRACE_DEPTH_INFINITE allowed */
+    uint32_t max_depth;     /* bounces (0: emission seen directly only); TRACE_DEPTH_INFINITE */
     uint64_t seed;
     enum sampler_kind sampler;
     int n_threads;
@@ -55,7 +55,6 @@ struct trace_options {
 };
 
 #define TRACE_RR_DEPTH_DEFAULT 2u  /* as PBRT 4e: the first two bounces are never cut short */
-#define TRACE_LIGHT_SAMPLES_MAX 1024u /* largest accepted light_samples */
 
 #define TRACE_ADAPTIVE_TOLERANCE 0.05f /* default T */
 #define TRACE_ADAPTIVE_FLOOR 0.01f     /* default floor, luminance in the image's linear units */

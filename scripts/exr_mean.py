@@ -10,7 +10,9 @@ For each of R, G, B: mean = sum of pixels / N.  When the file carries mcpt's per
 variance-of-the-mean planes (variance.R/G/B), the standard error of the image mean is
     SE = sqrt(sum over pixels of variance) / N
 because the pixels are independent estimates.  Usage:
-    python3 scripts/exr_mean.py IMAGE.exr [--json]
+    python3 scripts/exr_mean.py IMAGE.exr... [--json]
+    python3 scripts/exr_mean.py IMAGE.exr... --reference tests/data/reference/cornell-box-cycles.json
+The second form averages the images (independent seeds) and compares them with the reference.
 """
 
 import json
@@ -145,16 +147,70 @@ def image_stats(path):
     return out
 
 
+def compare(paths, ref_path):
+    """Averages the images (independent renders, e.g. different --seed) and compares the
+    per-channel mean with a reference JSON {"mean": [r,g,b], "se": [r,g,b]} such as
+    tests/data/reference/cornell-box-cycles.json.  Two standard errors of the images' mean:
+    se_var from the variance planes, sqrt(sum_k sum_px var) / (N K), which assumes independent
+    samples inside a pixel (an over-estimate for stratified samplers), and, with K >= 2 images,
+    se_seeds = std(image means) / sqrt(K).  z = difference / sqrt(se_img^2 + se_ref^2), using
+    se_seeds when there is one."""
+    with open(ref_path) as f:
+        ref = json.load(f)
+    stats = [image_stats(p) for p in paths]
+    k = len(stats)
+    out = {"images": paths, "reference": ref_path, "channels": []}
+    for i, c in enumerate("RGB"):
+        means = [s["mean"][i] for s in stats]
+        mean = math.fsum(means) / k
+        se_var = None
+        if all(s["se"] is not None for s in stats):
+            se_var = math.sqrt(math.fsum(s["se"][i] ** 2 for s in stats)) / k
+        se_seeds = None
+        if k >= 2:
+            se_seeds = math.sqrt(math.fsum((m - mean) ** 2 for m in means) / (k - 1) / k)
+        se_img = se_seeds if se_seeds is not None else se_var
+        diff = mean - ref["mean"][i]
+        se_comb = math.sqrt((se_img or 0.0) ** 2 + ref["se"][i] ** 2)
+        out["channels"].append({
+            "channel": c, "mean": mean, "se_var": se_var, "se_seeds": se_seeds,
+            "ref_mean": ref["mean"][i], "ref_se": ref["se"][i], "diff": diff,
+            "rel_diff": diff / ref["mean"][i], "se_combined": se_comb,
+            "z": diff / se_comb if se_comb > 0 else float("inf")})
+    return out
+
+
 def main(argv):
     if "--" in argv:  # under Blender: arguments after "--"
         argv = argv[argv.index("--") + 1:]
     else:
         argv = argv[1:]
     as_json = "--json" in argv
-    paths = [a for a in argv if a != "--json"]
+    argv = [a for a in argv if a != "--json"]
+    ref_path = None
+    if "--reference" in argv:
+        i = argv.index("--reference")
+        if i + 1 >= len(argv):
+            sys.stderr.write("exr_mean.py: expected a JSON file after --reference\n")
+            return 2
+        ref_path = argv[i + 1]
+        del argv[i:i + 2]
+    paths = argv
     if not paths:
-        sys.stderr.write("usage: exr_mean.py IMAGE.exr [--json]\n")
+        sys.stderr.write("usage: exr_mean.py IMAGE.exr... [--json] [--reference REF.json]\n")
         return 2
+    if ref_path is not None:
+        cmp = compare(paths, ref_path)
+        if as_json:
+            print(json.dumps(cmp, indent=2))
+            return 0
+        print("%d image(s) vs %s" % (len(paths), ref_path))
+        for ch in cmp["channels"]:
+            se_img = ch["se_seeds"] if ch["se_seeds"] is not None else ch["se_var"]
+            print("  %s image %.6f +- %.6f  ref %.6f +- %.6f  diff %+.4f%%  (%+.2f combined SE)"
+                  % (ch["channel"], ch["mean"], se_img or 0.0, ch["ref_mean"], ch["ref_se"],
+                     100.0 * ch["rel_diff"], ch["z"]))
+        return 0
     for path in paths:
         s = image_stats(path)
         if as_json:

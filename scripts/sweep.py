@@ -9,12 +9,13 @@ one SVG (OUT/sweep.svg) and prints them ranked by efficiency 1 / (MSE x seconds)
 Python standard library only.  Example (docs/convergence.md, "Sweeps"):
 
     python3 scripts/sweep.py scenes/cornell-box.txt --width 64 --height 64 --spp 256 \\
-        --samplers independent,stratified,sobol --depths 2,inf --out sweep/
+        --samplers independent,stratified,sobol --direct mis,light,bsdf --depths 2,inf \\
+        --out sweep/
 
 Without --reference, a reference is rendered first (--reference-spp, default 16384, independent
-sampler, a seed no sweep run uses).  An axis whose flag this mcpt lacks (mcpt --help) is skipped with a note.  Max
-depths below the reference's count their truncation bias as error: their curves flatten where the
-bias dominates, which is part of the answer.
+sampler, a seed no sweep run uses).  An axis whose flag this mcpt lacks (mcpt --help) is skipped
+with a note.  Max depths below the reference's count their truncation bias as error: their
+curves flatten where the bias dominates, which is part of the answer.
 """
 import argparse
 import csv

@@ -552,8 +552,9 @@ static void assert_same_exr_data(const char *a, const char *b)
 }
 
 /* trace_render continues each pixel from its count, so a progressive run with snapshots at
- * 1, 2, 4, 8, 12 spp ends on the same image as one call: identical EXR bytes, for the default
- * sampler and for the stratified one (whose strata must be those of the final spp). */
+ * 1, 2, 4, 8, 12 spp (and previews between passes) ends on the same image as one call:
+ * identical EXR bytes, for every sampler (the stratified one's strata must be those of the final
+ * spp), and with --seeds the image is the first seed's. */
 Test(stats, snapshot_run_equals_plain_run, .init = setup, .fini = teardown, .timeout = 60)
 {
     const char *samplers[] = {"sobol", "stratified", "independent"};
@@ -566,10 +567,11 @@ Test(stats, snapshot_run_equals_plain_run, .init = setup, .fini = teardown, .tim
                            "12", "--seed", "5", "--sampler", samplers[k], "-o", plain, "--quiet",
                            NULL};
         cr_assert_eq(run_mcpt(a), 0);
+        /* the independent run also repeats itself for seeds 6 and 7: OUT.exr stays seed 5's */
         const char *b[] = {"scenes/cornell-box.txt", "--width", "16", "--height", "12", "--spp",
                            "12", "--seed", "5", "--sampler", samplers[k], "-o", snap,
                            "--snapshots", "pow2", "--curve", curve, "--preview-every", "0.001",
-                           NULL};
+                           k == 2 ? "--seeds" : NULL, "3", NULL};
         cr_assert_eq(run_mcpt(b), 0);
         assert_same_exr_data(plain, snap);
         cr_assert(same_bytes(plain, snap), "%s: EXR files differ", samplers[k]);
@@ -591,6 +593,13 @@ Test(stats, snapshot_run_equals_plain_run, .init = setup, .fini = teardown, .tim
         n_lines += *p == '\n';
     cr_assert_eq(n_lines, 6, "%s", text);
     cr_assert(strstr(text, "\n12,") != NULL);
+    snprintf(path, sizeof path, "%s/curve-independent.csv", tmpdir);
+    text = read_text(path);
+    n_lines = 0;
+    for (const char *p = text; *p; p++)
+        n_lines += *p == '\n';
+    cr_assert_eq(n_lines, 16, "3 seeds x 5 spp: %s", text);
+    cr_assert(strstr(text, ",independent,path-mis,7,own-variance,") != NULL, "%s", text);
 }
 
 /* mcpt compare on a snapshot against the reference of its run prints, as JSON, the documented
