@@ -1,14 +1,18 @@
-/* bvh.c - the scalar reference BVH over triangles: 32-byte nodes in one flat array, triangles
- * permuted into BVH order, a binned-SAH build (Wald 2007, "On fast Construction of SAH-based
- * Bounding Volume Hierarchies"), ordered traversal with a fixed stack and a conservative slab
- * test (PBRT 4e, ch. 6, "Conservative Ray-Bounds Intersections"), and the watertight
- * ray-triangle test of Woop, Benthin, Wald 2013, "Watertight Ray/Triangle Intersection"
- * (JCGT 2(1)), which PBRT 4e, ch. 6, "Triangle Meshes" also uses.  Wide SIMD layouts are to be
- * converted from this one and checked against it.  Reading order: layout and invariants, the
- * build, traversal, the triangle test, brute force, stats. */
+/* bvh.c - BVH over triangles.  The scalar reference: 32-byte binary nodes in one flat array,
+ * triangles permuted into BVH order, a binned-SAH build (Wald 2007, "On fast Construction of
+ * SAH-based Bounding Volume Hierarchies"), run on several threads for large meshes, ordered
+ * traversal with a conservative slab test (PBRT 4e, ch. 6, "Conservative Ray-Bounds
+ * Intersections") and the watertight ray-triangle test of Woop, Benthin, Wald 2013,
+ * "Watertight Ray/Triangle Intersection" (JCGT 2(1)).  The fast layout is converted from it:
+ * 8-wide nodes with SoA child boxes (Wald et al. 2008, "Getting Rid of Packets"; Ernst, Greiner
+ * 2008, "Multi Bounding Volume Hierarchies"), SoA leaves tested 8 at a time with the same
+ * watertight test, single rays and 8-ray packets.  Reading order: layouts, build, conversion,
+ * reference traversal, the triangle test, the SIMD lanes, wide traversal, packets, stats. */
 #include "bvh.h"
 
 #include <assert.h>
+#include <pthread.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <time.h>
 
@@ -18,11 +22,12 @@
 #pragma STDC FP_CONTRACT OFF
 #endif
 
-/* ---- Layout and invariants ------------------------------------------------------------------
+/* ---- The binary reference layout --------------------------------------------------------------
  * struct bvh_node (bvh.h): 32 bytes, box min/max plus left_first and n_tris.
  * nodes[0] is the root; an empty BVH (n_tris == 0) has no nodes at all.  nodes[1] is unused, so
  *   that every sibling pair starts at an even index: in the 64-byte aligned array the two
- *   children of a node share one cache line.  Nodes are numbered in depth-first build order.
+ *   children of a node share one cache line.  Nodes are numbered in depth-first build order
+ *   (a node's child pair is allocated when the node is split, left subtree first).
  * Interior node (n_tris == 0): children nodes[left_first] and nodes[left_first + 1].
  * Leaf (n_tris > 0): triangles tris[left_first .. left_first + n_tris) and their input indices
  *   prim_idx[left_first ..].  The leaves' ranges tile [0, n_tris) exactly once.
@@ -44,13 +49,48 @@ struct bvh_tri {
     float p2[3]; /* vertex 2 */
 }; /* 36 bytes */
 
+/* ---- The 8-wide layout ---------------------------------------------------------------------------
+ * Converted from the binary tree (convert_wide): each wide node takes a binary node's children
+ * and keeps opening the one of largest surface area until it has BVH_WIDTH (the collapse of
+ * Wald et al. 2008).  The child boxes are stored SoA, bounds[2 a][lane] = min along axis a and
+ * bounds[2 a + 1][lane] = max, so one ray meets all eight boxes in one SIMD slab test.
+ * A child reference is a wide node index, or WIDE_LEAF | first << 3 | (n - 1) for a leaf of
+ * n in 1..8 triangles starting at wide triangle `first`.  An unused lane has the empty box
+ * (min +inf, max -inf), which no ray hits, whatever the signs of its direction.
+ * Leaves are the binary tree's leaves minus their degenerate triangles (a binary leaf of more
+ * than 8, which only the depth cap makes, becomes a small wide subtree).  A leaf's triangles
+ * are SoA: leaf_tris[9 first + (3 k + a) n + i] is coordinate a of vertex k of its triangle i
+ * (the same three vertices as struct bvh_tri, so the test stays watertight), and
+ * wide_prim_idx[first + i] is the caller's index.  The array has 8 floats of padding at its end
+ * so that an 8-lane load of any leaf row stays inside it; lanes i >= n are masked.
+ * Wide nodes are numbered in depth-first order, root = 0; leaves' triangles in the same order. */
+#define BVH_WIDTH 8
+#define WIDE_LEAF 0x80000000u
+#define WIDE_MAX_TRIS (1u << 28) /* first must fit in 28 bits */
+
+struct wide_node {
+    _Alignas(64) float bounds[6][BVH_WIDTH]; /* SoA child boxes: min x, max x, min y, ... */
+    uint32_t child[BVH_WIDTH];               /* child references */
+    uint32_t n_children;                     /* lanes in use: 0 .. n_children - 1 */
+    uint32_t pad[7];
+}; /* 256 bytes: four cache lines */
+_Static_assert(sizeof(struct wide_node) == 256, "wide_node must be 256 bytes");
+
 struct bvh {
+    /* binary reference (BVH_LAYOUT_BINARY) */
     struct bvh_node *nodes; /* n_nodes nodes, 64-byte aligned; root at 0, nodes[1] unused */
     struct bvh_tri *tris;   /* n_tris triangles in BVH order */
     uint32_t *prim_idx;     /* prim_idx[i]: the caller's index of tris[i] */
     uint32_t n_nodes;       /* length of nodes, the unused nodes[1] included; 0 when empty */
-    uint32_t n_tris;        /* triangles */
-    struct bvh_stats stats; /* filled once by bvh_build */
+    /* wide (BVH_LAYOUT_WIDE) */
+    struct wide_node *wide;  /* n_wide nodes, root at 0 */
+    float *leaf_tris;        /* 9 floats per wide triangle, SoA per leaf, plus 8 padding */
+    uint32_t *wide_prim_idx; /* the caller's index of each wide triangle */
+    uint32_t n_wide;         /* wide nodes */
+    uint32_t n_wide_tris;    /* triangles in the wide leaves (the non-degenerate ones) */
+    uint32_t n_tris;         /* triangles given to the build */
+    unsigned layouts;        /* OR of enum bvh_layout */
+    struct bvh_stats stats;  /* filled once by the build */
 };
 
 /* ---- Build: binned SAH, Wald 2007 ------------------------------------------------------------
@@ -64,24 +104,37 @@ struct bvh {
  * when N == 1, or at depth BVH_MAX_DEPTH (any size).  When all centres coincide no plane
  * separates them: a node of more than BVH_MAX_LEAF_TRIS triangles is then cut in the middle of
  * its index range, so leaves stay bounded and depth grows only as log2(N).
- * The build runs on the calling thread whatever n_threads says (a later task parallelises it). */
+ * Threads: every node's split depends only on its own range of refs, so the tree is the same
+ * for any thread count.  With several threads the top nodes are split first, their binning
+ * shared by all threads (each fills private bins over a slice, then they are merged: box
+ * unions and counts are exact), until there are BVH_SUBTREES_PER_THREAD subtrees per thread;
+ * those are built in parallel into reserved node ranges and renumbered into the order above. */
 
-/* The constants were chosen by measurement on the 100k-triangle Stanford dragon (single thread,
- * best of 30 runs, incoherent and camera rays): C_isect = 0.5 traced 15-25% faster than 1.0 and
- * used 61 instead of 75 bytes per triangle; 0.75 was within noise of 0.5; 32 bins instead of 16
- * cut node visits by 1.5% but built 28% slower; 8 bins visited 1.5% more nodes. */
+/* The constants were chosen by measurement on the 100k-triangle Stanford dragon with the wide
+ * traversal (docs/bvh.md, "Build constants"). */
+#ifndef BVH_COST_TRAVERSAL
 #define BVH_COST_TRAVERSAL 1.0f /* C_trav: visiting one interior node (two box tests); the unit */
+#endif
+#ifndef BVH_COST_INTERSECT
 #define BVH_COST_INTERSECT 0.5f /* C_isect: one triangle test, in units of C_trav */
+#endif
+#ifndef BVH_N_BINS
 #define BVH_N_BINS 16           /* bins per axis */
+#endif
 #define BVH_MAX_LEAF_TRIS 8     /* a larger node is split even when the SAH prefers a leaf */
 #define BVH_MAX_DEPTH 64        /* deepest node; bounds the build and traversal stacks */
+#define BVH_PARALLEL_MIN_TRIS 65536 /* fewer: build on one thread (the threads cost more) */
+#define BVH_PARALLEL_BIN_MIN 16384  /* top nodes with more refs share their binning */
+#define BVH_SUBTREES_PER_THREAD 4   /* subtrees handed to the threads, per thread */
+#define BVH_MAX_THREADS 64
 
 /* What the build knows of one triangle: its box (the centre is derived from it). */
 struct prim_ref {
     float min[3];      /* lower corner of the box of the stored vertices */
-    float max[3];      /* upper corner */
     uint32_t prim_idx; /* the caller's index of the triangle */
-}; /* 28 bytes */
+    float max[3];      /* upper corner */
+    float pad;         /* 32 bytes: two refs per cache line */
+}; /* 32 bytes */
 
 struct box {
     float min[3]; /* lower corner; +inf when empty */
@@ -93,13 +146,21 @@ struct bin {
     uint32_t n;     /* number of those triangles */
 }; /* 28 bytes */
 
-/* A node waiting to be built: refs[begin, end) at depth. */
+struct bins {
+    struct bin b[3][BVH_N_BINS]; /* per axis */
+}; /* 1344 bytes */
+
+/* A node waiting to be built: refs[begin, end) at depth, with the bounds of the refs' boxes
+ * and of their centres (computed while the parent partitioned them). */
 struct build_task {
-    uint32_t node_idx; /* node to fill */
-    uint32_t begin;    /* first ref */
-    uint32_t end;      /* one past the last */
-    uint32_t depth;    /* root = 0 */
-}; /* 16 bytes */
+    uint32_t node_idx;        /* node to fill */
+    uint32_t begin;           /* first ref */
+    uint32_t end;             /* one past the last */
+    uint32_t depth;           /* root = 0 */
+    uint32_t node_base;       /* parallel subtrees: first node index of its reserved range */
+    struct box bounds;        /* of the refs' boxes */
+    struct box centre_bounds; /* of their centres */
+}; /* 68 bytes */
 
 /* A split candidate: sah_sum = A_L N_L + A_R N_R (half areas), the part of C_split that varies. */
 struct split {
@@ -107,6 +168,12 @@ struct split {
     int bin;       /* the left child takes bins 0..bin */
     float sah_sum; /* A_L * N_L + A_R * N_R */
 }; /* 12 bytes */
+
+struct build_ctx {
+    struct prim_ref *refs;  /* n_tris refs, permuted into BVH order by the build */
+    struct bvh_node *nodes; /* node array being written */
+    int n_threads;          /* 1 .. BVH_MAX_THREADS */
+};
 
 static const struct box empty_box = {{INFINITY, INFINITY, INFINITY},
                                      {-INFINITY, -INFINITY, -INFINITY}};
@@ -128,9 +195,10 @@ static float box_half_area(const struct box *b)
     return dx * dy + dy * dz + dz * dx;
 }
 
-static float ref_centre(const struct prim_ref *r, int axis)
+static void ref_centre(const struct prim_ref *r, float c[3])
 {
-    return 0.5f * (r->min[axis] + r->max[axis]);
+    for (int a = 0; a < 3; a++)
+        c[a] = 0.5f * (r->min[a] + r->max[a]);
 }
 
 /* Bin of a centre coordinate c in [c_min, c_max], scale = BVH_N_BINS / (c_max - c_min). */
@@ -149,38 +217,58 @@ static float bin_scale(const struct box *centre_bounds, int axis)
     return extent > 0.0f && isfinite(scale) ? scale : 0.0f;
 }
 
-/* The cheapest binned split of refs[begin, end) (Wald 2007): one pass fills the bins of all
- * three axes, then per axis a sweep from the right gathers the right children's areas and one
- * from the left evaluates every plane. */
-static struct split find_split(const struct prim_ref *refs, uint32_t begin, uint32_t end,
-                               const struct box *centre_bounds)
+static void bins_clear(struct bins *bins)
 {
-    struct bin bins[3][BVH_N_BINS];
-    float scale[3];
-    for (int axis = 0; axis < 3; axis++) {
-        scale[axis] = bin_scale(centre_bounds, axis);
+    for (int axis = 0; axis < 3; axis++)
         for (int k = 0; k < BVH_N_BINS; k++)
-            bins[axis][k] = (struct bin){empty_box, 0};
-    }
+            bins->b[axis][k] = (struct bin){empty_box, 0};
+}
+
+/* One pass fills the bins of all three axes (Wald 2007, sec. 3.2). */
+static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t begin,
+                      uint32_t end, const struct box *centre_bounds)
+{
+    float scale[3];
+    for (int axis = 0; axis < 3; axis++)
+        scale[axis] = bin_scale(centre_bounds, axis);
     for (uint32_t i = begin; i < end; i++) {
         const struct prim_ref *r = &refs[i];
+        float c[3];
+        ref_centre(r, c);
         for (int axis = 0; axis < 3; axis++) {
-            int k = bin_index(ref_centre(r, axis), centre_bounds->min[axis], scale[axis]);
-            box_grow(&bins[axis][k].box, r->min, r->max);
-            bins[axis][k].n++;
+            struct bin *b = &bins->b[axis][bin_index(c[axis], centre_bounds->min[axis],
+                                                     scale[axis])];
+            box_grow(&b->box, r->min, r->max);
+            b->n++;
         }
     }
-    struct split best = {-1, 0, INFINITY};
-    uint32_t n = end - begin;
+}
+
+static void bins_merge(struct bins *into, const struct bins *from)
+{
     for (int axis = 0; axis < 3; axis++) {
+        for (int k = 0; k < BVH_N_BINS; k++) {
+            box_grow(&into->b[axis][k].box, from->b[axis][k].box.min, from->b[axis][k].box.max);
+            into->b[axis][k].n += from->b[axis][k].n;
+        }
+    }
+}
+
+/* The cheapest plane of n binned refs: per axis a sweep from the right gathers the right
+ * children's areas and one from the left evaluates every plane. */
+static struct split bins_best_split(const struct bins *bins, uint32_t n)
+{
+    struct split best = {-1, 0, INFINITY};
+    for (int axis = 0; axis < 3; axis++) {
+        const struct bin *b = bins->b[axis];
         /* right sweep: right_area[k], right_n[k] describe bins k .. BVH_N_BINS - 1 */
         float right_area[BVH_N_BINS];
         uint32_t right_n[BVH_N_BINS];
         struct box acc = empty_box;
         uint32_t acc_n = 0;
         for (int k = BVH_N_BINS - 1; k > 0; k--) {
-            box_grow(&acc, bins[axis][k].box.min, bins[axis][k].box.max);
-            acc_n += bins[axis][k].n;
+            box_grow(&acc, b[k].box.min, b[k].box.max);
+            acc_n += b[k].n;
             right_area[k] = acc_n > 0 ? box_half_area(&acc) : 0.0f;
             right_n[k] = acc_n;
         }
@@ -188,8 +276,8 @@ static struct split find_split(const struct prim_ref *refs, uint32_t begin, uint
         acc = empty_box;
         acc_n = 0;
         for (int k = 0; k < BVH_N_BINS - 1; k++) {
-            box_grow(&acc, bins[axis][k].box.min, bins[axis][k].box.max);
-            acc_n += bins[axis][k].n;
+            box_grow(&acc, b[k].box.min, b[k].box.max);
+            acc_n += b[k].n;
             if (acc_n == 0 || acc_n == n)
                 continue; /* one side would be empty */
             float sah_sum = box_half_area(&acc) * (float)acc_n +
@@ -201,82 +289,376 @@ static struct split find_split(const struct prim_ref *refs, uint32_t begin, uint
     return best;
 }
 
-/* Decides node refs[begin, end) and partitions refs in place.  Returns the first index of the
- * right child, or begin when the node is to be a leaf. */
-static uint32_t split_node(struct prim_ref *refs, uint32_t begin, uint32_t end, uint32_t depth,
-                           const struct box *bounds, const struct box *centre_bounds)
+/* Fork-join on up to n_threads threads: fn(arg + i * arg_bytes) for i in [0, n_jobs), job 0 on
+ * the calling thread.  A thread that cannot be started runs its job inline. */
+static void run_jobs(int n_jobs, void *(*fn)(void *), void *args, size_t arg_bytes)
 {
+    pthread_t threads[BVH_MAX_THREADS];
+    bool started[BVH_MAX_THREADS] = {false};
+    assert(n_jobs <= BVH_MAX_THREADS);
+    for (int i = 1; i < n_jobs; i++)
+        started[i] = pthread_create(&threads[i], NULL, fn, (char *)args + (size_t)i * arg_bytes) == 0;
+    fn(args);
+    for (int i = 1; i < n_jobs; i++) {
+        if (started[i])
+            pthread_join(threads[i], NULL);
+        else
+            fn((char *)args + (size_t)i * arg_bytes);
+    }
+}
+
+struct bin_job {
+    const struct prim_ref *refs;
+    uint32_t begin;
+    uint32_t end;
+    const struct box *centre_bounds;
+    struct bins bins;
+};
+
+static void *bin_job_run(void *arg)
+{
+    struct bin_job *job = arg;
+    bins_clear(&job->bins);
+    bins_fill(&job->bins, job->refs, job->begin, job->end, job->centre_bounds);
+    return NULL;
+}
+
+/* Bins refs[begin, end) on n_threads threads (private bins per slice, merged in slice order). */
+static void bins_fill_parallel(struct bins *bins, const struct prim_ref *refs, uint32_t begin,
+                               uint32_t end, const struct box *centre_bounds, int n_threads)
+{
+    struct bin_job *jobs = malloc((size_t)n_threads * sizeof *jobs);
+    if (!jobs) {
+        bins_clear(bins);
+        bins_fill(bins, refs, begin, end, centre_bounds);
+        return;
+    }
     uint32_t n = end - begin;
-    if (n <= 1 || depth >= BVH_MAX_DEPTH)
+    for (int i = 0; i < n_threads; i++) {
+        jobs[i].refs = refs;
+        jobs[i].begin = begin + (uint32_t)((uint64_t)n * (uint64_t)i / (uint64_t)n_threads);
+        jobs[i].end = begin + (uint32_t)((uint64_t)n * (uint64_t)(i + 1) / (uint64_t)n_threads);
+        jobs[i].centre_bounds = centre_bounds;
+    }
+    run_jobs(n_threads, bin_job_run, jobs, sizeof *jobs);
+    *bins = jobs[0].bins;
+    for (int i = 1; i < n_threads; i++)
+        bins_merge(bins, &jobs[i].bins);
+    free(jobs);
+}
+
+/* Bounds of the boxes and of the centres of refs[begin, end). */
+static void range_bounds(const struct prim_ref *refs, uint32_t begin, uint32_t end,
+                         struct box *bounds, struct box *centre_bounds)
+{
+    *bounds = empty_box;
+    *centre_bounds = empty_box;
+    for (uint32_t i = begin; i < end; i++) {
+        float c[3];
+        ref_centre(&refs[i], c);
+        box_grow(bounds, refs[i].min, refs[i].max);
+        box_grow(centre_bounds, c, c);
+    }
+}
+
+/* Decides task's node and partitions its refs in place.  Returns the first index of the right
+ * child, or task->begin when the node is to be a leaf; fills the children's bounds. */
+static uint32_t split_task(const struct build_ctx *ctx, const struct build_task *task,
+                           int n_threads, struct box child_bounds[2], struct box child_centres[2])
+{
+    struct prim_ref *refs = ctx->refs;
+    uint32_t begin = task->begin;
+    uint32_t end = task->end;
+    uint32_t n = end - begin;
+    if (n <= 1 || task->depth >= BVH_MAX_DEPTH)
         return begin;
-    struct split best = find_split(refs, begin, end, centre_bounds);
-    if (best.axis < 0) /* all centres coincide: halve the range, or stop when small */
-        return n <= BVH_MAX_LEAF_TRIS ? begin : begin + n / 2;
+    struct bins bins;
+    if (n_threads > 1 && n >= BVH_PARALLEL_BIN_MIN) {
+        bins_fill_parallel(&bins, refs, begin, end, &task->centre_bounds, n_threads);
+    } else {
+        bins_clear(&bins);
+        bins_fill(&bins, refs, begin, end, &task->centre_bounds);
+    }
+    struct split best = bins_best_split(&bins, n);
+    if (best.axis < 0) { /* all centres coincide: halve the range, or stop when small */
+        if (n <= BVH_MAX_LEAF_TRIS)
+            return begin;
+        uint32_t mid = begin + n / 2;
+        range_bounds(refs, begin, mid, &child_bounds[0], &child_centres[0]);
+        range_bounds(refs, mid, end, &child_bounds[1], &child_centres[1]);
+        return mid;
+    }
     /* C_split < C_leaf, both multiplied by A so that a zero-area box (a point) needs no division:
      * C_trav A + C_isect (A_L N_L + A_R N_R) < C_isect N A */
-    float area = box_half_area(bounds);
+    float area = box_half_area(&task->bounds);
     float split_cost = BVH_COST_TRAVERSAL * area + BVH_COST_INTERSECT * best.sah_sum;
     float leaf_cost = BVH_COST_INTERSECT * (float)n * area;
     if (split_cost >= leaf_cost && n <= BVH_MAX_LEAF_TRIS)
         return begin;
     int axis = best.axis;
-    float c_min = centre_bounds->min[axis];
-    float scale = bin_scale(centre_bounds, axis);
+    float c_min = task->centre_bounds.min[axis];
+    float scale = bin_scale(&task->centre_bounds, axis);
+    for (int side = 0; side < 2; side++) {
+        child_bounds[side] = empty_box;
+        child_centres[side] = empty_box;
+    }
     uint32_t i = begin;
     uint32_t j = end;
-    while (i < j) { /* left takes bins 0..best.bin */
-        if (bin_index(ref_centre(&refs[i], axis), c_min, scale) <= best.bin) {
+    while (i < j) { /* left takes bins 0..best.bin; each ref's side grows that side's bounds */
+        float c[3];
+        ref_centre(&refs[i], c);
+        if (bin_index(c[axis], c_min, scale) <= best.bin) {
+            box_grow(&child_bounds[0], refs[i].min, refs[i].max);
+            box_grow(&child_centres[0], c, c);
             i++;
         } else {
+            box_grow(&child_bounds[1], refs[i].min, refs[i].max);
+            box_grow(&child_centres[1], c, c);
             struct prim_ref tmp = refs[i];
             refs[i] = refs[--j];
             refs[j] = tmp;
         }
     }
-    assert(i > begin && i < end); /* find_split only offers planes with both sides non-empty */
+    assert(i > begin && i < end); /* bins_best_split only offers planes with both sides used */
     return i;
 }
 
-/* Builds nodes[] depth first from an explicit stack; returns the deepest depth reached.  The
- * root is nodes[0], nodes[1] is left unused and every sibling pair starts at an even index, so
- * with a 64-byte aligned array the two children of a node share one cache line. */
-static uint32_t build_nodes(struct bvh *bvh, struct prim_ref *refs)
+static void node_set_box(struct bvh_node *node, const struct box *b)
+{
+    memcpy(node->min, b->min, sizeof node->min);
+    memcpy(node->max, b->max, sizeof node->max);
+}
+
+/* Builds the subtree of root depth first from an explicit stack, allocating child pairs from
+ * root.node_base on.  Returns the deepest depth reached; *n_next is one past the last node
+ * used.  Started at the root with node_base 2, this numbers nodes in the canonical order. */
+static uint32_t build_subtree(const struct build_ctx *ctx, struct build_task root,
+                              uint32_t *n_next)
 {
     struct build_task stack[BVH_MAX_DEPTH + 2]; /* one pending right child per level + current */
     int n_stack = 0;
     uint32_t max_depth = 0;
-    bvh->nodes[1] = (struct bvh_node){{0}, 0, {0}, 0};
-    bvh->n_nodes = 2;
-    stack[n_stack++] = (struct build_task){0, 0, bvh->n_tris, 0};
+    uint32_t next = root.node_base;
+    stack[n_stack++] = root;
     while (n_stack > 0) {
         struct build_task task = stack[--n_stack];
-        struct box bounds = empty_box;
-        struct box centre_bounds = empty_box;
-        for (uint32_t i = task.begin; i < task.end; i++) {
-            const struct prim_ref *r = &refs[i];
-            float centre[3] = {ref_centre(r, 0), ref_centre(r, 1), ref_centre(r, 2)};
-            box_grow(&bounds, r->min, r->max);
-            box_grow(&centre_bounds, centre, centre);
-        }
-        struct bvh_node *node = &bvh->nodes[task.node_idx];
-        memcpy(node->min, bounds.min, sizeof node->min);
-        memcpy(node->max, bounds.max, sizeof node->max);
+        struct bvh_node *node = &ctx->nodes[task.node_idx];
+        node_set_box(node, &task.bounds);
         if (task.depth > max_depth)
             max_depth = task.depth;
-        uint32_t mid = split_node(refs, task.begin, task.end, task.depth, &bounds, &centre_bounds);
+        struct box child_bounds[2];
+        struct box child_centres[2];
+        uint32_t mid = split_task(ctx, &task, 1, child_bounds, child_centres);
         if (mid == task.begin) {
             node->left_first = task.begin;
             node->n_tris = task.end - task.begin;
             continue;
         }
-        uint32_t left_idx = bvh->n_nodes;
-        bvh->n_nodes += 2;
+        uint32_t left_idx = next;
+        next += 2;
         node->left_first = left_idx;
         node->n_tris = 0;
         assert(n_stack + 2 <= (int)(sizeof stack / sizeof stack[0]));
-        stack[n_stack++] = (struct build_task){left_idx + 1, mid, task.end, task.depth + 1};
-        stack[n_stack++] = (struct build_task){left_idx, task.begin, mid, task.depth + 1};
+        stack[n_stack++] = (struct build_task){left_idx + 1, mid,          task.end,
+                                               task.depth + 1, 0,          child_bounds[1],
+                                               child_centres[1]};
+        stack[n_stack++] = (struct build_task){left_idx,       task.begin,      mid,
+                                               task.depth + 1, 0,               child_bounds[0],
+                                               child_centres[0]};
     }
+    *n_next = next;
+    return max_depth;
+}
+
+/* Parallel subtrees: the threads take tasks from a shared counter, largest first. */
+struct subtree_pool {
+    const struct build_ctx *ctx;
+    struct build_task *tasks;
+    uint32_t n_tasks;
+    atomic_uint next_task;
+    atomic_uint max_depth;
+};
+
+static void *subtree_worker(void *arg)
+{
+    struct subtree_pool *pool = *(struct subtree_pool **)arg;
+    for (;;) {
+        uint32_t i = atomic_fetch_add(&pool->next_task, 1u);
+        if (i >= pool->n_tasks)
+            break;
+        uint32_t n_next;
+        uint32_t depth = build_subtree(pool->ctx, pool->tasks[i], &n_next);
+        uint32_t seen = atomic_load(&pool->max_depth);
+        while (depth > seen && !atomic_compare_exchange_weak(&pool->max_depth, &seen, depth)) {
+        }
+    }
+    return NULL;
+}
+
+static int compare_task_size(const void *a, const void *b)
+{
+    const struct build_task *x = a;
+    const struct build_task *y = b;
+    uint32_t nx = x->end - x->begin;
+    uint32_t ny = y->end - y->begin;
+    return (nx < ny) - (nx > ny); /* largest first */
+}
+
+/* Copies the tree under old[old_root] into out[] in the canonical depth-first numbering of
+ * build_subtree (root 0, nodes[1] unused, a node's pair allocated when it is visited). */
+static uint32_t renumber(const struct bvh_node *old, struct bvh_node *out)
+{
+    uint32_t stack[2 * (BVH_MAX_DEPTH + 4)];
+    int n_stack = 0;
+    uint32_t next = 2;
+    out[1] = (struct bvh_node){{0}, 0, {0}, 0};
+    stack[n_stack++] = 0; /* old index */
+    stack[n_stack++] = 0; /* new index */
+    while (n_stack > 0) {
+        uint32_t new_idx = stack[--n_stack];
+        uint32_t old_idx = stack[--n_stack];
+        out[new_idx] = old[old_idx];
+        if (old[old_idx].n_tris > 0)
+            continue;
+        uint32_t left = next;
+        next += 2;
+        out[new_idx].left_first = left;
+        assert(n_stack + 4 <= (int)(sizeof stack / sizeof stack[0]));
+        stack[n_stack++] = old[old_idx].left_first + 1;
+        stack[n_stack++] = left + 1;
+        stack[n_stack++] = old[old_idx].left_first;
+        stack[n_stack++] = left;
+    }
+    return next;
+}
+
+static uint32_t count_nodes(const struct bvh_node *nodes)
+{
+    uint32_t stack[BVH_MAX_DEPTH + 2];
+    int n_stack = 0;
+    uint32_t n = 2; /* the root and the unused slot */
+    stack[n_stack++] = 0;
+    while (n_stack > 0) {
+        const struct bvh_node *node = &nodes[stack[--n_stack]];
+        if (node->n_tris > 0)
+            continue;
+        n += 2;
+        stack[n_stack++] = node->left_first + 1;
+        stack[n_stack++] = node->left_first;
+    }
+    return n;
+}
+
+/* n nodes on a 64-byte boundary (aligned_alloc wants a multiple of 64 bytes), NULL on overflow. */
+static void *alloc_aligned(size_t n, size_t size)
+{
+    if (size != 0 && n > (SIZE_MAX - 64) / size)
+        return NULL;
+    size_t bytes = (n * size + 63) / 64 * 64;
+    return aligned_alloc(64, bytes == 0 ? 64 : bytes);
+}
+
+/* malloc of n elements of size bytes, NULL on overflow. */
+static void *alloc_array(size_t n, size_t size)
+{
+    if (size != 0 && n > SIZE_MAX / size)
+        return NULL;
+    return malloc(n * size == 0 ? 1 : n * size);
+}
+
+/* Builds the binary tree over ctx->refs[0, n) into a fresh exact-size node array (*out_nodes,
+ * *out_n_nodes).  Returns the maximum depth, or UINT32_MAX when out of memory. */
+static uint32_t build_tree(struct build_ctx *ctx, uint32_t n, const struct box *root_bounds,
+                           const struct box *root_centres, struct bvh_node **out_nodes,
+                           uint32_t *out_n_nodes)
+{
+    struct bvh_node *work = alloc_aligned(2 * (size_t)n, sizeof *work);
+    struct build_task *pending = NULL;
+    if (!work)
+        return UINT32_MAX;
+    ctx->nodes = work;
+    work[1] = (struct bvh_node){{0}, 0, {0}, 0};
+    struct build_task root = {0, 0, n, 0, 2, *root_bounds, *root_centres};
+    uint32_t max_depth = 0;
+    uint32_t n_used = 0;
+    bool renumbered = false;
+    if (ctx->n_threads <= 1 || n < BVH_PARALLEL_MIN_TRIS) {
+        max_depth = build_subtree(ctx, root, &n_used);
+    } else {
+        /* top nodes, largest first, until every thread has BVH_SUBTREES_PER_THREAD subtrees */
+        uint32_t target = (uint32_t)ctx->n_threads * BVH_SUBTREES_PER_THREAD;
+        uint32_t cap = 2 * target + 2;
+        pending = malloc(cap * sizeof *pending);
+        if (!pending) {
+            free(work);
+            return UINT32_MAX;
+        }
+        uint32_t n_pending = 0;
+        pending[n_pending++] = root;
+        uint32_t next = 2;
+        while (n_pending < target) {
+            uint32_t largest = 0;
+            for (uint32_t i = 1; i < n_pending; i++)
+                if (pending[i].end - pending[i].begin > pending[largest].end - pending[largest].begin)
+                    largest = i;
+            struct build_task task = pending[largest];
+            if (task.end - task.begin < BVH_PARALLEL_BIN_MIN)
+                break; /* the rest is small: leave it to the subtree threads */
+            pending[largest] = pending[--n_pending];
+            struct bvh_node *node = &work[task.node_idx];
+            node_set_box(node, &task.bounds);
+            if (task.depth > max_depth)
+                max_depth = task.depth;
+            struct box child_bounds[2];
+            struct box child_centres[2];
+            uint32_t mid = split_task(ctx, &task, ctx->n_threads, child_bounds, child_centres);
+            if (mid == task.begin) {
+                node->left_first = task.begin;
+                node->n_tris = task.end - task.begin;
+                continue;
+            }
+            uint32_t left_idx = next;
+            next += 2;
+            node->left_first = left_idx;
+            node->n_tris = 0;
+            pending[n_pending++] = (struct build_task){
+                left_idx, task.begin, mid, task.depth + 1, 0, child_bounds[0], child_centres[0]};
+            pending[n_pending++] = (struct build_task){
+                left_idx + 1, mid, task.end, task.depth + 1, 0, child_bounds[1], child_centres[1]};
+        }
+        /* a subtree of m refs has at most 2 (m - 1) nodes below its root */
+        qsort(pending, n_pending, sizeof *pending, compare_task_size);
+        for (uint32_t i = 0; i < n_pending; i++) {
+            pending[i].node_base = next;
+            next += 2 * (pending[i].end - pending[i].begin - 1);
+        }
+        assert(next <= 2 * n);
+        struct subtree_pool pool = {ctx, pending, n_pending, 0, max_depth};
+        struct subtree_pool *handles[BVH_MAX_THREADS];
+        for (int i = 0; i < ctx->n_threads; i++)
+            handles[i] = &pool;
+        run_jobs(ctx->n_threads, subtree_worker, handles, sizeof handles[0]);
+        max_depth = atomic_load(&pool.max_depth);
+        free(pending);
+        n_used = count_nodes(work);
+        renumbered = true;
+    }
+    struct bvh_node *nodes = alloc_aligned(n_used, sizeof *nodes);
+    if (!nodes) {
+        free(work);
+        return UINT32_MAX;
+    }
+    if (renumbered) {
+        uint32_t n_check = renumber(work, nodes);
+        assert(n_check == n_used);
+        (void)n_check;
+    } else {
+        memcpy(nodes, work, n_used * sizeof *nodes);
+    }
+    free(work);
+    ctx->nodes = NULL;
+    *out_nodes = nodes;
+    *out_n_nodes = n_used;
     return max_depth;
 }
 
@@ -301,6 +683,12 @@ static void collapse_if_degenerate(struct bvh_tri *tri)
     }
 }
 
+static bool tri_is_collapsed(const struct bvh_tri *tri)
+{
+    return memcmp(tri->p0, tri->p1, sizeof tri->p0) == 0 &&
+           memcmp(tri->p0, tri->p2, sizeof tri->p0) == 0;
+}
+
 static void load_tri(struct bvh_tri *tri, const vec3 *positions, const uint32_t *indices,
                      uint32_t prim)
 {
@@ -315,6 +703,40 @@ static void load_tri(struct bvh_tri *tri, const vec3 *positions, const uint32_t 
     collapse_if_degenerate(tri);
 }
 
+/* Refs of triangles [begin, end), in parallel slices. */
+struct ref_job {
+    struct prim_ref *refs;
+    const vec3 *positions;
+    const uint32_t *indices;
+    uint32_t begin;
+    uint32_t end;
+    struct box bounds;
+    struct box centres;
+};
+
+static void *ref_job_run(void *arg)
+{
+    struct ref_job *job = arg;
+    job->bounds = empty_box;
+    job->centres = empty_box;
+    for (uint32_t i = job->begin; i < job->end; i++) {
+        struct bvh_tri tri;
+        load_tri(&tri, job->positions, job->indices, i);
+        struct prim_ref *r = &job->refs[i];
+        for (int a = 0; a < 3; a++) {
+            r->min[a] = fminf(tri.p0[a], fminf(tri.p1[a], tri.p2[a]));
+            r->max[a] = fmaxf(tri.p0[a], fmaxf(tri.p1[a], tri.p2[a]));
+        }
+        r->prim_idx = i;
+        r->pad = 0.0f;
+        float c[3];
+        ref_centre(r, c);
+        box_grow(&job->bounds, r->min, r->max);
+        box_grow(&job->centres, c, c);
+    }
+    return NULL;
+}
+
 static double now_ms(void)
 {
     struct timespec ts;
@@ -322,82 +744,340 @@ static double now_ms(void)
     return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
 }
 
-/* malloc of n elements of size bytes, NULL on overflow. */
-static void *alloc_array(size_t n, size_t size)
-{
-    if (size != 0 && n > SIZE_MAX / size)
-        return NULL;
-    return malloc(n * size == 0 ? 1 : n * size);
-}
-
-/* n nodes on a 64-byte boundary (aligned_alloc wants a multiple of 64 bytes), NULL on overflow. */
-static struct bvh_node *alloc_nodes(size_t n)
-{
-    if (n > (SIZE_MAX - 64) / sizeof(struct bvh_node))
-        return NULL;
-    size_t bytes = (n * sizeof(struct bvh_node) + 63) / 64 * 64;
-    return aligned_alloc(64, bytes == 0 ? 64 : bytes);
-}
-
+static bool convert_wide(struct bvh *bvh, const vec3 *positions, const uint32_t *indices);
 static void compute_stats(struct bvh *bvh);
 
 struct bvh *bvh_build(const vec3 *positions, const uint32_t *indices, uint32_t n_tris,
                       int n_threads)
 {
-    (void)n_threads; /* single-threaded for now, see the build comment above */
+    struct bvh_build_options opt = {n_threads, BVH_LAYOUT_WIDE};
+    return bvh_build_with(positions, indices, n_tris, &opt);
+}
+
+struct bvh *bvh_build_with(const vec3 *positions, const uint32_t *indices, uint32_t n_tris,
+                           const struct bvh_build_options *opt)
+{
     double t_start_ms = now_ms();
-    struct prim_ref *refs = NULL;
-    struct bvh_node *nodes_worst = NULL;
+    struct bvh_build_options o = opt ? *opt : (struct bvh_build_options){1, BVH_LAYOUT_WIDE};
+    unsigned layouts = o.layouts ? o.layouts : BVH_LAYOUT_WIDE;
+    if (n_tris >= WIDE_MAX_TRIS)
+        layouts = BVH_LAYOUT_BINARY;
+    int n_threads = o.n_threads < 1 ? 1 : o.n_threads > BVH_MAX_THREADS ? BVH_MAX_THREADS
+                                                                          : o.n_threads;
+    struct build_ctx ctx = {NULL, NULL, n_threads};
     struct bvh *bvh = calloc(1, sizeof *bvh);
     if (!bvh)
         goto fail;
     bvh->n_tris = n_tris;
+    bvh->stats.n_threads = n_threads;
     if (n_tris > 0) {
         if (n_tris > UINT32_MAX / 2)
             goto fail; /* 2 n nodes (2 n - 1 and the unused nodes[1]) must fit in uint32_t */
-        refs = alloc_array(n_tris, sizeof *refs);
-        nodes_worst = alloc_nodes(2 * (size_t)n_tris);
-        bvh->tris = alloc_array(n_tris, sizeof *bvh->tris);
+        ctx.refs = alloc_aligned(n_tris, sizeof *ctx.refs);
         bvh->prim_idx = alloc_array(n_tris, sizeof *bvh->prim_idx);
-        if (!refs || !nodes_worst || !bvh->tris || !bvh->prim_idx)
+        if (!ctx.refs || !bvh->prim_idx)
             goto fail;
         /* the build sees only boxes (of the stored, possibly collapsed, vertices) */
-        for (uint32_t i = 0; i < n_tris; i++) {
-            struct bvh_tri tri;
-            load_tri(&tri, positions, indices, i);
-            struct prim_ref *r = &refs[i];
-            for (int a = 0; a < 3; a++) {
-                r->min[a] = fminf(tri.p0[a], fminf(tri.p1[a], tri.p2[a]));
-                r->max[a] = fmaxf(tri.p0[a], fmaxf(tri.p1[a], tri.p2[a]));
-            }
-            r->prim_idx = i;
+        int n_jobs = n_tris >= BVH_PARALLEL_MIN_TRIS ? n_threads : 1;
+        struct ref_job jobs[BVH_MAX_THREADS];
+        for (int i = 0; i < n_jobs; i++) {
+            jobs[i] = (struct ref_job){ctx.refs, positions, indices,
+                                       (uint32_t)((uint64_t)n_tris * (uint64_t)i / (uint64_t)n_jobs),
+                                       (uint32_t)((uint64_t)n_tris * (uint64_t)(i + 1) /
+                                                  (uint64_t)n_jobs),
+                                       empty_box, empty_box};
         }
-        bvh->nodes = nodes_worst;
-        bvh->stats.max_depth = build_nodes(bvh, refs);
-        /* move the nodes into an array of the final size */
-        bvh->nodes = alloc_nodes(bvh->n_nodes);
-        if (!bvh->nodes)
+        run_jobs(n_jobs, ref_job_run, jobs, sizeof jobs[0]);
+        struct box bounds = empty_box;
+        struct box centres = empty_box;
+        for (int i = 0; i < n_jobs; i++) {
+            box_grow(&bounds, jobs[i].bounds.min, jobs[i].bounds.max);
+            box_grow(&centres, jobs[i].centres.min, jobs[i].centres.max);
+        }
+        uint32_t depth = build_tree(&ctx, n_tris, &bounds, &centres, &bvh->nodes, &bvh->n_nodes);
+        if (depth == UINT32_MAX)
             goto fail;
-        memcpy(bvh->nodes, nodes_worst, bvh->n_nodes * sizeof *bvh->nodes);
-        free(nodes_worst);
-        nodes_worst = NULL;
-        for (uint32_t i = 0; i < n_tris; i++) {
-            load_tri(&bvh->tris[i], positions, indices, refs[i].prim_idx);
-            bvh->prim_idx[i] = refs[i].prim_idx;
+        bvh->stats.max_depth = depth;
+        for (uint32_t i = 0; i < n_tris; i++)
+            bvh->prim_idx[i] = ctx.refs[i].prim_idx;
+        free(ctx.refs);
+        ctx.refs = NULL;
+        compute_stats(bvh); /* of the binary tree, before it may be dropped */
+        if (layouts & BVH_LAYOUT_WIDE) {
+            double t_convert_ms = now_ms();
+            if (!convert_wide(bvh, positions, indices))
+                goto fail;
+            bvh->stats.convert_ms = now_ms() - t_convert_ms;
         }
+        if (layouts & BVH_LAYOUT_BINARY) {
+            bvh->tris = alloc_array(n_tris, sizeof *bvh->tris);
+            if (!bvh->tris)
+                goto fail;
+            for (uint32_t i = 0; i < n_tris; i++)
+                load_tri(&bvh->tris[i], positions, indices, bvh->prim_idx[i]);
+        } else {
+            free(bvh->nodes);
+            free(bvh->prim_idx);
+            bvh->nodes = NULL;
+            bvh->prim_idx = NULL;
+            bvh->n_nodes = 0;
+        }
+        bvh->layouts = layouts;
+    } else {
+        compute_stats(bvh);
     }
-    free(refs);
-    compute_stats(bvh);
+    bvh->stats.binary_bytes = bvh->layouts & BVH_LAYOUT_BINARY
+                                  ? (size_t)bvh->n_nodes * sizeof(struct bvh_node) +
+                                        (size_t)n_tris * (sizeof(struct bvh_tri) + sizeof(uint32_t))
+                                  : 0;
+    bvh->stats.wide_bytes = bvh->layouts & BVH_LAYOUT_WIDE
+                                ? (size_t)bvh->n_wide * sizeof(struct wide_node) +
+                                      ((size_t)bvh->n_wide_tris * 9 + 8) * sizeof(float) +
+                                      (size_t)bvh->n_wide_tris * sizeof(uint32_t)
+                                : 0;
+    bvh->stats.bytes = bvh->stats.binary_bytes + bvh->stats.wide_bytes;
+    bvh->stats.n_wide_nodes = bvh->n_wide;
     bvh->stats.build_ms = now_ms() - t_start_ms;
     return bvh;
 fail:
-    free(refs);
-    free(nodes_worst);
+    free(ctx.refs);
     bvh_free(bvh);
     return NULL;
 }
 
-/* ---- Traversal --------------------------------------------------------------------------------
+unsigned bvh_layouts(const struct bvh *bvh) { return bvh->layouts; }
+
+/* ---- Conversion to the wide layout ----------------------------------------------------------
+ * Depth first from the binary root.  A wide node starts with a binary node's two children and
+ * repeatedly replaces its interior child of largest surface area by that child's two children,
+ * until it holds BVH_WIDTH children or only leaves (Wald et al. 2008, sec. 3).  A first pass
+ * counts nodes and triangles so that the arrays are allocated once at their exact size. */
+struct convert {
+    const struct bvh *bvh;     /* binary tree: nodes, prim_idx */
+    const vec3 *positions;     /* the caller's mesh, read again for the leaves */
+    const uint32_t *indices;   /* (the wide leaves keep the same vertices as struct bvh_tri) */
+    struct wide_node *wide;    /* NULL in the counting pass */
+    float *leaf_tris;          /* SoA leaves */
+    uint32_t *prim_idx;        /* of the wide triangles */
+    uint32_t *scratch;         /* valid triangles of a big leaf */
+    uint32_t n_wide;           /* nodes allocated so far */
+    uint32_t n_wide_tris;      /* triangles written so far */
+    uint32_t n_leaves;         /* wide leaves */
+    uint32_t depth;            /* current wide depth, root = 0 */
+    uint32_t max_depth;        /* deepest wide node */
+};
+
+/* Wide depth stays below the binary depth cap plus the levels of one oversized leaf
+ * (8-way splits of at most 2^28 triangles). */
+#define WIDE_MAX_DEPTH (BVH_MAX_DEPTH + 10)
+#define WIDE_STACK_SIZE (7 * WIDE_MAX_DEPTH + 8)
+
+static float node_half_area(const struct bvh_node *node)
+{
+    struct box b = {{node->min[0], node->min[1], node->min[2]},
+                    {node->max[0], node->max[1], node->max[2]}};
+    return box_half_area(&b);
+}
+
+static void wide_node_init(struct wide_node *w)
+{
+    for (int lane = 0; lane < BVH_WIDTH; lane++) {
+        for (int a = 0; a < 3; a++) {
+            w->bounds[2 * a][lane] = INFINITY;
+            w->bounds[2 * a + 1][lane] = -INFINITY;
+        }
+        w->child[lane] = 0;
+    }
+    w->n_children = 0;
+    memset(w->pad, 0, sizeof w->pad);
+}
+
+static void wide_node_add(struct wide_node *w, const struct box *b, uint32_t ref)
+{
+    uint32_t lane = w->n_children++;
+    assert(lane < BVH_WIDTH);
+    for (int a = 0; a < 3; a++) {
+        w->bounds[2 * a][lane] = b->min[a];
+        w->bounds[2 * a + 1][lane] = b->max[a];
+    }
+    w->child[lane] = ref;
+}
+
+/* Writes one wide leaf of the n (1..8) triangles tris[] (binary positions) and returns its
+ * reference; grows *box by their vertices. */
+static uint32_t emit_leaf(struct convert *cv, const uint32_t *tris, uint32_t n, struct box *box)
+{
+    assert(n >= 1 && n <= BVH_WIDTH);
+    uint32_t first = cv->n_wide_tris;
+    cv->n_wide_tris += n;
+    cv->n_leaves++;
+    for (uint32_t i = 0; i < n; i++) {
+        struct bvh_tri tri;
+        uint32_t prim = cv->bvh->prim_idx[tris[i]];
+        load_tri(&tri, cv->positions, cv->indices, prim);
+        box_grow(box, tri.p0, tri.p0);
+        box_grow(box, tri.p1, tri.p1);
+        box_grow(box, tri.p2, tri.p2);
+        if (!cv->wide)
+            continue;
+        float *base = cv->leaf_tris + 9 * (size_t)first;
+        const float *p[3] = {tri.p0, tri.p1, tri.p2};
+        for (int k = 0; k < 3; k++)
+            for (int a = 0; a < 3; a++)
+                base[(size_t)(3 * k + a) * n + i] = p[k][a];
+        cv->prim_idx[first + i] = prim;
+    }
+    return WIDE_LEAF | first << 3 | (n - 1);
+}
+
+/* Triangles tris[0, n) as one leaf (n <= 8) or, for more, a wide node of up to eight parts. */
+static uint32_t emit_triangles(struct convert *cv, const uint32_t *tris, uint32_t n,
+                               struct box *box)
+{
+    if (n <= BVH_WIDTH)
+        return emit_leaf(cv, tris, n, box);
+    uint32_t w = cv->n_wide++;
+    if (cv->wide)
+        wide_node_init(&cv->wide[w]);
+    cv->depth++;
+    if (cv->depth > cv->max_depth)
+        cv->max_depth = cv->depth;
+    uint32_t n_parts = (n + BVH_WIDTH - 1) / BVH_WIDTH < BVH_WIDTH ? (n + BVH_WIDTH - 1) / BVH_WIDTH
+                                                                   : BVH_WIDTH;
+    for (uint32_t part = 0; part < n_parts; part++) {
+        uint32_t begin = (uint32_t)((uint64_t)n * part / n_parts);
+        uint32_t end = (uint32_t)((uint64_t)n * (part + 1) / n_parts);
+        struct box part_box = empty_box;
+        uint32_t ref = emit_triangles(cv, tris + begin, end - begin, &part_box);
+        box_grow(box, part_box.min, part_box.max);
+        if (cv->wide)
+            wide_node_add(&cv->wide[w], &part_box, ref);
+    }
+    cv->depth--;
+    return w;
+}
+
+/* The wide reference of binary leaf `leaf` without its degenerate triangles; false when none
+ * is left (the leaf is dropped).  *box is the binary leaf's box. */
+static bool emit_binary_leaf(struct convert *cv, const struct bvh_node *leaf, uint32_t *ref)
+{
+    uint32_t local[BVH_MAX_LEAF_TRIS];
+    uint32_t *tris = leaf->n_tris <= BVH_MAX_LEAF_TRIS ? local : cv->scratch;
+    uint32_t n = 0;
+    for (uint32_t i = leaf->left_first; i < leaf->left_first + leaf->n_tris; i++) {
+        struct bvh_tri tri;
+        load_tri(&tri, cv->positions, cv->indices, cv->bvh->prim_idx[i]);
+        if (!tri_is_collapsed(&tri))
+            tris[n++] = i;
+    }
+    if (n == 0)
+        return false;
+    struct box unused = empty_box;
+    *ref = emit_triangles(cv, tris, n, &unused);
+    return true;
+}
+
+/* A wide node over the binary nodes slots[0, n_slots); returns its index. */
+static uint32_t emit_wide(struct convert *cv, uint32_t *slots, int n_slots)
+{
+    const struct bvh_node *nodes = cv->bvh->nodes;
+    /* open the interior child of largest surface area until BVH_WIDTH children */
+    while (n_slots < BVH_WIDTH) {
+        int best = -1;
+        float best_area = -1.0f;
+        for (int i = 0; i < n_slots; i++) {
+            const struct bvh_node *c = &nodes[slots[i]];
+            float area = node_half_area(c);
+            if (c->n_tris == 0 && area > best_area) {
+                best = i;
+                best_area = area;
+            }
+        }
+        if (best < 0)
+            break;
+        uint32_t left = nodes[slots[best]].left_first;
+        slots[best] = left;
+        slots[n_slots++] = left + 1;
+    }
+    uint32_t w = cv->n_wide++;
+    if (cv->wide)
+        wide_node_init(&cv->wide[w]);
+    cv->depth++;
+    if (cv->depth > cv->max_depth)
+        cv->max_depth = cv->depth;
+    for (int i = 0; i < n_slots; i++) {
+        const struct bvh_node *c = &nodes[slots[i]];
+        struct box b = {{c->min[0], c->min[1], c->min[2]}, {c->max[0], c->max[1], c->max[2]}};
+        uint32_t ref;
+        if (c->n_tris > 0) {
+            if (!emit_binary_leaf(cv, c, &ref))
+                continue;
+        } else {
+            uint32_t child_slots[BVH_WIDTH] = {c->left_first, c->left_first + 1};
+            ref = emit_wide(cv, child_slots, 2);
+        }
+        if (cv->wide)
+            wide_node_add(&cv->wide[w], &b, ref);
+    }
+    cv->depth--;
+    return w;
+}
+
+static uint32_t max_leaf_size(const struct bvh *bvh)
+{
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < bvh->n_nodes; i++)
+        if (i != 1 && bvh->nodes[i].n_tris > n)
+            n = bvh->nodes[i].n_tris;
+    return n;
+}
+
+static bool convert_wide(struct bvh *bvh, const vec3 *positions, const uint32_t *indices)
+{
+    struct convert cv = {bvh, positions, indices, NULL, NULL, NULL, NULL, 0, 0, 0, 0, 0};
+    uint32_t big = max_leaf_size(bvh);
+    if (big > BVH_MAX_LEAF_TRIS) {
+        cv.scratch = alloc_array(big, sizeof *cv.scratch);
+        if (!cv.scratch)
+            return false;
+    }
+    /* pass 1: count; the root is a wide node whose children are the binary root's (or the
+     * binary root itself when it is a leaf) */
+    uint32_t root_slots[BVH_WIDTH] = {0};
+    bool root_is_leaf = bvh->nodes[0].n_tris > 0;
+    if (!root_is_leaf) {
+        root_slots[0] = bvh->nodes[0].left_first;
+        root_slots[1] = root_slots[0] + 1;
+    }
+    emit_wide(&cv, root_slots, root_is_leaf ? 1 : 2);
+    assert(cv.max_depth <= WIDE_MAX_DEPTH);
+    uint32_t n_wide = cv.n_wide;
+    uint32_t n_wide_tris = cv.n_wide_tris;
+    /* pass 2: write */
+    bvh->wide = alloc_aligned(n_wide, sizeof *bvh->wide);
+    bvh->leaf_tris = alloc_aligned(9 * (size_t)n_wide_tris + 8, sizeof(float));
+    bvh->wide_prim_idx = alloc_array(n_wide_tris, sizeof(uint32_t));
+    if (!bvh->wide || !bvh->leaf_tris || !bvh->wide_prim_idx) {
+        free(cv.scratch);
+        return false;
+    }
+    memset(bvh->leaf_tris + 9 * (size_t)n_wide_tris, 0, 8 * sizeof(float));
+    cv = (struct convert){bvh,  positions, indices, bvh->wide, bvh->leaf_tris, bvh->wide_prim_idx,
+                          cv.scratch, 0, 0, 0, 0, 0};
+    if (!root_is_leaf) {
+        root_slots[0] = bvh->nodes[0].left_first;
+        root_slots[1] = root_slots[0] + 1;
+    }
+    emit_wide(&cv, root_slots, root_is_leaf ? 1 : 2);
+    assert(cv.n_wide == n_wide && cv.n_wide_tris == n_wide_tris);
+    bvh->n_wide = n_wide;
+    bvh->n_wide_tris = n_wide_tris;
+    bvh->stats.n_wide_leaves = cv.n_leaves;
+    free(cv.scratch);
+    return true;
+}
+
+/* ---- Reference traversal ----------------------------------------------------------------------
  * Closest hit: iterative, depth first, nearer child first.  At an interior node both children's
  * boxes are tested against [t_min, t_hit] (t_hit = the closest hit so far, initially t_max); if
  * both are hit the farther one is pushed with its entry distance and the nearer one visited.
@@ -406,7 +1086,8 @@ fail:
  * equal t either triangle), with one exception: where several triangles are hit within a few
  * ulps of each other (a ray through a shared vertex or edge), the box of the marginally nearer
  * one can start a few ulps beyond t_hit and be culled.  The reported hit is then one of those
- * triangles, at the same point to within rounding.
+ * triangles, at the same point to within rounding.  The wide traversal below has the same
+ * contract.
  * A ray starting on a surface (t_min = 0) may report that surface at t ~ 0 when rounding puts
  * its origin behind the plane; tri_hit only rejects t <= delta_t.  Spawned rays must start at
  * offset_ray_origin (vec.h), which puts the origin on the correct side by the error bound. */
@@ -495,11 +1176,11 @@ static bool tri_hit(const struct bvh_tri *tri, const struct ray_pre *rp, float t
                     float *t_out, float *u_out, float *v_out);
 
 struct stack_entry {
-    uint32_t node_idx; /* node still to visit */
+    uint32_t node_idx; /* node still to visit (binary index or wide reference) */
     float t_entry;     /* where the ray enters its box */
 }; /* 8 bytes */
 
-bool bvh_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *hit)
+static bool binary_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *hit)
 {
     if (bvh->n_nodes == 0)
         return false;
@@ -574,8 +1255,8 @@ done:
 }
 
 /* Any hit: the same boxes against the fixed [t_min, t_max], children in stored order, and the
- * first triangle hit ends the search.  It reports a hit exactly when bvh_intersect does. */
-bool bvh_occluded(const struct bvh *bvh, const struct ray *ray)
+ * first triangle hit ends the search.  It reports a hit exactly when binary_intersect does. */
+static bool binary_occluded(const struct bvh *bvh, const struct ray *ray)
 {
     if (bvh->n_nodes == 0)
         return false;
@@ -636,11 +1317,27 @@ bool bvh_occluded(const struct bvh *bvh, const struct ray *ray)
  *   det = U + V + W,  T = U Az + V Bz + W Cz,  t = T / det,  u = V / det,  v = W / det
  * A hit needs t_min < t < t_max and t > delta_t, PBRT's bound on the rounding error of t (a hit
  * that close may lie behind the origin, so a negative t_min finds nothing behind it either);
- * det == 0 (ray parallel to, or in, the plane) is a miss. */
+ * det == 0 (ray parallel to, or in, the plane) is a miss.  The SIMD kernel woop8 below performs
+ * exactly these operations in the same order on eight lanes, so its t, u, v are the same bits. */
 static inline float max_abs3(float a, float b, float c)
 {
     float m = fabsf(a) > fabsf(b) ? fabsf(a) : fabsf(b);
     return fabsf(c) > m ? fabsf(c) : m;
+}
+
+/* The double-precision fallback for one triangle's sheared 2D vertices. */
+static void edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx, float Cy,
+                                  float *U, float *V, float *W)
+{
+    double CxBy = (double)Cx * (double)By;
+    double CyBx = (double)Cy * (double)Bx;
+    *U = (float)(CxBy - CyBx);
+    double AxCy = (double)Ax * (double)Cy;
+    double AyCx = (double)Ay * (double)Cx;
+    *V = (float)(AxCy - AyCx);
+    double BxAy = (double)Bx * (double)Ay;
+    double ByAx = (double)By * (double)Ax;
+    *W = (float)(BxAy - ByAx);
 }
 
 static bool tri_hit(const struct bvh_tri *tri, const struct ray_pre *rp, float t_min, float t_max,
@@ -670,17 +1367,8 @@ static bool tri_hit(const struct bvh_tri *tri, const struct ray_pre *rp, float t
     float U = Cx * By - Cy * Bx;
     float V = Ax * Cy - Ay * Cx;
     float W = Bx * Ay - By * Ax;
-    if (U == 0.0f || V == 0.0f || W == 0.0f) {
-        double CxBy = (double)Cx * (double)By;
-        double CyBx = (double)Cy * (double)Bx;
-        U = (float)(CxBy - CyBx);
-        double AxCy = (double)Ax * (double)Cy;
-        double AyCx = (double)Ay * (double)Cx;
-        V = (float)(AxCy - AyCx);
-        double BxAy = (double)Bx * (double)Ay;
-        double ByAx = (double)By * (double)Ax;
-        W = (float)(BxAy - ByAx);
-    }
+    if (U == 0.0f || V == 0.0f || W == 0.0f)
+        edge_functions_double(Ax, Ay, Bx, By, Cx, Cy, &U, &V, &W);
     /* (0, 0) is outside when the edge functions disagree in sign */
     if ((U < 0.0f || V < 0.0f || W < 0.0f) && (U > 0.0f || V > 0.0f || W > 0.0f))
         return false;
@@ -720,10 +1408,869 @@ static bool tri_hit(const struct bvh_tri *tri, const struct ray_pre *rp, float t
     return true;
 }
 
+/* ---- Eight SIMD lanes -----------------------------------------------------------------------
+ * struct f8 holds eight floats, struct m8 eight lane masks (all ones or all zeros).  With AVX2
+ * each operation is one instruction on a 256-bit register; otherwise it is the loop written
+ * beside it, which is also the definition of what the AVX2 instruction computes.  max_num and
+ * min_num keep the running value when the candidate is NaN, as the scalar ones above do. */
+#if defined(__AVX2__)
+#include <immintrin.h>
+
+struct f8 {
+    __m256 v;
+};
+struct m8 {
+    __m256 v;
+};
+
+const char *bvh_simd_name(void) { return "avx2"; }
+
+static inline struct f8 f8_set1(float s) { return (struct f8){_mm256_set1_ps(s)}; }
+static inline struct f8 f8_load(const float *p) { return (struct f8){_mm256_load_ps(p)}; }
+static inline struct f8 f8_loadu(const float *p) { return (struct f8){_mm256_loadu_ps(p)}; }
+static inline void f8_store(float *p, struct f8 a) { _mm256_storeu_ps(p, a.v); }
+static inline struct f8 f8_add(struct f8 a, struct f8 b) { return (struct f8){_mm256_add_ps(a.v, b.v)}; }
+static inline struct f8 f8_sub(struct f8 a, struct f8 b) { return (struct f8){_mm256_sub_ps(a.v, b.v)}; }
+static inline struct f8 f8_mul(struct f8 a, struct f8 b) { return (struct f8){_mm256_mul_ps(a.v, b.v)}; }
+static inline struct f8 f8_div(struct f8 a, struct f8 b) { return (struct f8){_mm256_div_ps(a.v, b.v)}; }
+/* candidate > running ? candidate : running (vmaxps returns its second operand on NaN) */
+static inline struct f8 f8_max_num(struct f8 running, struct f8 candidate)
+{
+    return (struct f8){_mm256_max_ps(candidate.v, running.v)};
+}
+static inline struct f8 f8_min_num(struct f8 running, struct f8 candidate)
+{
+    return (struct f8){_mm256_min_ps(candidate.v, running.v)};
+}
+static inline struct f8 f8_abs(struct f8 a)
+{
+    return (struct f8){_mm256_andnot_ps(_mm256_set1_ps(-0.0f), a.v)};
+}
+static inline struct m8 f8_lt(struct f8 a, struct f8 b) { return (struct m8){_mm256_cmp_ps(a.v, b.v, _CMP_LT_OQ)}; }
+static inline struct m8 f8_le(struct f8 a, struct f8 b) { return (struct m8){_mm256_cmp_ps(a.v, b.v, _CMP_LE_OQ)}; }
+static inline struct m8 f8_gt(struct f8 a, struct f8 b) { return (struct m8){_mm256_cmp_ps(a.v, b.v, _CMP_GT_OQ)}; }
+static inline struct m8 f8_eq(struct f8 a, struct f8 b) { return (struct m8){_mm256_cmp_ps(a.v, b.v, _CMP_EQ_OQ)}; }
+static inline struct m8 m8_or(struct m8 a, struct m8 b) { return (struct m8){_mm256_or_ps(a.v, b.v)}; }
+static inline struct m8 m8_and(struct m8 a, struct m8 b) { return (struct m8){_mm256_and_ps(a.v, b.v)}; }
+static inline uint32_t m8_bits(struct m8 m) { return (uint32_t)_mm256_movemask_ps(m.v); }
+/* lane i set when bit i of bits is */
+static inline struct m8 m8_from_bits(uint32_t bits)
+{
+    const __m256i lane_bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+    __m256i b = _mm256_and_si256(_mm256_set1_epi32((int)bits), lane_bit);
+    return (struct m8){_mm256_castsi256_ps(_mm256_cmpeq_epi32(b, lane_bit))};
+}
+/* m ? a : b per lane */
+static inline struct f8 f8_select(struct m8 m, struct f8 a, struct f8 b)
+{
+    return (struct f8){_mm256_blendv_ps(b.v, a.v, m.v)};
+}
+/* smallest lane */
+static inline float f8_hmin(struct f8 a)
+{
+    __m256 m = _mm256_min_ps(a.v, _mm256_permute2f128_ps(a.v, a.v, 1));
+    m = _mm256_min_ps(m, _mm256_shuffle_ps(m, m, _MM_SHUFFLE(1, 0, 3, 2)));
+    m = _mm256_min_ps(m, _mm256_shuffle_ps(m, m, _MM_SHUFFLE(2, 3, 0, 1)));
+    return _mm256_cvtss_f32(m);
+}
+#else
+struct f8 {
+    float v[8];
+};
+struct m8 {
+    int32_t v[8]; /* 0 or -1 */
+};
+
+const char *bvh_simd_name(void) { return "scalar"; }
+
+#define F8_MAP(expr)                                                                              \
+    struct f8 r;                                                                                  \
+    for (int i = 0; i < 8; i++)                                                                   \
+        r.v[i] = (expr);                                                                          \
+    return r
+#define M8_MAP(expr)                                                                              \
+    struct m8 r;                                                                                  \
+    for (int i = 0; i < 8; i++)                                                                   \
+        r.v[i] = (expr) ? -1 : 0;                                                                 \
+    return r
+
+static inline struct f8 f8_set1(float s) { F8_MAP(s); }
+static inline struct f8 f8_load(const float *p) { F8_MAP(p[i]); }
+static inline struct f8 f8_loadu(const float *p) { F8_MAP(p[i]); }
+static inline void f8_store(float *p, struct f8 a) { memcpy(p, a.v, sizeof a.v); }
+static inline struct f8 f8_add(struct f8 a, struct f8 b) { F8_MAP(a.v[i] + b.v[i]); }
+static inline struct f8 f8_sub(struct f8 a, struct f8 b) { F8_MAP(a.v[i] - b.v[i]); }
+static inline struct f8 f8_mul(struct f8 a, struct f8 b) { F8_MAP(a.v[i] * b.v[i]); }
+static inline struct f8 f8_div(struct f8 a, struct f8 b) { F8_MAP(a.v[i] / b.v[i]); }
+static inline struct f8 f8_max_num(struct f8 running, struct f8 candidate)
+{
+    F8_MAP(max_num(running.v[i], candidate.v[i]));
+}
+static inline struct f8 f8_min_num(struct f8 running, struct f8 candidate)
+{
+    F8_MAP(min_num(running.v[i], candidate.v[i]));
+}
+static inline struct f8 f8_abs(struct f8 a) { F8_MAP(fabsf(a.v[i])); }
+static inline struct m8 f8_lt(struct f8 a, struct f8 b) { M8_MAP(a.v[i] < b.v[i]); }
+static inline struct m8 f8_le(struct f8 a, struct f8 b) { M8_MAP(a.v[i] <= b.v[i]); }
+static inline struct m8 f8_gt(struct f8 a, struct f8 b) { M8_MAP(a.v[i] > b.v[i]); }
+static inline struct m8 f8_eq(struct f8 a, struct f8 b) { M8_MAP(a.v[i] == b.v[i]); }
+static inline struct m8 m8_or(struct m8 a, struct m8 b) { M8_MAP(a.v[i] | b.v[i]); }
+static inline struct m8 m8_and(struct m8 a, struct m8 b) { M8_MAP(a.v[i] & b.v[i]); }
+static inline uint32_t m8_bits(struct m8 m)
+{
+    uint32_t bits = 0;
+    for (int i = 0; i < 8; i++)
+        bits |= (m.v[i] ? 1u : 0u) << i;
+    return bits;
+}
+static inline struct m8 m8_from_bits(uint32_t bits) { M8_MAP((bits >> i) & 1u); }
+static inline struct f8 f8_select(struct m8 m, struct f8 a, struct f8 b)
+{
+    F8_MAP(m.v[i] ? a.v[i] : b.v[i]);
+}
+static inline float f8_hmin(struct f8 a)
+{
+    float m = a.v[0];
+    for (int i = 1; i < 8; i++)
+        m = a.v[i] < m ? a.v[i] : m;
+    return m;
+}
+#undef F8_MAP
+#undef M8_MAP
+#endif
+
+static inline int lowest_bit(uint32_t bits)
+{
+    assert(bits != 0);
+    return __builtin_ctz(bits);
+}
+
+/* ---- Woop's test on eight lanes ----------------------------------------------------------------
+ * A lane is one (ray, triangle) pair: eight triangles against one ray in a leaf, or one
+ * triangle against eight rays in a packet.  The inputs are the vertices relative to the ray
+ * origin, components already permuted to (kx, ky, kz) of the lane's ray.  Every operation is
+ * tri_hit's, in the same order, so a lane's t, u, v equal tri_hit's to the bit.  Lanes outside
+ * `valid` are ignored (their inputs may be garbage).  Returns the mask of lanes that hit. */
+struct woop8_in {
+    struct f8 a[3]; /* p0 - o: (kx, ky, kz) components */
+    struct f8 b[3]; /* p1 - o */
+    struct f8 c[3]; /* p2 - o */
+    struct f8 sx;   /* shear constants of each lane's ray */
+    struct f8 sy;
+    struct f8 sz;
+    struct f8 t_min; /* hit interval (t_min, t_max) */
+    struct f8 t_max;
+};
+
+struct woop8_out {
+    struct f8 t;
+    struct f8 u; /* V / det */
+    struct f8 v; /* W / det */
+};
+
+static void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, struct f8 Bx,
+                               struct f8 By, struct f8 Cx, struct f8 Cy, struct f8 *U,
+                               struct f8 *V, struct f8 *W)
+{
+    float ax[8], ay[8], bx[8], by[8], cx[8], cy[8], u[8], v[8], w[8];
+    f8_store(ax, Ax);
+    f8_store(ay, Ay);
+    f8_store(bx, Bx);
+    f8_store(by, By);
+    f8_store(cx, Cx);
+    f8_store(cy, Cy);
+    f8_store(u, *U);
+    f8_store(v, *V);
+    f8_store(w, *W);
+    for (uint32_t bits = lanes; bits; bits &= bits - 1) {
+        int i = lowest_bit(bits);
+        edge_functions_double(ax[i], ay[i], bx[i], by[i], cx[i], cy[i], &u[i], &v[i], &w[i]);
+    }
+    *U = f8_loadu(u);
+    *V = f8_loadu(v);
+    *W = f8_loadu(w);
+}
+
+static inline uint32_t woop8(const struct woop8_in *in, uint32_t valid, struct woop8_out *out)
+{
+    const struct f8 zero = f8_set1(0.0f);
+    /* shear so each lane's ray direction becomes (0, 0, 1) */
+    struct f8 Ax = f8_sub(in->a[0], f8_mul(in->sx, in->a[2]));
+    struct f8 Ay = f8_sub(in->a[1], f8_mul(in->sy, in->a[2]));
+    struct f8 Bx = f8_sub(in->b[0], f8_mul(in->sx, in->b[2]));
+    struct f8 By = f8_sub(in->b[1], f8_mul(in->sy, in->b[2]));
+    struct f8 Cx = f8_sub(in->c[0], f8_mul(in->sx, in->c[2]));
+    struct f8 Cy = f8_sub(in->c[1], f8_mul(in->sy, in->c[2]));
+    /* scaled barycentric coordinates (edge functions) */
+    struct f8 U = f8_sub(f8_mul(Cx, By), f8_mul(Cy, Bx));
+    struct f8 V = f8_sub(f8_mul(Ax, Cy), f8_mul(Ay, Cx));
+    struct f8 W = f8_sub(f8_mul(Bx, Ay), f8_mul(By, Ax));
+    uint32_t on_edge = m8_bits(m8_or(m8_or(f8_eq(U, zero), f8_eq(V, zero)), f8_eq(W, zero)));
+    if (on_edge & valid)
+        woop8_fallback(on_edge & valid, Ax, Ay, Bx, By, Cx, Cy, &U, &V, &W);
+    /* outside when the edge functions disagree in sign */
+    struct m8 any_neg = m8_or(m8_or(f8_lt(U, zero), f8_lt(V, zero)), f8_lt(W, zero));
+    struct m8 any_pos = m8_or(m8_or(f8_gt(U, zero), f8_gt(V, zero)), f8_gt(W, zero));
+    uint32_t hit = valid & ~m8_bits(m8_and(any_neg, any_pos));
+    if (!hit)
+        return 0;
+    struct f8 det = f8_add(f8_add(U, V), W);
+    hit &= ~m8_bits(f8_eq(det, zero));
+    if (!hit)
+        return 0;
+    struct f8 Az = f8_mul(in->sz, in->a[2]);
+    struct f8 Bz = f8_mul(in->sz, in->b[2]);
+    struct f8 Cz = f8_mul(in->sz, in->c[2]);
+    struct f8 T = f8_add(f8_add(f8_mul(U, Az), f8_mul(V, Bz)), f8_mul(W, Cz));
+    struct f8 inv_det = f8_div(f8_set1(1.0f), det);
+    struct f8 t = f8_mul(T, inv_det);
+    hit &= m8_bits(m8_and(f8_gt(t, in->t_min), f8_lt(t, in->t_max)));
+    if (!hit)
+        return 0;
+    /* PBRT 4e, ch. 6, "Avoiding Intersections Behind Ray Origins", as in tri_hit */
+    struct f8 max_xt = f8_max_num(f8_max_num(f8_abs(Ax), f8_abs(Bx)), f8_abs(Cx));
+    struct f8 max_yt = f8_max_num(f8_max_num(f8_abs(Ay), f8_abs(By)), f8_abs(Cy));
+    struct f8 max_zt = f8_max_num(f8_max_num(f8_abs(Az), f8_abs(Bz)), f8_abs(Cz));
+    struct f8 max_e = f8_max_num(f8_max_num(f8_abs(U), f8_abs(V)), f8_abs(W));
+    struct f8 max_z = f8_max_num(f8_max_num(f8_abs(in->a[2]), f8_abs(in->b[2])), f8_abs(in->c[2]));
+    struct f8 delta_x = f8_mul(f8_set1(mcpt_gamma(5)), f8_add(max_xt, max_z));
+    struct f8 delta_y = f8_mul(f8_set1(mcpt_gamma(5)), f8_add(max_yt, max_z));
+    struct f8 delta_z = f8_mul(f8_set1(mcpt_gamma(3)), max_zt);
+    struct f8 delta_e = f8_mul(
+        f8_set1(2.0f), f8_add(f8_add(f8_mul(f8_mul(f8_set1(mcpt_gamma(2)), max_xt), max_yt),
+                                     f8_mul(delta_y, max_xt)),
+                              f8_mul(delta_x, max_yt)));
+    struct f8 delta_t = f8_mul(
+        f8_mul(f8_set1(3.0f), f8_add(f8_add(f8_mul(f8_mul(f8_set1(mcpt_gamma(3)), max_e), max_zt),
+                                            f8_mul(delta_e, max_zt)),
+                                     f8_mul(delta_z, max_e))),
+        f8_abs(inv_det));
+    hit &= m8_bits(f8_gt(t, delta_t));
+    out->t = t;
+    out->u = f8_mul(V, inv_det);
+    out->v = f8_mul(W, inv_det);
+    return hit;
+}
+
+/* ---- Wide traversal, one ray ---------------------------------------------------------------------
+ * The eight child boxes of a node are slab-tested at once (the box_hit formulas, one lane per
+ * child; the far-plane allowance is folded into inv_d_far = inv_d (1 + 4 gamma(3)), twice
+ * PBRT's, which also covers the rounding of that product).  The children hit are visited
+ * nearest first: one hit child is taken directly, two are ordered by one comparison, more are
+ * pushed and insertion-sorted on the stack (nearest on top) (Wald et al. 2008, sec. 4).
+ * A stack entry keeps its entry distance, and an entry beyond the closest hit is dropped when
+ * popped.  A leaf's triangles are tested by woop8, eight lanes at once. */
+struct wide_ray {
+    struct f8 o[3];         /* origin, broadcast */
+    struct f8 inv_d[3];     /* 1 / d */
+    struct f8 inv_d_far[3]; /* inv_d (1 + 4 gamma(3)): the conservative far plane */
+    int near_row[3];        /* bounds row of the near plane per axis: 2 a + is_neg */
+    int far_row[3];         /* and of the far plane: 2 a + 1 - is_neg */
+    int k[3];               /* kx, ky, kz */
+    struct f8 o_k[3];       /* o[kx], o[ky], o[kz] */
+    struct f8 sx;           /* shear constants */
+    struct f8 sy;
+    struct f8 sz;
+    struct f8 t_min;        /* t_min, broadcast */
+}; /* 512 bytes with AVX2 */
+
+static void wide_ray_setup(const struct ray_pre *rp, float t_min, struct wide_ray *wr)
+{
+    const float far_scale = 1.0f + 4.0f * mcpt_gamma(3);
+    for (int a = 0; a < 3; a++) {
+        wr->o[a] = f8_set1(rp->o[a]);
+        wr->inv_d[a] = f8_set1(rp->inv_d[a]);
+        wr->inv_d_far[a] = f8_set1(rp->inv_d[a] * far_scale);
+        wr->near_row[a] = 2 * a + rp->is_neg[a];
+        wr->far_row[a] = 2 * a + 1 - rp->is_neg[a];
+    }
+    wr->k[0] = rp->kx;
+    wr->k[1] = rp->ky;
+    wr->k[2] = rp->kz;
+    for (int j = 0; j < 3; j++)
+        wr->o_k[j] = f8_set1(rp->o[wr->k[j]]);
+    wr->sx = f8_set1(rp->sx);
+    wr->sy = f8_set1(rp->sy);
+    wr->sz = f8_set1(rp->sz);
+    wr->t_min = f8_set1(t_min);
+}
+
+/* Slab test of one ray against a wide node's children; returns the mask of children hit in
+ * [t_min, t_max] and their entry distances. */
+static inline uint32_t wide_box_hit(const struct wide_node *node, const struct wide_ray *wr,
+                                    float t_max, struct f8 *t_entry)
+{
+    struct f8 t0 = wr->t_min;
+    struct f8 t1 = f8_set1(t_max);
+    for (int a = 0; a < 3; a++) {
+        struct f8 near = f8_load(node->bounds[wr->near_row[a]]);
+        struct f8 far = f8_load(node->bounds[wr->far_row[a]]);
+        t0 = f8_max_num(t0, f8_mul(f8_sub(near, wr->o[a]), wr->inv_d[a]));
+        t1 = f8_min_num(t1, f8_mul(f8_sub(far, wr->o[a]), wr->inv_d_far[a]));
+    }
+    *t_entry = t0;
+    return m8_bits(f8_le(t0, t1));
+}
+
+/* woop8 of one ray against the n (1..8) triangles of the leaf at wide triangle `first`. */
+static inline uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint32_t n,
+                                     const struct wide_ray *wr, float t_max,
+                                     struct woop8_out *out)
+{
+    const float *base = bvh->leaf_tris + 9 * (size_t)first;
+    struct woop8_in in;
+    for (int j = 0; j < 3; j++) {
+        size_t row = (size_t)wr->k[j] * n;
+        in.a[j] = f8_sub(f8_loadu(base + row), wr->o_k[j]);
+        in.b[j] = f8_sub(f8_loadu(base + 3 * (size_t)n + row), wr->o_k[j]);
+        in.c[j] = f8_sub(f8_loadu(base + 6 * (size_t)n + row), wr->o_k[j]);
+    }
+    in.sx = wr->sx;
+    in.sy = wr->sy;
+    in.sz = wr->sz;
+    in.t_min = wr->t_min;
+    in.t_max = f8_set1(t_max);
+    return woop8(&in, (1u << n) - 1u, out);
+}
+
+/* The closest hit so far. */
+struct wide_hit {
+    float t;      /* t_hit, initially the ray's t_max */
+    float u;
+    float v;
+    uint32_t tri; /* wide triangle index, UINT32_MAX while none */
+};
+
+/* Asks for the memory of wide reference ref (a node's four cache lines or a leaf's
+ * triangles) ahead of its visit: a hint, no effect on results. */
+static inline void prefetch_ref(const struct bvh *bvh, uint32_t ref)
+{
+    const char *p;
+    size_t bytes;
+    if (ref & WIDE_LEAF) {
+        p = (const char *)(bvh->leaf_tris + 9 * (size_t)((ref & ~WIDE_LEAF) >> 3));
+        bytes = 36 * ((ref & 7u) + 1);
+    } else {
+        p = (const char *)&bvh->wide[ref];
+        bytes = sizeof(struct wide_node);
+    }
+    for (size_t off = 0; off < bytes; off += 64)
+        __builtin_prefetch(p + off);
+}
+
+/* Pushes the children in mask (at least three) and sorts them so the nearest is on top. */
+static inline void push_sorted(struct stack_entry *stack, uint32_t *n_stack,
+                               const struct wide_node *node, uint32_t mask, const float *dist)
+{
+    uint32_t base = *n_stack;
+    uint32_t n = base;
+    for (; mask; mask &= mask - 1) {
+        int c = lowest_bit(mask);
+        struct stack_entry e = {node->child[c], dist[c]};
+        /* insertion: farther entries sink below nearer ones */
+        uint32_t i = n++;
+        while (i > base && stack[i - 1].t_entry < e.t_entry) {
+            stack[i] = stack[i - 1];
+            i--;
+        }
+        stack[i] = e;
+    }
+    *n_stack = n;
+}
+
+#ifdef BVH_COUNT
+_Thread_local unsigned long long bvh_n_nodes_visited, bvh_n_leaves_visited, bvh_n_children_hit, bvh_n_tris_tested;
+#define COUNT(x) (x)
+#else
+#define COUNT(x) ((void)0)
+#endif
+/* Closest hit below wide reference `root` (a node or a leaf) for t in (t_min, hit->t). */
+static void wide_closest(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
+                         struct wide_hit *hit)
+{
+    struct stack_entry stack[WIDE_STACK_SIZE];
+    uint32_t n_stack = 0;
+    uint32_t ref = root;
+    for (;;) {
+        if (!(ref & WIDE_LEAF)) {
+            const struct wide_node *node = &bvh->wide[ref];
+            struct f8 t_entry;
+            uint32_t mask = wide_box_hit(node, wr, hit->t, &t_entry);
+            COUNT(bvh_n_nodes_visited++);
+            COUNT(bvh_n_children_hit += (unsigned)__builtin_popcount(mask));
+            if (mask) {
+                float dist[8];
+                f8_store(dist, t_entry);
+                int c0 = lowest_bit(mask);
+                uint32_t rest = mask & (mask - 1);
+                if (!rest) {
+                    ref = node->child[c0];
+                    continue;
+                }
+                for (uint32_t bits = mask; bits; bits &= bits - 1)
+                    prefetch_ref(bvh, node->child[lowest_bit(bits)]);
+                int c1 = lowest_bit(rest);
+                if (!(rest & (rest - 1))) {
+                    if (dist[c1] < dist[c0]) {
+                        int tmp = c0;
+                        c0 = c1;
+                        c1 = tmp;
+                    }
+                    stack[n_stack++] = (struct stack_entry){node->child[c1], dist[c1]};
+                    ref = node->child[c0];
+                    continue;
+                }
+                assert(n_stack + 8 <= WIDE_STACK_SIZE);
+                push_sorted(stack, &n_stack, node, mask, dist);
+                ref = stack[--n_stack].node_idx;
+                continue;
+            }
+        } else {
+            uint32_t first = (ref & ~WIDE_LEAF) >> 3;
+            uint32_t n = (ref & 7u) + 1;
+            struct woop8_out out;
+            COUNT(bvh_n_leaves_visited++);
+            COUNT(bvh_n_tris_tested += n);
+            uint32_t hits = wide_leaf_hit(bvh, first, n, wr, hit->t, &out);
+            if (hits) {
+                struct f8 t_hits = f8_select(m8_from_bits(hits), out.t, f8_set1(INFINITY));
+                float t_best = f8_hmin(t_hits);
+                /* among equal t the lowest lane: the first in BVH order, as brute force */
+                int lane = lowest_bit(hits & m8_bits(f8_eq(t_hits, f8_set1(t_best))));
+                float u[8];
+                float v[8];
+                f8_store(u, out.u);
+                f8_store(v, out.v);
+                *hit = (struct wide_hit){t_best, u[lane], v[lane], first + (uint32_t)lane};
+            }
+        }
+        /* pop the next pending node that still starts before the closest hit */
+        do {
+            if (n_stack == 0)
+                return;
+            n_stack--;
+        } while (stack[n_stack].t_entry > hit->t);
+        ref = stack[n_stack].node_idx;
+    }
+}
+
+/* Any hit below `root` for t in (t_min, t_max): children in any order, the first hit ends it. */
+static bool wide_any(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr, float t_max)
+{
+    uint32_t stack[WIDE_STACK_SIZE];
+    uint32_t n_stack = 0;
+    uint32_t ref = root;
+    for (;;) {
+        if (!(ref & WIDE_LEAF)) {
+            const struct wide_node *node = &bvh->wide[ref];
+            struct f8 t_entry;
+            uint32_t mask = wide_box_hit(node, wr, t_max, &t_entry);
+            if (mask) {
+                ref = node->child[lowest_bit(mask)];
+                assert(n_stack + 8 <= WIDE_STACK_SIZE);
+                for (mask &= mask - 1; mask; mask &= mask - 1)
+                    stack[n_stack++] = node->child[lowest_bit(mask)];
+                continue;
+            }
+        } else {
+            struct woop8_out out;
+            if (wide_leaf_hit(bvh, (ref & ~WIDE_LEAF) >> 3, (ref & 7u) + 1, wr, t_max, &out))
+                return true;
+        }
+        if (n_stack == 0)
+            return false;
+        ref = stack[--n_stack];
+    }
+}
+
+static bool wide_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *out)
+{
+    if (bvh->n_wide == 0)
+        return false;
+    struct ray_pre rp;
+    ray_setup(ray, &rp);
+    struct wide_ray wr;
+    wide_ray_setup(&rp, ray->t_min, &wr);
+    struct wide_hit hit = {ray->t_max, 0.0f, 0.0f, UINT32_MAX};
+    wide_closest(bvh, 0, &wr, &hit);
+    if (hit.tri == UINT32_MAX)
+        return false;
+    *out = (struct bvh_hit){hit.t, hit.u, hit.v, bvh->wide_prim_idx[hit.tri]};
+    return true;
+}
+
+static bool wide_occluded(const struct bvh *bvh, const struct ray *ray)
+{
+    if (bvh->n_wide == 0)
+        return false;
+    struct ray_pre rp;
+    ray_setup(ray, &rp);
+    struct wide_ray wr;
+    wide_ray_setup(&rp, ray->t_min, &wr);
+    return wide_any(bvh, 0, &wr, ray->t_max);
+}
+
+bool bvh_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *hit)
+{
+    if (bvh->layouts & BVH_LAYOUT_WIDE)
+        return wide_intersect(bvh, ray, hit);
+    return binary_intersect(bvh, ray, hit);
+}
+
+bool bvh_occluded(const struct bvh *bvh, const struct ray *ray)
+{
+    if (bvh->layouts & BVH_LAYOUT_WIDE)
+        return wide_occluded(bvh, ray);
+    return binary_occluded(bvh, ray);
+}
+
+bool bvh_intersect_layout(const struct bvh *bvh, enum bvh_layout layout, const struct ray *ray,
+                          struct bvh_hit *hit)
+{
+    assert(bvh->n_tris == 0 || (bvh->layouts & (unsigned)layout));
+    return layout == BVH_LAYOUT_WIDE ? wide_intersect(bvh, ray, hit)
+                                     : binary_intersect(bvh, ray, hit);
+}
+
+bool bvh_occluded_layout(const struct bvh *bvh, enum bvh_layout layout, const struct ray *ray)
+{
+    assert(bvh->n_tris == 0 || (bvh->layouts & (unsigned)layout));
+    return layout == BVH_LAYOUT_WIDE ? wide_occluded(bvh, ray) : binary_occluded(bvh, ray);
+}
+
+/* ---- Packets: eight rays through the wide layout -------------------------------------------------
+ * Lanes are rays.  At a node each child box is slab-tested against all active rays (one lane
+ * per ray, near and far planes picked per lane by the sign of d), giving the child's ray mask;
+ * children hit by some ray are pushed with that mask and the smallest entry distance among
+ * them, nearest on top.  A leaf's triangles are tested one at a time against the node's rays by
+ * woop8, each lane with its own permutation (kx, ky, kz) and shear.  When few rays remain
+ * active in a node (BVH_PACKET_MIN_ACTIVE), they continue one by one through the single-ray
+ * traversal from that node (Benthin et al. 2012, "Combining Single and Packet-Ray Tracing for
+ * Arbitrary Ray Distributions on the Intel MIC Architecture").  Every lane sees exactly the
+ * box and triangle tests of the single-ray traversal. */
+#define BVH_PACKET_MIN_ACTIVE 3 /* fewer active rays in a node: finish them one by one */
+
+struct packet_pre {
+    struct f8 o[3];
+    struct f8 inv_d[3];
+    struct f8 inv_d_far[3];
+    struct m8 is_neg[3]; /* near plane is max */
+    struct m8 k_is[3][2]; /* k_is[j][m]: lane's k[j] == m (m = 0, 1; else 2) */
+    struct f8 o_k[3];     /* o[k[j]] per lane */
+    struct f8 sx;
+    struct f8 sy;
+    struct f8 sz;
+    struct f8 t_min;
+    struct ray_pre rp[BVH_PACKET_SIZE]; /* per lane, for the single-ray fallback */
+};
+
+/* Per-lane constants of the active rays; inactive lanes (whose fields may be uninitialised)
+ * get a harmless ray with an empty interval, t_max[lane] = -inf. */
+static void packet_setup(const struct bvh_packet *p, uint32_t active, struct packet_pre *pp,
+                         float t_max[BVH_PACKET_SIZE])
+{
+    float o[3][8], t_min[8], inv_d[3][8], inv_d_far[3][8], is_neg[3][8], k_is[3][2][8];
+    float o_k[3][8], s[3][8];
+    const float far_scale = 1.0f + 4.0f * mcpt_gamma(3);
+    for (int lane = 0; lane < BVH_PACKET_SIZE; lane++) {
+        struct ray r = {{0.0f, 0.0f, 0.0f}, 0.0f, {0.0f, 0.0f, 1.0f}, -INFINITY};
+        if (active >> lane & 1u)
+            r = (struct ray){{p->o[0][lane], p->o[1][lane], p->o[2][lane]}, p->t_min[lane],
+                             {p->d[0][lane], p->d[1][lane], p->d[2][lane]}, p->t_max[lane]};
+        o[0][lane] = r.o.x;
+        o[1][lane] = r.o.y;
+        o[2][lane] = r.o.z;
+        t_min[lane] = r.t_min;
+        t_max[lane] = r.t_max;
+        struct ray_pre *rp = &pp->rp[lane];
+        ray_setup(&r, rp);
+        int k[3] = {rp->kx, rp->ky, rp->kz};
+        for (int a = 0; a < 3; a++) {
+            inv_d[a][lane] = rp->inv_d[a];
+            inv_d_far[a][lane] = rp->inv_d[a] * far_scale;
+            is_neg[a][lane] = rp->is_neg[a] ? 1.0f : 0.0f;
+            k_is[a][0][lane] = k[a] == 0 ? 1.0f : 0.0f;
+            k_is[a][1][lane] = k[a] == 1 ? 1.0f : 0.0f;
+            o_k[a][lane] = rp->o[k[a]];
+        }
+        s[0][lane] = rp->sx;
+        s[1][lane] = rp->sy;
+        s[2][lane] = rp->sz;
+    }
+    const struct f8 one = f8_set1(1.0f);
+    for (int a = 0; a < 3; a++) {
+        pp->o[a] = f8_loadu(o[a]);
+        pp->inv_d[a] = f8_loadu(inv_d[a]);
+        pp->inv_d_far[a] = f8_loadu(inv_d_far[a]);
+        pp->is_neg[a] = f8_eq(f8_loadu(is_neg[a]), one);
+        pp->k_is[a][0] = f8_eq(f8_loadu(k_is[a][0]), one);
+        pp->k_is[a][1] = f8_eq(f8_loadu(k_is[a][1]), one);
+        pp->o_k[a] = f8_loadu(o_k[a]);
+    }
+    pp->sx = f8_loadu(s[0]);
+    pp->sy = f8_loadu(s[1]);
+    pp->sz = f8_loadu(s[2]);
+    pp->t_min = f8_loadu(t_min);
+}
+
+/* Slab test of child `lane` of node against every ray; returns the mask of rays hitting it. */
+static inline uint32_t packet_box_hit(const struct wide_node *node, int lane,
+                                      const struct packet_pre *pp, struct f8 t_max,
+                                      struct f8 *t_entry)
+{
+    struct f8 t0 = pp->t_min;
+    struct f8 t1 = t_max;
+    for (int a = 0; a < 3; a++) {
+        struct f8 lo = f8_set1(node->bounds[2 * a][lane]);
+        struct f8 hi = f8_set1(node->bounds[2 * a + 1][lane]);
+        struct f8 near = f8_select(pp->is_neg[a], hi, lo);
+        struct f8 far = f8_select(pp->is_neg[a], lo, hi);
+        t0 = f8_max_num(t0, f8_mul(f8_sub(near, pp->o[a]), pp->inv_d[a]));
+        t1 = f8_min_num(t1, f8_mul(f8_sub(far, pp->o[a]), pp->inv_d_far[a]));
+    }
+    *t_entry = t0;
+    return m8_bits(f8_le(t0, t1));
+}
+
+/* coordinate k[j] of (x, y, z) per lane */
+static inline struct f8 pick_k(const struct packet_pre *pp, int j, struct f8 x, struct f8 y,
+                               struct f8 z)
+{
+    return f8_select(pp->k_is[j][0], x, f8_select(pp->k_is[j][1], y, z));
+}
+
+/* woop8 of triangle i of the leaf at `first` (n triangles) against the rays in mask. */
+static inline uint32_t packet_tri_hit(const struct bvh *bvh, uint32_t first, uint32_t n,
+                                      uint32_t i, const struct packet_pre *pp, struct f8 t_max,
+                                      uint32_t mask, struct woop8_out *out)
+{
+    const float *base = bvh->leaf_tris + 9 * (size_t)first;
+    struct woop8_in in;
+    struct f8 *dst[3] = {in.a, in.b, in.c};
+    for (int k = 0; k < 3; k++) {
+        struct f8 x = f8_set1(base[(size_t)(3 * k) * n + i]);
+        struct f8 y = f8_set1(base[(size_t)(3 * k + 1) * n + i]);
+        struct f8 z = f8_set1(base[(size_t)(3 * k + 2) * n + i]);
+        for (int j = 0; j < 3; j++)
+            dst[k][j] = f8_sub(pick_k(pp, j, x, y, z), pp->o_k[j]);
+    }
+    in.sx = pp->sx;
+    in.sy = pp->sy;
+    in.sz = pp->sz;
+    in.t_min = pp->t_min;
+    in.t_max = t_max;
+    return woop8(&in, mask, out);
+}
+
+struct packet_entry {
+    uint32_t ref;  /* wide reference */
+    uint32_t mask; /* rays that hit its box */
+    float t_entry; /* smallest entry distance among them */
+}; /* 12 bytes */
+
+uint32_t bvh_intersect_packet(const struct bvh *bvh, const struct bvh_packet *packet,
+                              uint32_t active, struct bvh_packet_hit *hit)
+{
+    active &= (1u << BVH_PACKET_SIZE) - 1u;
+    if (!(bvh->layouts & BVH_LAYOUT_WIDE) || bvh->n_wide == 0) {
+        uint32_t hits = 0;
+        for (uint32_t bits = active; bits; bits &= bits - 1) {
+            int lane = lowest_bit(bits);
+            struct ray r = {{packet->o[0][lane], packet->o[1][lane], packet->o[2][lane]},
+                            packet->t_min[lane],
+                            {packet->d[0][lane], packet->d[1][lane], packet->d[2][lane]},
+                            packet->t_max[lane]};
+            struct bvh_hit h;
+            if (bvh_intersect(bvh, &r, &h)) {
+                hits |= 1u << lane;
+                hit->t[lane] = h.t;
+                hit->u[lane] = h.u;
+                hit->v[lane] = h.v;
+                hit->prim_idx[lane] = h.prim_idx;
+            }
+        }
+        return hits;
+    }
+    struct packet_pre pp;
+    float t_hit[8];
+    float u_hit[8];
+    float v_hit[8];
+    uint32_t tri_hit_idx[8];
+    packet_setup(packet, active, &pp, t_hit);
+    for (int lane = 0; lane < 8; lane++) {
+        tri_hit_idx[lane] = UINT32_MAX;
+        u_hit[lane] = 0.0f;
+        v_hit[lane] = 0.0f;
+    }
+    struct f8 t_hit8 = f8_loadu(t_hit);
+    /* a node's entry is pushed at most once per visit of its parent: 7 per level */
+    struct packet_entry stack[WIDE_STACK_SIZE];
+    uint32_t n_stack = 0;
+    struct packet_entry cur = {0, active, -INFINITY};
+    for (;;) {
+        if (__builtin_popcount(cur.mask) < BVH_PACKET_MIN_ACTIVE) {
+            /* few rays left here: finish them one by one from this node */
+            f8_store(t_hit, t_hit8);
+            for (uint32_t bits = cur.mask; bits; bits &= bits - 1) {
+                int lane = lowest_bit(bits);
+                struct wide_ray wr;
+                wide_ray_setup(&pp.rp[lane], packet->t_min[lane], &wr);
+                struct wide_hit h = {t_hit[lane], u_hit[lane], v_hit[lane], tri_hit_idx[lane]};
+                wide_closest(bvh, cur.ref, &wr, &h);
+                t_hit[lane] = h.t;
+                u_hit[lane] = h.u;
+                v_hit[lane] = h.v;
+                tri_hit_idx[lane] = h.tri;
+            }
+            t_hit8 = f8_loadu(t_hit);
+        } else if (!(cur.ref & WIDE_LEAF)) {
+            const struct wide_node *node = &bvh->wide[cur.ref];
+            const uint32_t base = n_stack;
+            for (uint32_t c = 0; c < node->n_children; c++) {
+                struct f8 t_entry;
+                uint32_t mask = packet_box_hit(node, (int)c, &pp, t_hit8, &t_entry) & cur.mask;
+                if (!mask)
+                    continue;
+                struct f8 t_in = f8_select(m8_from_bits(mask), t_entry, f8_set1(INFINITY));
+                struct packet_entry e = {node->child[c], mask, f8_hmin(t_in)};
+                /* insertion among this node's children only: nearest on top */
+                uint32_t i = n_stack++;
+                while (i > base && stack[i - 1].t_entry < e.t_entry) {
+                    stack[i] = stack[i - 1];
+                    i--;
+                }
+                stack[i] = e;
+            }
+        } else {
+            uint32_t first = (cur.ref & ~WIDE_LEAF) >> 3;
+            uint32_t n = (cur.ref & 7u) + 1;
+            for (uint32_t i = 0; i < n; i++) {
+                struct woop8_out out;
+                uint32_t hits = packet_tri_hit(bvh, first, n, i, &pp, t_hit8, cur.mask, &out);
+                if (!hits)
+                    continue;
+                /* a lane's later triangle is tested against the t_hit its earlier one set, as
+                 * in the single-ray loop, so the first of equal t stays */
+                struct m8 m = m8_from_bits(hits);
+                t_hit8 = f8_select(m, out.t, t_hit8);
+                float u[8];
+                float v[8];
+                f8_store(u, out.u);
+                f8_store(v, out.v);
+                for (uint32_t bits = hits; bits; bits &= bits - 1) {
+                    int lane = lowest_bit(bits);
+                    u_hit[lane] = u[lane];
+                    v_hit[lane] = v[lane];
+                    tri_hit_idx[lane] = first + i;
+                }
+            }
+        }
+        /* pop the next entry that some of its rays may still need */
+        for (;;) {
+            if (n_stack == 0)
+                goto done;
+            cur = stack[--n_stack];
+            struct f8 t_in = f8_set1(cur.t_entry);
+            cur.mask &= m8_bits(f8_le(t_in, t_hit8));
+            if (cur.mask)
+                break;
+        }
+    }
+done:
+    f8_store(t_hit, t_hit8);
+    uint32_t hits = 0;
+    for (uint32_t bits = active; bits; bits &= bits - 1) {
+        int lane = lowest_bit(bits);
+        if (tri_hit_idx[lane] == UINT32_MAX)
+            continue;
+        hits |= 1u << lane;
+        hit->t[lane] = t_hit[lane];
+        hit->u[lane] = u_hit[lane];
+        hit->v[lane] = v_hit[lane];
+        hit->prim_idx[lane] = bvh->wide_prim_idx[tri_hit_idx[lane]];
+    }
+    return hits;
+}
+
+uint32_t bvh_occluded_packet(const struct bvh *bvh, const struct bvh_packet *packet,
+                             uint32_t active)
+{
+    active &= (1u << BVH_PACKET_SIZE) - 1u;
+    if (!(bvh->layouts & BVH_LAYOUT_WIDE) || bvh->n_wide == 0) {
+        uint32_t occluded = 0;
+        for (uint32_t bits = active; bits; bits &= bits - 1) {
+            int lane = lowest_bit(bits);
+            struct ray r = {{packet->o[0][lane], packet->o[1][lane], packet->o[2][lane]},
+                            packet->t_min[lane],
+                            {packet->d[0][lane], packet->d[1][lane], packet->d[2][lane]},
+                            packet->t_max[lane]};
+            if (bvh_occluded(bvh, &r))
+                occluded |= 1u << lane;
+        }
+        return occluded;
+    }
+    struct packet_pre pp;
+    float t_max[8];
+    packet_setup(packet, active, &pp, t_max);
+    const struct f8 t_max8 = f8_loadu(t_max);
+    uint32_t occluded = 0;
+    struct packet_entry stack[WIDE_STACK_SIZE];
+    uint32_t n_stack = 0;
+    struct packet_entry cur = {0, active, -INFINITY};
+    for (;;) {
+        cur.mask &= ~occluded;
+        if (!cur.mask) {
+            /* nothing left to do here */
+        } else if (__builtin_popcount(cur.mask) < BVH_PACKET_MIN_ACTIVE) {
+            for (uint32_t bits = cur.mask; bits; bits &= bits - 1) {
+                int lane = lowest_bit(bits);
+                struct wide_ray wr;
+                wide_ray_setup(&pp.rp[lane], packet->t_min[lane], &wr);
+                if (wide_any(bvh, cur.ref, &wr, packet->t_max[lane]))
+                    occluded |= 1u << lane;
+            }
+        } else if (!(cur.ref & WIDE_LEAF)) {
+            const struct wide_node *node = &bvh->wide[cur.ref];
+            for (uint32_t c = 0; c < node->n_children; c++) {
+                struct f8 t_entry;
+                uint32_t mask = packet_box_hit(node, (int)c, &pp, t_max8, &t_entry) & cur.mask;
+                if (mask)
+                    stack[n_stack++] = (struct packet_entry){node->child[c], mask, 0.0f};
+            }
+        } else {
+            uint32_t first = (cur.ref & ~WIDE_LEAF) >> 3;
+            uint32_t n = (cur.ref & 7u) + 1;
+            for (uint32_t i = 0; i < n && (cur.mask & ~occluded); i++) {
+                struct woop8_out out;
+                occluded |= packet_tri_hit(bvh, first, n, i, &pp, t_max8, cur.mask & ~occluded,
+                                           &out);
+            }
+        }
+        if (occluded == active || n_stack == 0)
+            return occluded;
+        cur = stack[--n_stack];
+    }
+}
+
+void bvh_packet_set(struct bvh_packet *packet, int lane, const struct ray *ray)
+{
+    assert(lane >= 0 && lane < BVH_PACKET_SIZE);
+    packet->o[0][lane] = ray->o.x;
+    packet->o[1][lane] = ray->o.y;
+    packet->o[2][lane] = ray->o.z;
+    packet->d[0][lane] = ray->d.x;
+    packet->d[1][lane] = ray->d.y;
+    packet->d[2][lane] = ray->d.z;
+    packet->t_min[lane] = ray->t_min;
+    packet->t_max[lane] = ray->t_max;
+}
+
 /* ---- Brute force: every triangle, the same test ----------------------------------------------
  * O(n) per ray, the baseline of the BVH-versus-naive table and the oracle of the tests.  It
- * tests the BVH-ordered triangles with tri_hit, so a triangle's t, u, v are bit-identical to
- * what bvh_intersect computes for it; among exactly equal t the lowest BVH position wins. */
+ * tests the BVH-ordered triangles with the scalar tri_hit, so a triangle's t, u, v are
+ * bit-identical to what the traversals compute for it; among exactly equal t the lowest BVH
+ * position wins.  Without the binary layout it walks the wide leaves in their stored order. */
 bool bvh_intersect_brute(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *hit)
 {
     struct ray_pre rp;
@@ -731,36 +2278,64 @@ bool bvh_intersect_brute(const struct bvh *bvh, const struct ray *ray, struct bv
     float t_hit = ray->t_max;
     float u_hit = 0.0f;
     float v_hit = 0.0f;
-    uint32_t tri_idx = UINT32_MAX;
-    for (uint32_t i = 0; i < bvh->n_tris; i++) {
-        float t;
-        float u;
-        float v;
-        if (tri_hit(&bvh->tris[i], &rp, ray->t_min, t_hit, &t, &u, &v)) {
-            t_hit = t;
-            u_hit = u;
-            v_hit = v;
-            tri_idx = i;
+    uint32_t prim = UINT32_MAX;
+    if (bvh->layouts & BVH_LAYOUT_BINARY) {
+        for (uint32_t i = 0; i < bvh->n_tris; i++) {
+            float t;
+            float u;
+            float v;
+            if (tri_hit(&bvh->tris[i], &rp, ray->t_min, t_hit, &t, &u, &v)) {
+                t_hit = t;
+                u_hit = u;
+                v_hit = v;
+                prim = bvh->prim_idx[i];
+            }
+        }
+    } else if (bvh->n_wide > 0) {
+        /* every leaf, depth first in stored order; leaf triangles are stored in that order */
+        uint32_t stack[WIDE_STACK_SIZE];
+        uint32_t n_stack = 0;
+        stack[n_stack++] = 0;
+        while (n_stack > 0) {
+            uint32_t ref = stack[--n_stack];
+            if (!(ref & WIDE_LEAF)) {
+                const struct wide_node *node = &bvh->wide[ref];
+                for (uint32_t c = node->n_children; c-- > 0;)
+                    stack[n_stack++] = node->child[c];
+                continue;
+            }
+            uint32_t first = (ref & ~WIDE_LEAF) >> 3;
+            uint32_t n = (ref & 7u) + 1;
+            const float *base = bvh->leaf_tris + 9 * (size_t)first;
+            for (uint32_t i = 0; i < n; i++) {
+                struct bvh_tri tri;
+                float *p[3] = {tri.p0, tri.p1, tri.p2};
+                for (int k = 0; k < 3; k++)
+                    for (int a = 0; a < 3; a++)
+                        p[k][a] = base[(size_t)(3 * k + a) * n + i];
+                float t;
+                float u;
+                float v;
+                if (tri_hit(&tri, &rp, ray->t_min, t_hit, &t, &u, &v)) {
+                    t_hit = t;
+                    u_hit = u;
+                    v_hit = v;
+                    prim = bvh->wide_prim_idx[first + i];
+                }
+            }
         }
     }
-    if (tri_idx == UINT32_MAX)
+    if (prim == UINT32_MAX)
         return false;
-    *hit = (struct bvh_hit){t_hit, u_hit, v_hit, bvh->prim_idx[tri_idx]};
+    *hit = (struct bvh_hit){t_hit, u_hit, v_hit, prim};
     return true;
 }
 
 /* ---- Stats ------------------------------------------------------------------------------------
- * SAH cost of the finished tree, normalised by the root's area (Wald 2007's cost model summed
- * over the tree; A(n) / A(root) is the probability that a ray hitting the root hits node n):
+ * SAH cost of the finished binary tree, normalised by the root's area (Wald 2007's cost model
+ * summed over the tree; A(n) / A(root) is the probability that a ray hitting the root hits n):
  *   C = sum_interior C_trav A(n) / A(root) + sum_leaves C_isect N(n) A(n) / A(root)
  * When the root has zero area (every triangle at one point) all ratios are taken as 1. */
-static float node_half_area(const struct bvh_node *node)
-{
-    struct box b = {{node->min[0], node->min[1], node->min[2]},
-                    {node->max[0], node->max[1], node->max[2]}};
-    return box_half_area(&b);
-}
-
 static void compute_stats(struct bvh *bvh)
 {
     struct bvh_stats *st = &bvh->stats;
@@ -781,8 +2356,6 @@ static void compute_stats(struct bvh *bvh)
             st->sah_cost += BVH_COST_TRAVERSAL * ratio;
         }
     }
-    st->bytes = (size_t)bvh->n_nodes * sizeof(struct bvh_node) +
-                (size_t)bvh->n_tris * (sizeof(struct bvh_tri) + sizeof(uint32_t));
 }
 
 struct bvh_stats bvh_get_stats(const struct bvh *bvh) { return bvh->stats; }
@@ -794,5 +2367,8 @@ void bvh_free(struct bvh *bvh)
     free(bvh->nodes);
     free(bvh->tris);
     free(bvh->prim_idx);
+    free(bvh->wide);
+    free(bvh->leaf_tris);
+    free(bvh->wide_prim_idx);
     free(bvh);
 }

@@ -433,7 +433,7 @@ uint8_t *film_count_heatmap(const struct film *film, int *width, int *height)
     }
     int k = (FILM_HEATMAP_MIN_WIDTH + film->width - 1) / film->width; /* whole scale factor */
     k = k < 1 ? 1 : k;
-    int s = film->width * k >= 2 * FILM_HEATMAP_MIN_WIDTH ? 2 : 1; /* font scale */
+    int s = film->width * k >= 2 * FILM_HEATMAP_MIN_WIDTH ? 2 : 1; /* a font pixel, in pixels */
     /* legend rows, in font pixels s: margin 4, title 7, gap 4, bar 12, tick 3, gap 2, labels
      * 7, margin 4 */
     int legend_h = 43 * s;

@@ -1,9 +1,11 @@
 /* sample.c - RNG, samplers, warps and MIS weights.
  * Seeding rule: the PCG32 stream of a sample is
  *   initstate = hash(seed, pixel_idx, sample_idx), initseq = hash(initstate),
- * so a sample's values depend on (seed, pixel, sample index, dimension) only.
- * References: O'Neill 2014 (PCG); Shirley & Chiu 1997 (concentric disk); PBRT 4e, ch. A.5,
- * "Sampling Multidimensional Functions"; Veach 1997, ch. 9 (MIS). */
+ * so a sample's values depend on (seed, pixel, sample index, dimension) only; the stratified
+ * and Sobol' samplers are stateless hashes of the same coordinates (docs/sampling.md).
+ * References: O'Neill 2014 (PCG); Kensler 2013 (correlated multi-jittered sampling); Burley
+ * 2020 and Joe & Kuo 2008 (Owen-scrambled Sobol'); Shirley & Chiu 1997 (concentric disk);
+ * PBRT 4e, ch. A.5, "Sampling Multidimensional Functions"; Veach 1997, ch. 9 (MIS). */
 #include "sample.h"
 
 #include <stdlib.h>
@@ -109,7 +111,7 @@ bool sample_sampler_parse(const char *name, enum sampler_kind *kind)
 /* Columns m of the multi-jittered grid for N samples: the largest divisor of N not above
  * sqrt(N), so that m x n = N exactly and every 1D projection is stratified into N intervals;
  * when that grid would be flatter than 1:4 (N prime, say), Kensler's m = floor(sqrt(N)) with a
- * ragged last row (Kensler 2013, sec. 5, arbitrary sample counts). */
+ * ragged last row (Kensler 2013, cmj for arbitrary sample counts). */
 static uint32_t cmj_columns(uint32_t n_samples)
 {
     uint32_t root = 1;
@@ -179,7 +181,7 @@ static float fraction_to_float(uint32_t x)
 /* -- stratified: correlated multi-jittered sampling, Kensler 2013, "Correlated Multi-Jittered
  * Sampling", Pixar Technical Memo 13-01 -- */
 
-/* A pseudo-random permutation of [0, l), indexed by p: Kensler 2013, sec. 3, "permute"
+/* A pseudo-random permutation of [0, l), indexed by p: Kensler 2013, "permute"
  * (a hash restricted to the next power of two, cycle-walked back into [0, l)). */
 static uint32_t kensler_permute(uint32_t i, uint32_t l, uint32_t p)
 {
@@ -248,7 +250,7 @@ static float stratified_1d(const struct sampler *s, uint32_t dim)
     return in_stratum(stratum, n, hash_jitter(i, p * 0x967a889bu));
 }
 
-/* 2D: Kensler 2013, sec. 5, cmj(s, N, p) with an m x n grid (m = cmj_cols):
+/* 2D: Kensler 2013, cmj(s, N, p) for arbitrary N, with an m x n grid (m = cmj_cols):
  *   s' = permute(s, N), sx = permute(s' mod m, m), sy = permute(s' div m, n),
  *   x = (sx + (sy + jx) / n) / m,  y = (s' + jy) / N.
  * Each cell of the m x n grid and each 1/N interval of x and of y holds one point when

@@ -2,7 +2,8 @@
  * RNG: PCG32 (O'Neill 2014).  Every sample value is a function of (seed, pixel, sample index,
  * dimension) alone, never of thread state, so images are identical for any thread count.
  * Dimension order of one camera sample (SAMPLE_DIM_*): pixel 2D, lens 2D, then per bounce:
- * light choice 1D, light position 2D, BSDF lobe 1D, BSDF direction 2D, roulette 1D. */
+ * light choice 1D, light position 2D, BSDF lobe 1D, BSDF direction 2D, roulette 1D.
+ * Samplers: independent, stratified (Kensler 2013), Owen-scrambled Sobol' (Burley 2020). */
 #ifndef MCPT_SAMPLE_H
 #define MCPT_SAMPLE_H
 

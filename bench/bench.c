@@ -366,7 +366,86 @@ fail:
     return false;
 }
 
+/* ---- tracing through mcpt ------------------------------------------------------------------------ */
+
+void bench_trace_range(void *trace, uint64_t begin, uint64_t end)
+{
+    const struct bench_trace *tr = trace;
+    const struct ray *rays = tr->rays->rays;
+    bool occlusion = tr->rays->kind == BENCH_KIND_OCCLUSION;
+    if (tr->method == BENCH_PACKET) {
+        for (uint64_t i = begin; i < end; i += BVH_PACKET_SIZE) {
+            struct bvh_packet p;
+            uint32_t active = 0;
+            for (int lane = 0; lane < BVH_PACKET_SIZE && i + (uint64_t)lane < end; lane++) {
+                bvh_packet_set(&p, lane, &rays[i + (uint64_t)lane]);
+                active |= 1u << lane;
+            }
+            if (occlusion) {
+                uint32_t occluded = bvh_occluded_packet(tr->bvh, &p, active);
+                for (int lane = 0; lane < BVH_PACKET_SIZE && (active >> lane & 1u); lane++)
+                    tr->prim[i + (uint64_t)lane] = occluded >> lane & 1u ? 0 : UINT32_MAX;
+                continue;
+            }
+            struct bvh_packet_hit hit;
+            uint32_t hits = bvh_intersect_packet(tr->bvh, &p, active, &hit);
+            for (int lane = 0; lane < BVH_PACKET_SIZE && (active >> lane & 1u); lane++) {
+                bool is_hit = hits >> lane & 1u;
+                tr->prim[i + (uint64_t)lane] = is_hit ? hit.prim_idx[lane] : UINT32_MAX;
+                tr->t[i + (uint64_t)lane] = is_hit ? hit.t[lane] : 0.0f;
+            }
+        }
+        return;
+    }
+    for (uint64_t i = begin; i < end; i++) {
+        if (occlusion && tr->method == BENCH_SINGLE) {
+            tr->prim[i] = bvh_occluded(tr->bvh, &rays[i]) ? 0 : UINT32_MAX;
+            continue;
+        }
+        struct bvh_hit hit;
+        bool is_hit = tr->method == BENCH_BRUTE ? bvh_intersect_brute(tr->bvh, &rays[i], &hit)
+                                                : bvh_intersect(tr->bvh, &rays[i], &hit);
+        if (occlusion)
+            tr->prim[i] = is_hit ? 0 : UINT32_MAX;
+        else
+            tr->prim[i] = is_hit ? hit.prim_idx : UINT32_MAX;
+        tr->t[i] = is_hit ? hit.t : 0.0f;
+    }
+}
+
+struct bench_checksum bench_checksum_of(const struct bench_rays *rays, uint64_t n,
+                                        const uint32_t *prim, const float *t)
+{
+    struct bench_checksum c = {0, 0.0, 0};
+    for (uint64_t i = 0; i < n; i++) {
+        if (prim[i] == UINT32_MAX)
+            continue;
+        c.hits++;
+        if (rays->kind == BENCH_KIND_CLOSEST) {
+            c.t_sum += (double)t[i];
+            c.prim_sum += prim[i];
+        }
+    }
+    return c;
+}
+
 /* ---- timing, machine, threads ------------------------------------------------------------------ */
+
+static double thread_cpu_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
+
+struct bench_time bench_time_1t(void (*fn)(void *ctx, uint64_t begin, uint64_t end), void *ctx,
+                                uint64_t n)
+{
+    double wall0 = bench_now_ms();
+    double cpu0 = thread_cpu_ms();
+    fn(ctx, 0, n);
+    return (struct bench_time){bench_now_ms() - wall0, thread_cpu_ms() - cpu0};
+}
 
 double bench_now_ms(void)
 {

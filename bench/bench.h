@@ -68,7 +68,40 @@ struct bench_checksum {
 /* The triangle's geometric normal, unnormalised (p1 - p0) x (p2 - p0). */
 vec3 bench_tri_normal(const struct bench_mesh *mesh, uint32_t prim_idx);
 
+/* Tracing a ray file through mcpt's BVH, one result per ray so that checksums do not depend
+ * on the thread count: prim[i] is the hit triangle (closest hit) or 0 / UINT32_MAX for
+ * occluded / not (occlusion); t[i] the hit distance. */
+enum bench_method {
+    BENCH_SINGLE, /* bvh_intersect / bvh_occluded, ray by ray */
+    BENCH_PACKET, /* bvh_intersect_packet / bvh_occluded_packet, 8 consecutive rays a packet */
+    BENCH_BRUTE,  /* bvh_intersect_brute (every triangle) */
+};
+
+struct bench_trace {
+    const struct bvh *bvh;
+    const struct bench_rays *rays;
+    enum bench_method method;
+    uint32_t *prim; /* rays->n results */
+    float *t;
+};
+
+/* fn for bench_parallel: traces rays [begin, end) (packets: begin a multiple of 8). */
+void bench_trace_range(void *trace, uint64_t begin, uint64_t end);
+
+/* Checksums of a results array (BENCHMARKS.md), over rays [0, n). */
+struct bench_checksum bench_checksum_of(const struct bench_rays *rays, uint64_t n,
+                                        const uint32_t *prim, const float *t);
+
 /* Timing and machine. */
+struct bench_time {
+    double wall_ms; /* elapsed */
+    double cpu_ms;  /* CPU time of the calling thread: what the kernel cost, whatever the load */
+};
+
+/* Runs fn(ctx, 0, n) on the calling thread and times it. */
+struct bench_time bench_time_1t(void (*fn)(void *ctx, uint64_t begin, uint64_t end), void *ctx,
+                                uint64_t n);
+
 double bench_now_ms(void);
 double bench_median(double *v, int n); /* sorts v */
 long bench_peak_rss_kib(void);         /* getrusage ru_maxrss */

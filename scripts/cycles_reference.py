@@ -30,6 +30,7 @@ import time
 
 import bpy
 
+sys.dont_write_bytecode = True  # no scripts/__pycache__ in the tree
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import exr_mean  # noqa: E402  (same folder)
 
@@ -131,7 +132,10 @@ def make_material(name, kd, ke):
         nt.links.new(diffuse.outputs["BSDF"], add.inputs[0])
         nt.links.new(mix.outputs["Shader"], add.inputs[1])
         surface = add.outputs["Shader"]
-        mat.cycles.sample_as_light = True
+        if hasattr(mat.cycles, "sample_as_light"):  # Blender <= 3.4
+            mat.cycles.sample_as_light = True
+        if hasattr(mat.cycles, "emission_sampling"):  # Blender >= 3.5: sample the front only
+            mat.cycles.emission_sampling = "FRONT"
     nt.links.new(surface, out.inputs["Surface"])
     return mat
 
@@ -254,6 +258,8 @@ def set_world_and_render(scene, args):
     c.filter_width = 1.0
     c.film_exposure = 1.0  # a linear factor in Cycles: 1 = unchanged
     c.use_camera_cull = c.use_distance_cull = False
+    if hasattr(c, "use_light_tree"):  # Blender >= 3.5 only; 3.4 samples lights by area
+        c.use_light_tree = False
     for vl in scene.view_layers:
         vl.cycles.denoising_store_passes = False
         vl.samples = 0  # use the scene's sample count

@@ -9,10 +9,13 @@ file layout follows the OpenEXR file-format document ("OpenEXR File Layout", ope
 For each of R, G, B: mean = sum of pixels / N.  When the file carries mcpt's per-pixel
 variance-of-the-mean planes (variance.R/G/B), the standard error of the image mean is
     SE = sqrt(sum over pixels of variance) / N
-because the pixels are independent estimates.  Usage:
+because the pixels are independent estimates.  The variance planes treat a pixel's samples as
+independent; with mcpt's stratified (Sobol') sampler they over-estimate the error (about 2-3x on
+the Cornell box), so for a sharp figure render several --seed values and use the spread.  Usage:
     python3 scripts/exr_mean.py IMAGE.exr... [--json]
-    python3 scripts/exr_mean.py IMAGE.exr... --reference tests/data/reference/cornell-box-cycles.json
-The second form averages the images (independent seeds) and compares them with the reference.
+    python3 scripts/exr_mean.py IMAGE.exr... --reference REF.json
+The second form averages the images (independent seeds) and compares them with a reference such
+as tests/data/reference/cornell-box-cycles.json.
 """
 
 import json

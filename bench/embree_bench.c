@@ -1,0 +1,408 @@
+/* embree_bench.c - mcpt's BVH against Embree 3 (Wald et al. 2014, "Embree: A Kernel Framework
+ * for Efficient CPU Ray Tracing") on the same mesh and ray files, in one invocation: builds
+ * (mcpt's binned SAH against RTC_BUILD_QUALITY_HIGH, on one thread and on all), then per ray
+ * file mcpt's single-ray and packet kernels against rtcIntersect1 / rtcIntersect8 (closest hit)
+ * or rtcOccluded1 / rtcOccluded8 (occlusion), runs interleaved so that both see the same load.
+ * Prints both checksums and the ratio mcpt / Embree; one JSON line per ray file.  Built only
+ * when Embree 3 is installed (`make bench-embree`); nothing else in mcpt uses Embree. */
+#include <embree3/rtcore.h>
+#include <getopt.h>
+#include <stdatomic.h>
+#include <stdlib.h>
+
+#include "bench.h"
+#include "bvh.h"
+
+static const char usage[] =
+    "usage: embree_bench MODEL RAYS.bin... [--runs R] [--threads N] [--robust]\n"
+    "  MODEL     an OBJ file or torus:N (see raybench)\n"
+    "  --runs R  timed runs of each tracer after one warm-up, interleaved (default 5)\n"
+    "  --threads N  threads of the all-threads figures and builds (default: all CPUs)\n"
+    "  --robust  build Embree's scene with RTC_SCENE_FLAG_ROBUST (its watertight mode)\n";
+
+/* ---- Embree: scene, memory, tracing ------------------------------------------------------------ */
+
+static atomic_llong embree_bytes; /* bytes Embree holds, from its memory monitor */
+
+static bool memory_monitor(void *ptr, ssize_t bytes, bool post)
+{
+    (void)ptr;
+    (void)post;
+    atomic_fetch_add(&embree_bytes, (long long)bytes);
+    return true;
+}
+
+struct embree {
+    RTCDevice device;
+    RTCScene scene;
+    float *vertices;   /* shared with Embree: 3 floats per vertex plus one float of padding */
+    uint32_t *indices; /* shared: 3 per triangle */
+    double build_ms;
+    long long bytes; /* BVH and primitive data Embree allocated for the scene */
+};
+
+static bool embree_build(const struct bench_mesh *mesh, int n_threads, bool robust,
+                         struct embree *e)
+{
+    char config[64];
+    snprintf(config, sizeof config, "threads=%d", n_threads);
+    e->device = rtcNewDevice(config);
+    if (!e->device)
+        return false;
+    rtcSetDeviceMemoryMonitorFunction(e->device, memory_monitor, NULL);
+    /* shared buffers, so that the memory monitor counts only what Embree builds */
+    e->vertices = malloc((3 * (size_t)mesh->n_positions + 1) * sizeof(float));
+    e->indices = malloc(3 * (size_t)mesh->n_tris * sizeof(uint32_t) + 1);
+    if (!e->vertices || !e->indices)
+        return false;
+    memcpy(e->vertices, mesh->positions, 3 * (size_t)mesh->n_positions * sizeof(float));
+    e->vertices[3 * (size_t)mesh->n_positions] = 0.0f;
+    memcpy(e->indices, mesh->indices, 3 * (size_t)mesh->n_tris * sizeof(uint32_t));
+    long long bytes_before = atomic_load(&embree_bytes);
+    double t0 = bench_now_ms();
+    e->scene = rtcNewScene(e->device);
+    rtcSetSceneBuildQuality(e->scene, RTC_BUILD_QUALITY_HIGH);
+    if (robust)
+        rtcSetSceneFlags(e->scene, RTC_SCENE_FLAG_ROBUST);
+    RTCGeometry g = rtcNewGeometry(e->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    rtcSetGeometryBuildQuality(g, RTC_BUILD_QUALITY_HIGH);
+    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, e->vertices, 0,
+                               3 * sizeof(float), mesh->n_positions);
+    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, e->indices, 0,
+                               3 * sizeof(uint32_t), mesh->n_tris);
+    rtcCommitGeometry(g);
+    rtcAttachGeometry(e->scene, g);
+    rtcReleaseGeometry(g);
+    rtcCommitScene(e->scene);
+    e->build_ms = bench_now_ms() - t0;
+    e->bytes = atomic_load(&embree_bytes) - bytes_before;
+    return rtcGetDeviceError(e->device) == RTC_ERROR_NONE;
+}
+
+static void embree_free(struct embree *e)
+{
+    if (e->scene)
+        rtcReleaseScene(e->scene);
+    if (e->device)
+        rtcReleaseDevice(e->device);
+    free(e->vertices);
+    free(e->indices);
+    *e = (struct embree){0};
+}
+
+enum embree_method {
+    EMBREE_1, /* rtcIntersect1 / rtcOccluded1 */
+    EMBREE_8, /* rtcIntersect8 / rtcOccluded8, 8 consecutive rays a packet */
+};
+
+struct embree_trace {
+    RTCScene scene;
+    const struct bench_rays *rays;
+    enum embree_method method;
+    uint32_t *prim;
+    float *t;
+};
+
+static void set_ray1(struct RTCRay *r, const struct ray *ray)
+{
+    r->org_x = ray->o.x;
+    r->org_y = ray->o.y;
+    r->org_z = ray->o.z;
+    r->tnear = ray->t_min;
+    r->dir_x = ray->d.x;
+    r->dir_y = ray->d.y;
+    r->dir_z = ray->d.z;
+    r->time = 0.0f;
+    r->tfar = ray->t_max;
+    r->mask = UINT32_MAX;
+    r->id = 0;
+    r->flags = 0;
+}
+
+static void set_ray8(struct RTCRay8 *r, int lane, const struct ray *ray)
+{
+    r->org_x[lane] = ray->o.x;
+    r->org_y[lane] = ray->o.y;
+    r->org_z[lane] = ray->o.z;
+    r->tnear[lane] = ray->t_min;
+    r->dir_x[lane] = ray->d.x;
+    r->dir_y[lane] = ray->d.y;
+    r->dir_z[lane] = ray->d.z;
+    r->time[lane] = 0.0f;
+    r->tfar[lane] = ray->t_max;
+    r->mask[lane] = UINT32_MAX;
+    r->id[lane] = 0;
+    r->flags[lane] = 0;
+}
+
+static void embree_trace_range(void *arg, uint64_t begin, uint64_t end)
+{
+    const struct embree_trace *tr = arg;
+    const struct ray *rays = tr->rays->rays;
+    bool occlusion = tr->rays->kind == BENCH_KIND_OCCLUSION;
+    struct RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    if (tr->method == EMBREE_1) {
+        for (uint64_t i = begin; i < end; i++) {
+            if (occlusion) {
+                struct RTCRay r;
+                set_ray1(&r, &rays[i]);
+                rtcOccluded1(tr->scene, &ctx, &r);
+                tr->prim[i] = r.tfar < 0.0f ? 0 : UINT32_MAX; /* tfar = -inf when occluded */
+                continue;
+            }
+            struct RTCRayHit rh;
+            set_ray1(&rh.ray, &rays[i]);
+            rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+            rtcIntersect1(tr->scene, &ctx, &rh);
+            bool is_hit = rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
+            tr->prim[i] = is_hit ? rh.hit.primID : UINT32_MAX;
+            tr->t[i] = is_hit ? rh.ray.tfar : 0.0f;
+        }
+        return;
+    }
+    for (uint64_t i = begin; i < end; i += 8) {
+        _Alignas(32) int valid[8];
+        int n = end - i < 8 ? (int)(end - i) : 8;
+        if (occlusion) {
+            _Alignas(32) struct RTCRay8 r;
+            for (int lane = 0; lane < 8; lane++) {
+                valid[lane] = lane < n ? -1 : 0;
+                set_ray8(&r, lane, &rays[i + (uint64_t)(lane < n ? lane : 0)]);
+            }
+            rtcOccluded8(valid, tr->scene, &ctx, &r);
+            for (int lane = 0; lane < n; lane++)
+                tr->prim[i + (uint64_t)lane] = r.tfar[lane] < 0.0f ? 0 : UINT32_MAX;
+            continue;
+        }
+        _Alignas(32) struct RTCRayHit8 rh;
+        for (int lane = 0; lane < 8; lane++) {
+            valid[lane] = lane < n ? -1 : 0;
+            set_ray8(&rh.ray, lane, &rays[i + (uint64_t)(lane < n ? lane : 0)]);
+            rh.hit.geomID[lane] = RTC_INVALID_GEOMETRY_ID;
+        }
+        rtcIntersect8(valid, tr->scene, &ctx, &rh);
+        for (int lane = 0; lane < n; lane++) {
+            bool is_hit = rh.hit.geomID[lane] != RTC_INVALID_GEOMETRY_ID;
+            tr->prim[i + (uint64_t)lane] = is_hit ? rh.hit.primID[lane] : UINT32_MAX;
+            tr->t[i + (uint64_t)lane] = is_hit ? rh.ray.tfar[lane] : 0.0f;
+        }
+    }
+}
+
+/* ---- interleaved measurement ------------------------------------------------------------------- */
+
+/* One tracer: its run function and context, results and collected timings. */
+struct tracer {
+    const char *name;
+    void (*fn)(void *ctx, uint64_t begin, uint64_t end);
+    void *ctx;
+    double cpu_ms[64];  /* single thread */
+    double wall_ms[64]; /* single thread */
+    double mt_ms[64];   /* all threads */
+    struct bench_checksum sum;
+    double mrays_1t;
+    double mrays_1t_wall;
+    double mrays_mt;
+};
+
+/* Warm-up of each, then R rounds; in each round every tracer runs once on one thread, then
+ * every tracer once on all threads. */
+static void measure_interleaved(struct tracer *tr, int n_tr, const struct bench_rays *rays,
+                                int runs, int n_threads, uint32_t **prim, float **t)
+{
+    for (int k = 0; k < n_tr; k++) {
+        tr[k].fn(tr[k].ctx, 0, rays->n);
+        tr[k].sum = bench_checksum_of(rays, rays->n, prim[k], t[k]);
+    }
+    for (int r = 0; r < runs; r++) {
+        for (int k = 0; k < n_tr; k++) {
+            struct bench_time bt = bench_time_1t(tr[k].fn, tr[k].ctx, rays->n);
+            tr[k].cpu_ms[r] = bt.cpu_ms;
+            tr[k].wall_ms[r] = bt.wall_ms;
+        }
+        for (int k = 0; k < n_tr; k++)
+            tr[k].mt_ms[r] = bench_parallel(rays->n, 4096, n_threads, tr[k].fn, tr[k].ctx);
+    }
+    for (int k = 0; k < n_tr; k++) {
+        tr[k].mrays_1t = (double)rays->n / bench_median(tr[k].cpu_ms, runs) / 1e3;
+        tr[k].mrays_1t_wall = (double)rays->n / bench_median(tr[k].wall_ms, runs) / 1e3;
+        tr[k].mrays_mt = (double)rays->n / bench_median(tr[k].mt_ms, runs) / 1e3;
+    }
+}
+
+static double rel_diff(double a, double b)
+{
+    double m = fabs(a) > fabs(b) ? fabs(a) : fabs(b);
+    return m > 0.0 ? fabs(a - b) / m : 0.0;
+}
+
+int main(int argc, char **argv)
+{
+    int runs = 5;
+    int n_threads = bench_n_cpus();
+    bool robust = false;
+    static const struct option long_opts[] = {{"runs", required_argument, NULL, 'r'},
+                                              {"threads", required_argument, NULL, 't'},
+                                              {"robust", no_argument, NULL, 'R'},
+                                              {"help", no_argument, NULL, 'h'},
+                                              {NULL, 0, NULL, 0}};
+    int c;
+    while ((c = getopt_long(argc, argv, "h", long_opts, NULL)) != -1) {
+        switch (c) {
+        case 'r': runs = atoi(optarg); break;
+        case 't': n_threads = atoi(optarg); break;
+        case 'R': robust = true; break;
+        case 'h': fputs(usage, stdout); return 0;
+        default: fputs(usage, stderr); return 2;
+        }
+    }
+    if (argc - optind < 2 || runs < 1 || runs > 64 || n_threads < 1 || n_threads > 256) {
+        fputs(usage, stderr);
+        return 2;
+    }
+    const char *model = argv[optind];
+    struct bench_mesh mesh = {0};
+    if (strncmp(model, "torus:", 6) == 0) {
+        char *end;
+        unsigned long long n = strtoull(model + 6, &end, 10);
+        n <<= *end == 'k' ? 10 : *end == 'M' ? 20 : 0;
+        if (!bench_mesh_torus(n, &mesh)) {
+            fprintf(stderr, "embree_bench: cannot generate %s\n", model);
+            return 2;
+        }
+    } else {
+        struct mcpt_error err;
+        if (!bench_mesh_load_obj(model, &mesh, &err)) {
+            char line[600];
+            mcpt_error_format(&err, line, sizeof line);
+            fprintf(stderr, "%s\n", line);
+            return 2;
+        }
+    }
+    printf("model: %s: %u triangles; load average %.2f on %d CPUs; mcpt kernels %s; Embree %s%s\n",
+           model, mesh.n_tris, bench_loadavg(), bench_n_cpus(), bvh_simd_name(), RTC_VERSION_STRING,
+           robust ? " (robust)" : "");
+    /* builds, interleaved: mcpt 1 thread, Embree 1 thread, mcpt all, Embree all */
+    double b_mcpt[2][64];
+    double b_embree[2][64];
+    struct bvh *bvh = NULL;
+    struct embree emb = {0};
+    long long embree_scene_bytes = 0;
+    for (int r = 0; r <= runs; r++) { /* r == 0: warm-up */
+        for (int mt = 0; mt < 2; mt++) {
+            int threads = mt ? n_threads : 1;
+            bvh_free(bvh);
+            bvh = bvh_build(mesh.positions, mesh.indices, mesh.n_tris, threads);
+            embree_free(&emb);
+            if (!bvh || !embree_build(&mesh, threads, robust, &emb)) {
+                fprintf(stderr, "embree_bench: build failed\n");
+                return 1;
+            }
+            embree_scene_bytes = emb.bytes;
+            if (r > 0) {
+                b_mcpt[mt][r - 1] = bvh_get_stats(bvh).build_ms;
+                b_embree[mt][r - 1] = emb.build_ms;
+            }
+        }
+    }
+    double mcpt_build[2] = {bench_median(b_mcpt[0], runs), bench_median(b_mcpt[1], runs)};
+    double embree_build_ms[2] = {bench_median(b_embree[0], runs), bench_median(b_embree[1], runs)};
+    struct bvh_stats st = bvh_get_stats(bvh);
+    double mcpt_bpt = (double)st.bytes / (double)mesh.n_tris;
+    double embree_bpt = (double)embree_scene_bytes / (double)mesh.n_tris;
+    printf("build 1 thread: mcpt %.1f ms, Embree high quality %.1f ms: ratio %.2f (< 1: mcpt "
+           "faster)\n",
+           mcpt_build[0], embree_build_ms[0], mcpt_build[0] / embree_build_ms[0]);
+    printf("build %d threads: mcpt %.1f ms, Embree %.1f ms: ratio %.2f\n", n_threads,
+           mcpt_build[1], embree_build_ms[1], mcpt_build[1] / embree_build_ms[1]);
+    printf("memory: mcpt %.1f bytes/triangle, Embree %.1f; mcpt SAH cost %.2f\n", mcpt_bpt,
+           embree_bpt, st.sah_cost);
+    int status = 0;
+    for (int f = optind + 1; f < argc; f++) {
+        struct bench_rays rays;
+        struct mcpt_error err;
+        if (!bench_rays_read(argv[f], &rays, &err)) {
+            char line[600];
+            mcpt_error_format(&err, line, sizeof line);
+            fprintf(stderr, "%s\n", line);
+            status = 2;
+            continue;
+        }
+        uint32_t *prim[4];
+        float *t[4];
+        for (int k = 0; k < 4; k++) {
+            prim[k] = malloc(rays.n * sizeof(uint32_t) + 1);
+            t[k] = malloc(rays.n * sizeof(float) + 1);
+            if (!prim[k] || !t[k])
+                return 1;
+        }
+        struct bench_trace m1 = {bvh, &rays, BENCH_SINGLE, prim[0], t[0]};
+        struct embree_trace e1 = {emb.scene, &rays, EMBREE_1, prim[1], t[1]};
+        struct bench_trace m8 = {bvh, &rays, BENCH_PACKET, prim[2], t[2]};
+        struct embree_trace e8 = {emb.scene, &rays, EMBREE_8, prim[3], t[3]};
+        bool occlusion = rays.kind == BENCH_KIND_OCCLUSION;
+        struct tracer tr[4] = {
+            {.name = "mcpt single", .fn = bench_trace_range, .ctx = &m1},
+            {.name = occlusion ? "Embree rtcOccluded1" : "Embree rtcIntersect1",
+             .fn = embree_trace_range, .ctx = &e1},
+            {.name = "mcpt packets", .fn = bench_trace_range, .ctx = &m8},
+            {.name = occlusion ? "Embree rtcOccluded8" : "Embree rtcIntersect8",
+             .fn = embree_trace_range, .ctx = &e8},
+        };
+        measure_interleaved(tr, 4, &rays, runs, n_threads, prim, t);
+        printf("rays: %s: %llu %s rays; load average %.2f\n", argv[f], (unsigned long long)rays.n,
+               occlusion ? "occlusion" : "closest-hit", bench_loadavg());
+        for (int k = 0; k < 4; k++) {
+            printf("  %-22s %8.3f Mrays/s 1 thread (CPU time; %.3f wall), %8.3f on %d threads; "
+                   "hits %llu",
+                   tr[k].name, tr[k].mrays_1t, tr[k].mrays_1t_wall, tr[k].mrays_mt, n_threads,
+                   (unsigned long long)tr[k].sum.hits);
+            if (!occlusion)
+                printf(" t_sum %.6e prim_sum %llu", tr[k].sum.t_sum,
+                       (unsigned long long)tr[k].sum.prim_sum);
+            printf("\n");
+        }
+        /* checksums: mcpt single against Embree single */
+        double hit_diff = rays.n ? fabs((double)tr[0].sum.hits - (double)tr[1].sum.hits) /
+                                       (double)rays.n
+                                 : 0.0;
+        double t_diff = rel_diff(tr[0].sum.t_sum, tr[1].sum.t_sum);
+        /* the target comparisons of docs/bvh.md: single rays against rtc*1; for primary-like
+         * coherent sets the better mcpt kernel against rtcIntersect8 */
+        double r1 = tr[0].mrays_1t / tr[1].mrays_1t;
+        double best_mcpt = tr[0].mrays_1t > tr[2].mrays_1t ? tr[0].mrays_1t : tr[2].mrays_1t;
+        double r8 = best_mcpt / tr[3].mrays_1t;
+        double r_mt = tr[0].mrays_mt / tr[1].mrays_mt;
+        printf("  ratio mcpt/Embree: single %.2f, best mcpt vs %s %.2f, all threads %.2f; "
+               "checksums: hits differ by %.5f%% of rays, t_sum by %.2e relative\n",
+               r1, tr[3].name, r8, r_mt, 100.0 * hit_diff, t_diff);
+        printf("{\"model\":\"%s\",\"rays_file\":\"%s\",\"triangles\":%u,\"kind\":\"%s\","
+               "\"rays\":%llu,\"build_ms\":%.3f,\"build_ms_embree\":%.3f,\"build_ms_mt\":%.3f,"
+               "\"build_ms_mt_embree\":%.3f,\"bytes_per_tri\":%.2f,\"bytes_per_tri_embree\":%.2f,"
+               "\"sah_cost\":%.4f,\"hits\":%llu,\"hits_embree\":%llu,\"t_sum\":%.6e,"
+               "\"t_sum_embree\":%.6e,\"prim_sum\":%llu,\"prim_sum_embree\":%llu,"
+               "\"mrays_1t\":%.4f,\"mrays_1t_embree\":%.4f,\"mrays_1t_packet\":%.4f,"
+               "\"mrays_1t_packet_embree\":%.4f,\"mrays_mt\":%.4f,\"mrays_mt_embree\":%.4f,"
+               "\"ratio_1t\":%.4f,\"ratio_packet\":%.4f,\"ratio_mt\":%.4f,\"threads\":%d,"
+               "\"runs\":%d,\"load_avg\":%.2f,\"robust\":%s}\n",
+               model, argv[f], mesh.n_tris, occlusion ? "occlusion" : "closest",
+               (unsigned long long)rays.n, mcpt_build[0], embree_build_ms[0], mcpt_build[1],
+               embree_build_ms[1], mcpt_bpt, embree_bpt, st.sah_cost,
+               (unsigned long long)tr[0].sum.hits, (unsigned long long)tr[1].sum.hits,
+               tr[0].sum.t_sum, tr[1].sum.t_sum, (unsigned long long)tr[0].sum.prim_sum,
+               (unsigned long long)tr[1].sum.prim_sum, tr[0].mrays_1t, tr[1].mrays_1t,
+               tr[2].mrays_1t, tr[3].mrays_1t, tr[0].mrays_mt, tr[1].mrays_mt, r1, r8, r_mt,
+               n_threads, runs, bench_loadavg(), robust ? "true" : "false");
+        fflush(stdout);
+        for (int k = 0; k < 4; k++) {
+            free(prim[k]);
+            free(t[k]);
+        }
+        bench_rays_free(&rays);
+    }
+    embree_free(&emb);
+    bvh_free(bvh);
+    bench_mesh_free(&mesh);
+    return status;
+}
