@@ -104,15 +104,4 @@ bool film_save_checkpoint(const char *path, const struct film *film,
 bool film_load_checkpoint(const char *path, struct film *film, struct film_checkpoint_info *info,
                           struct mcpt_error *err);
 
-/* ---- the sample-count map: where the renderer spent its samples ---- */
-
-#define FILM_HEATMAP_MIN_WIDTH 256 /* pixels: smaller films are scaled up by a whole factor */
-
-/* Draws each pixel's sample count (n + n_dropped) in false colour (viridis, linear from the
- * least to the most samples in the film), the film scaled up by a whole factor to at least
- * FILM_HEATMAP_MIN_WIDTH pixels wide, above a legend: the title "samples per pixel", the colour
- * bar and its tick labels.  Returns a malloc'ed interleaved RGB8 image of *width x *height
- * pixels (the caller frees it), or NULL when out of memory or too large. */
-uint8_t *film_count_heatmap(const struct film *film, int *width, int *height);
-
 #endif

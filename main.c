@@ -560,20 +560,6 @@ static int sample_range_options(const struct options *o, bool measuring, uint64_
     return -1;
 }
 
-/* Writes the false-colour sample-count map of film (film_count_heatmap) as a PNG. */
-static bool write_heatmap(const struct film *film, const char *png_path, struct mcpt_error *err)
-{
-    int width, height;
-    uint8_t *rgb8 = film_count_heatmap(film, &width, &height);
-    if (!rgb8) {
-        mcpt_error_set(err, png_path, 0, 0, "out of memory drawing the sample-count map");
-        return false;
-    }
-    bool ok = image_write_png_rgb8(png_path, width, height, rgb8, err);
-    free(rgb8);
-    return ok;
-}
-
 /* Writes the film as EXR (R, G, B, variance of the mean per channel, sample count) and PNG. */
 static bool write_images(const struct film *film, const char *exr_path, float exposure,
                          struct mcpt_error *err)
@@ -1360,7 +1346,7 @@ int main(int argc, char **argv)
         snprintf(heatmap_path, sizeof heatmap_path, "%.*s.samples.png",
                  (int)strlen(png_path) - 4, png_path);
     }
-    if (heatmap_path[0] && !write_heatmap(&film, heatmap_path, &err)) {
+    if (heatmap_path[0] && !stats_write_count_heatmap(heatmap_path, &film, &err)) {
         print_error(&err);
         goto done;
     }

@@ -9,6 +9,7 @@
 
 #include <errno.h>
 #include <fcntl.h>
+#include <limits.h>
 #include <stdlib.h>
 #include <unistd.h>
 
@@ -1392,12 +1393,6 @@ int stats_draw_text(uint8_t *rgb8, int width, int height, int x, int y, int scal
 static const uint8_t WHITE[3] = {255, 255, 255};
 static const uint8_t BACKGROUND[3] = {32, 32, 32};
 
-static bool write_rgb8_png(const char *path, int width, int height, const uint8_t *rgb8,
-                           struct mcpt_error *err)
-{
-    return image_write_png_rgb8(path, width, height, rgb8, err);
-}
-
 /* ---- the contact sheet: the snapshots side by side, labelled ---- */
 
 bool stats_write_contact_sheet(const char *path, const struct stats_curve *c,
@@ -1447,12 +1442,19 @@ bool stats_write_contact_sheet(const char *path, const struct stats_curve *c,
         stats_draw_text(rgb8, width, height, x0, ty + (STATS_FONT_H + 3) * scale, scale, text,
                         WHITE);
     }
-    bool ok = write_rgb8_png(path, width, height, rgb8, err);
+    bool ok = image_write_png_rgb8(path, width, height, rgb8, err);
     free(rgb8);
     return ok;
 }
 
-/* ---- the relative-error heat map ---- */
+/* ---- false-colour maps: the relative-error map and the sample-count map ----
+ * Both draw one value t in [0, 1] per image pixel in viridis, the image scaled up by a whole
+ * factor to at least HEATMAP_MIN_WIDTH pixels wide, above a legend: a title, the colour bar and
+ * labelled ticks.  Legend rows, in font pixels s: margin 4, title 7, gap 4, bar 12, tick 3,
+ * gap 2, labels 7, margin 4. */
+
+#define HEATMAP_MIN_WIDTH 256 /* pixels: narrower images are scaled up by a whole factor */
+#define HEATMAP_LEGEND_ROWS 43 /* font pixels: the sum of the legend rows above */
 
 /* viridis (van der Walt & Smith 2015, matplotlib's default colour map), 9 stops at t = k / 8,
  * linearly interpolated: perceptually uniform and readable in grey and by colour-blind readers. */
@@ -1470,7 +1472,76 @@ static void viridis8(double t, uint8_t out[3])
         out[c] = (uint8_t)(STOPS[k][c] + w * (STOPS[k + 1][c] - STOPS[k][c]) + 0.5);
 }
 
-#define HEATMAP_MIN_WIDTH 256 /* pixels: narrower images are scaled up by a whole factor */
+/* A map being drawn. */
+struct heatmap {
+    uint8_t *rgb8; /* interleaved RGB8, width x height, malloc'ed by heatmap_begin */
+    int width;     /* pixels */
+    int height;    /* pixels, legend included */
+    int k;         /* map pixels per image pixel, each way */
+    int s;         /* map pixels per font pixel, each way */
+    int y_legend;  /* first row of the legend */
+    int bar_x0;    /* the colour bar covers the columns [bar_x0, bar_x1) */
+    int bar_x1;
+};
+
+/* Lays out the map of an image_w x image_h image (nothing drawn, hm->rgb8 NULL).  False when
+ * its sides would not fit in an int. */
+static bool heatmap_layout(struct heatmap *hm, int image_w, int image_h)
+{
+    int k = image_w < HEATMAP_MIN_WIDTH ? (HEATMAP_MIN_WIDTH + image_w - 1) / image_w : 1;
+    int s = image_w * k >= 2 * HEATMAP_MIN_WIDTH ? 2 : 1;
+    *hm = (struct heatmap){.k = k, .s = s};
+    if ((int64_t)image_w * k > INT_MAX || (int64_t)image_h * k + HEATMAP_LEGEND_ROWS * s > INT_MAX)
+        return false;
+    hm->width = image_w * k;
+    hm->y_legend = image_h * k;
+    hm->height = hm->y_legend + HEATMAP_LEGEND_ROWS * s;
+    hm->bar_x0 = 12 * s; /* margin 4, then room for the end ticks' labels */
+    hm->bar_x1 = hm->width - 12 * s;
+    return true;
+}
+
+/* Allocates the laid-out map and draws its background, title and colour bar.  False (rgb8
+ * NULL) when out of memory. */
+static bool heatmap_begin(struct heatmap *hm, const char *title)
+{
+    int s = hm->s, y_bar = hm->y_legend + 15 * s;
+    hm->rgb8 = malloc((size_t)hm->width * (size_t)hm->height * 3);
+    if (!hm->rgb8)
+        return false;
+    fill_rect(hm->rgb8, hm->width, hm->height, 0, 0, hm->width, hm->height, BACKGROUND);
+    stats_draw_text(hm->rgb8, hm->width, hm->height, 4 * s, hm->y_legend + 4 * s, s, title,
+                    WHITE);
+    for (int x = hm->bar_x0; x < hm->bar_x1; x++) {
+        uint8_t col[3];
+        viridis8((double)(x - hm->bar_x0) / (double)(hm->bar_x1 - 1 - hm->bar_x0), col);
+        fill_rect(hm->rgb8, hm->width, hm->height, x, y_bar, 1, 12 * s, col);
+    }
+    return true;
+}
+
+/* Paints image pixel (x, y) (a k x k block of the map) in the colour of t. */
+static void heatmap_pixel(struct heatmap *hm, int x, int y, double t)
+{
+    uint8_t col[3];
+    viridis8(t, col);
+    fill_rect(hm->rgb8, hm->width, hm->height, x * hm->k, y * hm->k, hm->k, hm->k, col);
+}
+
+/* Draws a tick under the colour bar at fraction f of its length and, unless label is NULL, the
+ * label centred under it (moved inside the map where it would stick out). */
+static void heatmap_tick(struct heatmap *hm, double f, const char *label)
+{
+    int s = hm->s, y_tick = hm->y_legend + 27 * s;
+    int x = hm->bar_x0 + (int)(f * (hm->bar_x1 - 1 - hm->bar_x0) + 0.5);
+    fill_rect(hm->rgb8, hm->width, hm->height, x, y_tick, s, 3 * s, WHITE);
+    if (!label)
+        return;
+    int w = (int)strlen(label) * (STATS_FONT_W + 1) * s - s;
+    int xt = x - w / 2;
+    xt = xt < 0 ? 0 : xt + w > hm->width ? hm->width - w : xt;
+    stats_draw_text(hm->rgb8, hm->width, hm->height, xt, y_tick + 5 * s, s, label, WHITE);
+}
 
 bool stats_write_heatmap(const char *path, const struct stats_image *a,
                          const struct stats_image *r, struct mcpt_error *err)
@@ -1478,7 +1549,7 @@ bool stats_write_heatmap(const char *path, const struct stats_image *a,
     size_t n_pixels = (size_t)a->width * (size_t)a->height;
     double *e = malloc(n_pixels * sizeof *e);       /* log10 relative squared error per pixel */
     double *sorted = malloc(n_pixels * sizeof *e);
-    uint8_t *rgb8 = NULL;
+    struct heatmap hm = {0};
     bool ok = false;
     if (!e || !sorted)
         goto oom;
@@ -1510,53 +1581,71 @@ bool stats_write_heatmap(const char *path, const struct stats_image *a,
     if (hi - lo > 8)
         lo = hi - 8;
 
-    int k = a->width < HEATMAP_MIN_WIDTH ? (HEATMAP_MIN_WIDTH + a->width - 1) / a->width : 1;
-    int s = a->width * k >= 2 * HEATMAP_MIN_WIDTH ? 2 : 1; /* font scale */
-    /* legend rows, in font pixels s: margin 4, title 7, gap 4, bar 12, tick 3, gap 2, labels 7,
-     * margin 4 */
-    int legend_h = 43 * s;
-    int width = a->width * k, height = a->height * k + legend_h;
-    rgb8 = malloc((size_t)width * (size_t)height * 3);
-    if (!rgb8)
-        goto oom;
-    fill_rect(rgb8, width, height, 0, 0, width, height, BACKGROUND);
-    for (int y = 0; y < a->height * k; y++)
-        for (int x = 0; x < width; x++) {
-            uint8_t col[3];
-            viridis8((e[(size_t)(y / k) * (size_t)a->width + (size_t)(x / k)] - lo) / (hi - lo),
-                     col);
-            memcpy(rgb8 + ((size_t)y * (size_t)width + (size_t)x) * 3, col, 3);
-        }
-    int margin = 4 * s, y_title = a->height * k + margin, y_bar = y_title + 11 * s;
-    stats_draw_text(rgb8, width, height, margin, y_title, s, "(a-r)^2/(r^2+0.01), mean RGB",
-                    WHITE);
-    int bar_x0 = margin + 8 * s, bar_x1 = width - margin - 8 * s; /* room for end labels */
-    for (int x = bar_x0; x < bar_x1; x++) {
-        uint8_t col[3];
-        viridis8((double)(x - bar_x0) / (double)(bar_x1 - 1 - bar_x0), col);
-        fill_rect(rgb8, width, height, x, y_bar, 1, 12 * s, col);
+    if (!heatmap_layout(&hm, a->width, a->height)) {
+        mcpt_error_set(err, path, 0, 0, "expected an image small enough to map, got %dx%d",
+                       a->width, a->height);
+        goto done;
     }
+    if (!heatmap_begin(&hm, "(a-r)^2/(r^2+0.01), mean RGB"))
+        goto oom;
+    for (int y = 0; y < a->height; y++)
+        for (int x = 0; x < a->width; x++) {
+            double e_xy = e[(size_t)y * (size_t)a->width + (size_t)x];
+            heatmap_pixel(&hm, x, y, (e_xy - lo) / (hi - lo));
+        }
     int label_every = (hi - lo + 5) / 6; /* at most about 6 labels */
     for (int d = lo; d <= hi; d++) {
-        int x = bar_x0 + (int)((double)(d - lo) / (hi - lo) * (bar_x1 - 1 - bar_x0) + 0.5);
-        fill_rect(rgb8, width, height, x, y_bar + 12 * s, s, 3 * s, WHITE);
-        if ((d - lo) % label_every)
-            continue;
         char label[16];
         snprintf(label, sizeof label, "1e%d", d);
-        int w = (int)strlen(label) * (STATS_FONT_W + 1) * s - s;
-        int xt = x - w / 2;
-        xt = xt < 0 ? 0 : xt + w > width ? width - w : xt;
-        stats_draw_text(rgb8, width, height, xt, y_bar + 17 * s, s, label, WHITE);
+        heatmap_tick(&hm, (double)(d - lo) / (hi - lo), (d - lo) % label_every ? NULL : label);
     }
-    ok = write_rgb8_png(path, width, height, rgb8, err);
+    ok = image_write_png_rgb8(path, hm.width, hm.height, hm.rgb8, err);
     goto done;
 oom:
     mcpt_error_set(err, path, 0, 0, "out of memory drawing the heat map");
 done:
     free(e);
     free(sorted);
-    free(rgb8);
+    free(hm.rgb8);
+    return ok;
+}
+
+bool stats_write_count_heatmap(const char *path, const struct film *film, struct mcpt_error *err)
+{
+    size_t n_pixels = (size_t)film->width * (size_t)film->height;
+    uint32_t lo = UINT32_MAX, hi = 0;
+    for (size_t i = 0; i < n_pixels; i++) {
+        uint32_t n = film->pixels[i].n + film->pixels[i].n_dropped;
+        lo = n < lo ? n : lo;
+        hi = n > hi ? n : hi;
+    }
+    struct heatmap hm;
+    if (!heatmap_layout(&hm, film->width, film->height) || hm.width > 65535 ||
+        hm.height > 65535) {
+        mcpt_error_set(err, path, 0, 0, "expected a film whose sample-count map is at most 65535 "
+                       "pixels a side, got a %dx%d film", film->width, film->height);
+        return false;
+    }
+    if (!heatmap_begin(&hm, "samples per pixel")) {
+        mcpt_error_set(err, path, 0, 0, "out of memory drawing the sample-count map");
+        return false;
+    }
+    /* t = (n - lo) / (hi - lo), linear */
+    double span = hi > lo ? (double)(hi - lo) : 1.0;
+    for (int y = 0; y < film->height; y++)
+        for (int x = 0; x < film->width; x++) {
+            const struct film_pixel *p = &film->pixels[(size_t)y * (size_t)film->width + x];
+            heatmap_pixel(&hm, x, y, (double)(p->n + p->n_dropped - lo) / span);
+        }
+    int n_ticks = hi > lo ? 5 : 1;
+    for (int t = 0; t < n_ticks; t++) {
+        double f = n_ticks > 1 ? t / (double)(n_ticks - 1) : 0.0;
+        char label[16];
+        snprintf(label, sizeof label, "%u", (unsigned)(lo + f * (double)(hi - lo) + 0.5));
+        heatmap_tick(&hm, f, label);
+    }
+    bool ok = image_write_png_rgb8(path, hm.width, hm.height, hm.rgb8, err);
+    free(hm.rgb8);
     return ok;
 }
 

@@ -1,7 +1,7 @@
 /* stats.h - image error metrics against a reference, convergence curves with their fits, their
- * outputs (CSV, JSON, SVG plot, PNG contact sheet and error heat map) and the sampler laboratory
- * (Monte Carlo estimates of 2-D integrals with known values).  Formats are an interface, kept
- * stable and documented in docs/convergence.md.  Nothing here changes a render. */
+ * outputs (CSV, JSON, SVG plot, PNG contact sheet, error and sample-count heat maps) and the
+ * sampler laboratory (Monte Carlo estimates of 2-D integrals with known values).  Formats are an
+ * interface, kept stable and documented in docs/convergence.md.  Nothing here changes a render. */
 #ifndef MCPT_STATS_H
 #define MCPT_STATS_H
 
@@ -80,6 +80,13 @@ void stats_write_metrics_json(FILE *f, const struct stats_metrics *m, const char
  * a and r must have the same size.  Returns false with *err (file = path) on failure. */
 bool stats_write_heatmap(const char *path, const struct stats_image *a,
                          const struct stats_image *r, struct mcpt_error *err);
+
+/* Writes a false-colour PNG of each pixel's sample count n + n_dropped (where the renderer spent
+ * its samples: adaptive sampling's map), linear from the least to the most samples in the film,
+ * with the same scaling and legend as stats_write_heatmap.  Returns false with *err (file =
+ * path) when out of memory, when the map would exceed 65535 pixels a side, or when the write
+ * fails. */
+bool stats_write_count_heatmap(const char *path, const struct film *film, struct mcpt_error *err);
 
 /* ---- line fits ---- */
 

@@ -18,18 +18,22 @@ SCENES=${GALLERY_SCENES:-$ALL}
 OUT=build/gallery
 mkdir -p "$OUT" docs/gallery
 
-# name -> "scene file|extra options"
+# name -> "scene file|extra options" (materials.txt's 640x360 film is scaled to 512 wide, so
+# that every committed PNG is at most 512 pixels)
 job() {
     case "$1" in
     bunny-direct) echo "scenes/bunny.txt|--split direct" ;;
     bunny-indirect) echo "scenes/bunny.txt|--split indirect" ;;
+    materials) echo "scenes/materials.txt|--width 512 --height 288" ;;
     *) echo "scenes/$1.txt|" ;;
     esac
 }
 
-# the first comment line of a scene: "name.txt - what it is" -> "what it is"
+# A scene's opening comment up to "Render:", as one line, without "name.txt - ".
 describe() {
-    sed -n '1s/^# [^ ]* - //p' "$1"
+    awk '!/^#/ { exit } { sub(/^# ?/, ""); text = text (text == "" ? "" : " ") $0 }
+         END { sub(/ *Render:.*/, "", text); sub(/^[^ ]*\.txt - /, "", text);
+               print toupper(substr(text, 1, 1)) substr(text, 2) }' "$1"
 }
 
 ROWS=$OUT/rows.md
@@ -67,15 +71,16 @@ for name in $SCENES; do
     cp "$OUT/$name.png" "docs/gallery/$name.png"
     what=$(describe "$scene")
     cmd="mcpt $scene${extra:+ $extra}"
-    echo "gallery: $name: $size, $spp spp, ${wall} s wall, ${cpu} s CPU, load $load_before -> $load_after"
+    echo "gallery: $name: $size, $spp spp, ${wall} s wall, ${cpu} s CPU," \
+        "load $load_before -> $load_after"
     printf '| [%s](#%s) | %s | %s | %s | %s | %s -> %s |\n' "$name" "$name" "$size" "$spp" \
         "$wall" "$cpu" "$load_before" "$load_after" >>"$ROWS"
     {
         printf '### %s\n\n' "$name"
         printf '![%s](gallery/%s.png)\n\n' "$name" "$name"
         # shellcheck disable=SC2016 # the backquotes are Markdown
-        printf '`%s`: %s, %s spp, %s s (%s s CPU). ' "$cmd" "$size" "$spp" "$wall" "$cpu"
-        printf '%s\n\n' "${what:-}"
+        printf '`%s`: %s, %s spp, %s s (%s s CPU).\n\n' "$cmd" "$size" "$spp" "$wall" "$cpu"
+        [ -z "$what" ] || printf '%s\n\n' "$what"
     } >>"$IMAGES"
 done
 
@@ -84,16 +89,19 @@ commit=$(git rev-parse --short HEAD 2>/dev/null || echo unknown)
 {
     echo "# Gallery"
     echo
-    echo "Every scene in \`scenes/\`, rendered by \`make gallery\` (\`scripts/gallery.sh\`) at its"
-    echo "default spp with $THREADS threads, on $(date -u +%Y-%m-%d) (commit $commit; $cpu_model,"
-    echo "$(nproc) cores online). Regenerate with \`make gallery\`. \`GALLERY_THREADS=N\` sets the"
-    echo "threads, and \`GALLERY_SCENES=\"bunny materials\"\` renders a subset."
+    echo "The gallery scenes of \`scenes/\`, rendered by \`make gallery\`"
+    echo "(\`scripts/gallery.sh\`) at their default spp with $THREADS threads, on"
+    echo "$(date -u +%Y-%m-%d) (commit $commit; $cpu_model, $(nproc) cores online)."
+    echo "Regenerate with \`make gallery\`. \`GALLERY_THREADS=N\` sets the"
+    echo "threads, and \`GALLERY_SCENES=\"bunny materials\"\` renders a subset. The other scenes"
+    echo "(\`cornell-glass.txt\`, \`direct-plane.txt\`) are the measurement scenes of"
+    echo "[sampling.md](sampling.md)."
     echo
     echo "*Wall* is the whole run: loading, the BVH build, rendering and writing the EXR and PNG."
     echo "*CPU* is user plus system time. On a machine shared with other work, wall time grows"
-    echo "and CPU time stays about the same. With $THREADS threads on $THREADS otherwise idle cores,"
-    echo "wall time is close to CPU / $THREADS. *Load* is the 1-minute load average before and after"
-    echo "the render."
+    echo "and CPU time stays about the same. With $THREADS threads on $THREADS otherwise idle"
+    echo "cores, wall time is close to CPU / $THREADS. *Load* is the 1-minute load average"
+    echo "before and after the render."
     echo
     echo "| Scene | Size | spp | Wall (s) | CPU (s) | Load |"
     echo "|---|---|---|---|---|---|"

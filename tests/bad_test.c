@@ -8,13 +8,12 @@
 #include <criterion/criterion.h>
 
 #include <dirent.h>
-#include <stdio.h>
-#include <fcntl.h>
 #include <signal.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <sys/stat.h>
-#include <sys/wait.h>
-#include <unistd.h>
+
+#include "test_util.h"
 
 #define CASES_PATH "tests/bad/cases.txt"
 #define TIME_LIMIT_S 10u /* a case running longer counts as a hang */
@@ -22,59 +21,23 @@
 
 static char tmpdir[256];
 
-static void setup(void)
-{
-    snprintf(tmpdir, sizeof tmpdir, "/tmp/mcpt_bad_XXXXXX");
-    cr_assert(mkdtemp(tmpdir));
-}
-
-static void teardown(void)
-{
-    char cmd[512];
-    snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmpdir);
-    cr_assert_eq(system(cmd), 0);
-}
-
-/* Reads a whole small file into buf (NUL-terminated); returns its length or -1. */
-static long read_small(const char *path, char *buf, size_t buf_bytes)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f)
-        return -1;
-    size_t n = fread(buf, 1, buf_bytes - 1, f);
-    buf[n] = '\0';
-    fclose(f);
-    return (long)n;
-}
+static void setup(void) { test_make_dir(tmpdir, sizeof tmpdir, "bad"); }
+static void teardown(void) { test_remove_dir(tmpdir); }
 
 /* Runs mcpt -o OUT followed by args (split at spaces) under an alarm of TIME_LIMIT_S seconds,
  * stdout and stderr to files in tmpdir; returns the exit status, or 128 + signal. */
 static int run_case(const char *args, const char *out_path)
 {
-    const char *bin = getenv("MCPT") ? getenv("MCPT") : "./mcpt";
     char out_file[300], err_file[300], words[4096];
     snprintf(out_file, sizeof out_file, "%s/stdout.txt", tmpdir);
     snprintf(err_file, sizeof err_file, "%s/stderr.txt", tmpdir);
     snprintf(words, sizeof words, "%s", args);
-    char *argv[64] = {(char *)bin, "-o", (char *)out_path};
-    int argc = 3;
-    for (char *w = strtok(words, " "); w && argc < 63; w = strtok(NULL, " "))
+    const char *argv[TEST_MAX_ARGS + 1] = {"-o", out_path};
+    int argc = 2;
+    for (char *w = strtok(words, " "); w && argc < TEST_MAX_ARGS; w = strtok(NULL, " "))
         argv[argc++] = w;
     argv[argc] = NULL;
-    pid_t pid = fork();
-    cr_assert(pid >= 0);
-    if (pid == 0) {
-        int fd_out = open(out_file, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-        int fd_err = open(err_file, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-        dup2(fd_out, 1);
-        dup2(fd_err, 2);
-        alarm(TIME_LIMIT_S); /* survives exec: SIGALRM ends a hung run */
-        execv(bin, argv);
-        _exit(127);
-    }
-    int status;
-    cr_assert_eq(waitpid(pid, &status, 0), pid);
-    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    return test_run_mcpt(argv, out_file, err_file, TIME_LIMIT_S);
 }
 
 /* Trims leading and trailing blanks in place. */
@@ -122,9 +85,9 @@ Test(bad, corpus, .init = setup, .fini = teardown, .timeout = 600)
         int status = run_case(args, out_path);
         char err[8192], out[1024], path[400];
         snprintf(path, sizeof path, "%s/stderr.txt", tmpdir);
-        long n_err = read_small(path, err, sizeof err);
+        long n_err = test_read_file(path, err, sizeof err);
         snprintf(path, sizeof path, "%s/stdout.txt", tmpdir);
-        long n_out = read_small(path, out, sizeof out);
+        long n_out = test_read_file(path, out, sizeof out);
         cr_assert_neq(status, 128 + SIGALRM, "line %d '%s': no exit within %u s", line_no, args,
                       TIME_LIMIT_S);
         cr_assert_eq(status, want_status, "line %d '%s': exit %d, want %d; stderr: %s", line_no,
@@ -138,7 +101,7 @@ Test(bad, corpus, .init = setup, .fini = teardown, .timeout = 600)
 
         /* the output folder holds the sentinel OUT.exr and nothing else */
         char buf[64];
-        cr_assert_eq(read_small(out_path, buf, sizeof buf), (long)strlen(SENTINEL));
+        cr_assert_eq(test_read_file(out_path, buf, sizeof buf), (long)strlen(SENTINEL));
         cr_assert_str_eq(buf, SENTINEL, "line %d '%s': OUT.exr overwritten", line_no, args);
         DIR *d = opendir(out_dir);
         cr_assert_not_null(d);
@@ -165,7 +128,7 @@ Test(bad, corpus, .init = setup, .fini = teardown, .timeout = 600)
 Test(bad, every_file_listed)
 {
     char cases[65536];
-    cr_assert(read_small(CASES_PATH, cases, sizeof cases) > 0);
+    cr_assert(test_read_file(CASES_PATH, cases, sizeof cases) > 0);
     const char *dirs[] = {"scene", "obj", "mtl", "ckpt"};
     for (int k = 0; k < 4; k++) {
         char dir[64];

@@ -3,58 +3,23 @@
  * sample-count channels) and a PNG.  Runs the binary named by $MCPT (default ./mcpt). */
 #include <criterion/criterion.h>
 
-#include <fcntl.h>
-#include <stdlib.h>
-#include <sys/stat.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
 #include "image.h"
+#include "test_util.h"
 
 static char tmpdir[256];
 
-static void setup(void)
-{
-    snprintf(tmpdir, sizeof tmpdir, "/tmp/mcpt_cli_XXXXXX");
-    cr_assert(mkdtemp(tmpdir));
-}
+static void setup(void) { test_make_dir(tmpdir, sizeof tmpdir, "cli"); }
+static void teardown(void) { test_remove_dir(tmpdir); }
 
-static void teardown(void)
-{
-    char cmd[512];
-    snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmpdir);
-    cr_assert_eq(system(cmd), 0);
-}
-
-/* Runs mcpt with args (NULL-terminated), stdout and stderr captured; returns the exit status. */
+/* Runs mcpt with args (NULL-terminated), stdout discarded, stderr captured in err_out; returns
+ * the exit status. */
 static int run_mcpt(const char *const *args, char *err_out, size_t err_bytes)
 {
-    const char *bin = getenv("MCPT") ? getenv("MCPT") : "./mcpt";
     char err_path[300];
     snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
-    pid_t pid = fork();
-    cr_assert(pid >= 0);
-    if (pid == 0) {
-        int fd = open(err_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-        int null_fd = open("/dev/null", O_WRONLY);
-        dup2(fd, 2);
-        dup2(null_fd, 1);
-        const char *argv[32] = {bin};
-        int n = 1;
-        for (; args[n - 1] && n < 31; n++)
-            argv[n] = args[n - 1];
-        argv[n] = NULL;
-        execv(bin, (char *const *)argv);
-        _exit(127);
-    }
-    int status;
-    cr_assert_eq(waitpid(pid, &status, 0), pid);
-    FILE *f = fopen(err_path, "r");
-    size_t len = f ? fread(err_out, 1, err_bytes - 1, f) : 0;
-    err_out[len] = '\0';
-    if (f)
-        fclose(f);
-    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    int rc = test_run_mcpt(args, NULL, err_path, 0);
+    test_read_file(err_path, err_out, err_bytes);
+    return rc;
 }
 
 static int count_lines(const char *s)
@@ -63,12 +28,6 @@ static int count_lines(const char *s)
     for (; *s; s++)
         n += *s == '\n';
     return n;
-}
-
-static bool exists(const char *path)
-{
-    struct stat st;
-    return stat(path, &st) == 0;
 }
 
 /* Bad usage: exit 2, exactly one line "mcpt: error: expected ...". */
@@ -116,7 +75,7 @@ Test(cli, bad_scene_writes_nothing, .init = setup, .fini = teardown)
     cr_assert(fread(buf, 1, sizeof buf - 1, f) == 8);
     fclose(f);
     cr_assert_str_eq(buf, "precious");
-    cr_assert_not(exists(png));
+    cr_assert_not(test_exists(png));
     const char *missing[] = {"tests/data/cli/no-such-scene.txt", "-o", out, NULL};
     cr_assert_eq(run_mcpt(missing, err, sizeof err), 2);
     cr_assert(strstr(err, "tests/data/cli/no-such-scene.txt") == err, "%s", err);
@@ -141,7 +100,7 @@ Test(cli, render_writes_exr_and_png, .init = setup, .fini = teardown)
     snprintf(png, sizeof png, "%s/tiny.png", tmpdir);
     const char *args[] = {"tests/data/cli/tiny.txt", "-o", out, "--spp", "5", "--quiet", NULL};
     cr_assert_eq(run_mcpt(args, err, sizeof err), 0, "%s", err);
-    cr_assert(exists(png));
+    cr_assert(test_exists(png));
     struct image img;
     struct mcpt_error e;
     cr_assert(image_read_exr(out, &img, &e), "%s", e.msg);

@@ -10,9 +10,7 @@
  * double-precision accumulation (film.h); NaN and infinity dropped and counted, never added. */
 #include <criterion/criterion.h>
 
-#include <fcntl.h>
 #include <stdlib.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include "bvh.h"
@@ -20,6 +18,7 @@
 #include "image.h"
 #include "obj.h"
 #include "scene.h"
+#include "test_util.h"
 #include "trace.h"
 
 #define DIR "tests/extremes/"
@@ -446,31 +445,16 @@ Test(extremes, split_accumulation_is_bit_identical, .timeout = 120)
 
 /* ---- NaN and infinity ---- */
 
-/* Runs mcpt on a scene; returns the exit status and the stderr text. */
+/* Runs mcpt on a scene (stderr to OUT.stderr, an alarm of 60 s); returns the exit status and
+ * the stderr text. */
 static int run_mcpt(const char *scene, const char *out, char *err, size_t err_bytes)
 {
-    const char *bin = getenv("MCPT") ? getenv("MCPT") : "./mcpt";
     char err_path[300];
     snprintf(err_path, sizeof err_path, "%s.stderr", out);
-    pid_t pid = fork();
-    cr_assert(pid >= 0);
-    if (pid == 0) {
-        int fd = open(err_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-        int null_fd = open("/dev/null", O_WRONLY);
-        dup2(fd, 2);
-        dup2(null_fd, 1);
-        alarm(60);
-        execl(bin, bin, scene, "-o", out, "--threads", "2", "--quiet", (char *)NULL);
-        _exit(127);
-    }
-    int status;
-    cr_assert_eq(waitpid(pid, &status, 0), pid);
-    FILE *f = fopen(err_path, "r");
-    size_t len = f ? fread(err, 1, err_bytes - 1, f) : 0;
-    err[len] = '\0';
-    if (f)
-        fclose(f);
-    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    const char *args[] = {scene, "-o", out, "--threads", "2", "--quiet", NULL};
+    int rc = test_run_mcpt(args, NULL, err_path, 60);
+    test_read_file(err_path, err, err_bytes);
+    return rc;
 }
 
 /* The EXR mcpt wrote is finite in every channel; returns the samples dropped, spp - samples

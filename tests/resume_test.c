@@ -5,36 +5,23 @@
  * interrupted any number of times and resumed is bit-identical to an uninterrupted one. */
 #include <criterion/criterion.h>
 
-#include <fcntl.h>
 #include <signal.h>
-#include <stdlib.h>
-#include <sys/stat.h>
-#include <sys/wait.h>
 #include <time.h>
-#include <unistd.h>
 
 #include "film.h"
 #include "image.h"
 #include "scene.h"
+#include "test_util.h"
 #include "trace.h"
 
 #define SCENE "tests/data/resume/small.txt"
 #define SIGNAL_SPP "4096" /* long enough (most of a second on 2 threads) to interrupt twice */
+#define ALARM_S 60u       /* a hung run ends instead of hanging the suite */
 
 static char tmpdir[256];
 
-static void setup(void)
-{
-    snprintf(tmpdir, sizeof tmpdir, "/tmp/mcpt_resume_XXXXXX");
-    cr_assert(mkdtemp(tmpdir));
-}
-
-static void teardown(void)
-{
-    char cmd[512];
-    snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmpdir);
-    cr_assert_eq(system(cmd), 0);
-}
+static void setup(void) { test_make_dir(tmpdir, sizeof tmpdir, "resume"); }
+static void teardown(void) { test_remove_dir(tmpdir); }
 
 static double now_s(void)
 {
@@ -43,64 +30,13 @@ static double now_s(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-static bool exists(const char *path)
-{
-    struct stat st;
-    return stat(path, &st) == 0;
-}
-
-/* Starts mcpt with args (NULL-terminated), stdout to /dev/null and stderr to err_path. */
-static pid_t start_mcpt(const char *const *args, const char *err_path)
-{
-    const char *bin = getenv("MCPT") ? getenv("MCPT") : "./mcpt";
-    pid_t pid = fork();
-    cr_assert(pid >= 0);
-    if (pid == 0) {
-        int fd = open(err_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-        int null_fd = open("/dev/null", O_WRONLY);
-        dup2(fd, 2);
-        dup2(null_fd, 1);
-        const char *argv[32] = {bin};
-        int n = 1;
-        for (; args[n - 1] && n < 31; n++)
-            argv[n] = args[n - 1];
-        argv[n] = NULL;
-        alarm(60); /* a hung run ends instead of hanging the suite */
-        execv(bin, (char *const *)argv);
-        _exit(127);
-    }
-    return pid;
-}
-
-/* Waits for pid; returns its exit status or 128 + signal. */
-static int wait_mcpt(pid_t pid)
-{
-    int status;
-    cr_assert_eq(waitpid(pid, &status, 0), pid);
-    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-}
-
-static int run_mcpt(const char *const *args, const char *err_path)
-{
-    return wait_mcpt(start_mcpt(args, err_path));
-}
-
-static void read_text(const char *path, char *buf, size_t buf_bytes)
-{
-    FILE *f = fopen(path, "r");
-    size_t n = f ? fread(buf, 1, buf_bytes - 1, f) : 0;
-    buf[n] = '\0';
-    if (f)
-        fclose(f);
-}
-
 /* Polls err_path until mcpt has printed a progress line (it has rendered a quarter of what it
  * set out to), so the signal lands mid-render; fails after 30 s. */
 static void wait_for_progress(const char *err_path)
 {
     char buf[4096];
     for (double t0 = now_s(); now_s() - t0 < 30.0;) {
-        read_text(err_path, buf, sizeof buf);
+        test_read_file(err_path, buf, sizeof buf);
         if (strstr(buf, "progress:"))
             return;
         nanosleep(&(struct timespec){0, 5 * 1000 * 1000}, NULL);
@@ -268,14 +204,14 @@ Test(resume, from_checkpoint_bit_identical, .init = setup, .fini = teardown)
     make_checkpoint(ckpt, 13, 64);
     const char *a_full[] = {SCENE, "--spp", "64", "--sampler", "independent", "--threads", "1",
                             "-o", full, NULL};
-    cr_assert_eq(run_mcpt(a_full, err_path), 0);
+    cr_assert_eq(test_run_mcpt(a_full, NULL, err_path, ALARM_S), 0);
     const char *a_res[] = {"--resume", ckpt, "--threads", "2", "-o", resumed, NULL};
     char err[4096];
-    int rc = run_mcpt(a_res, err_path);
-    read_text(err_path, err, sizeof err);
+    int rc = test_run_mcpt(a_res, NULL, err_path, ALARM_S);
+    test_read_file(err_path, err, sizeof err);
     cr_assert_eq(rc, 0, "%s", err);
     assert_same_exr(full, resumed);
-    cr_assert_not(exists(ckpt), "the checkpoint of a finished render is removed");
+    cr_assert_not(test_exists(ckpt), "the checkpoint of a finished render is removed");
 }
 
 /* A resumed run must render what the interrupted one would have: another seed, film size or
@@ -288,34 +224,34 @@ Test(resume, mismatch_refused, .init = setup, .fini = teardown)
     snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
     make_checkpoint(ckpt, 2, 8);
     const char *seed[] = {SCENE, "--resume", ckpt, "--seed", "5", "-o", out, NULL};
-    cr_assert_eq(run_mcpt(seed, err_path), 2);
-    read_text(err_path, err, sizeof err);
+    cr_assert_eq(test_run_mcpt(seed, NULL, err_path, ALARM_S), 2);
+    test_read_file(err_path, err, sizeof err);
     snprintf(want, sizeof want,
              "%s: error: expected --seed 0 as in the checkpoint, got 5\n", ckpt);
     cr_assert_str_eq(err, want);
 
     const char *spp[] = {"--resume", ckpt, "--spp", "9", "-o", out, NULL};
-    cr_assert_eq(run_mcpt(spp, err_path), 2);
-    read_text(err_path, err, sizeof err);
+    cr_assert_eq(test_run_mcpt(spp, NULL, err_path, ALARM_S), 2);
+    test_read_file(err_path, err, sizeof err);
     snprintf(want, sizeof want, "%s: error: expected --spp 8 as in the checkpoint, got 9\n",
              ckpt);
     cr_assert_str_eq(err, want);
 
     const char *size[] = {"--resume", ckpt, "--width", "8", "-o", out, NULL};
-    cr_assert_eq(run_mcpt(size, err_path), 2);
-    read_text(err_path, err, sizeof err);
+    cr_assert_eq(test_run_mcpt(size, NULL, err_path, ALARM_S), 2);
+    test_read_file(err_path, err, sizeof err);
     snprintf(want, sizeof want, "%s: error: expected a 24x16 film as in the checkpoint, got "
                                 "8x16\n", ckpt);
     cr_assert_str_eq(err, want);
 
     const char *scene[] = {"tests/data/cli/tiny.txt", "--resume", ckpt, "-o", out, NULL};
-    cr_assert_eq(run_mcpt(scene, err_path), 2);
-    read_text(err_path, err, sizeof err);
+    cr_assert_eq(test_run_mcpt(scene, NULL, err_path, ALARM_S), 2);
+    test_read_file(err_path, err, sizeof err);
     snprintf(want, sizeof want, "%s: error: expected the scene the checkpoint was made from",
              ckpt);
     cr_assert(strncmp(err, want, strlen(want)) == 0, "%s", err);
-    cr_assert_not(exists(out));
-    cr_assert(exists(ckpt), "a refused resume keeps its checkpoint");
+    cr_assert_not(test_exists(out));
+    cr_assert(test_exists(ckpt), "a refused resume keeps its checkpoint");
 }
 
 /* ---- signals ---- */
@@ -336,46 +272,46 @@ Test(interrupt, sigint_then_sigterm_then_bit_identical, .init = setup, .fini = t
 
     const char *a_full[] = {SCENE, "--spp", SIGNAL_SPP, "--threads", "1", "--quiet", "-o", full,
                             NULL};
-    cr_assert_eq(run_mcpt(a_full, err_path), 0);
+    cr_assert_eq(test_run_mcpt(a_full, NULL, err_path, ALARM_S), 0);
 
     /* first interruption: SIGINT */
     snprintf(err_path, sizeof err_path, "%s/stderr1.txt", tmpdir);
     const char *a_int[] = {SCENE, "--spp", SIGNAL_SPP, "--threads", "2", "-o", part, NULL};
-    pid_t pid = start_mcpt(a_int, err_path);
+    pid_t pid = test_start_mcpt(a_int, NULL, err_path, ALARM_S);
     wait_for_progress(err_path);
     double t0 = now_s();
     kill(pid, SIGINT);
-    int rc = wait_mcpt(pid);
+    int rc = test_wait(pid);
     double stop_s = now_s() - t0;
-    read_text(err_path, err, sizeof err);
+    test_read_file(err_path, err, sizeof err);
     cr_assert_eq(rc, 130, "exit %d: %s", rc, err);
     cr_assert_lt(stop_s, 2.0, "took %.2f s to stop", stop_s);
     cr_log_info("SIGINT to exit: %.3f s", stop_s);
     cr_assert(strstr(err, "mcpt: interrupted by SIGINT"), "%s", err);
     cr_assert(strstr(err, "--resume"), "%s", err);
     assert_partial(part, 4096.0f);
-    cr_assert(exists(ckpt));
+    cr_assert(test_exists(ckpt));
 
     /* second interruption, of the resumed run: SIGTERM */
     snprintf(err_path, sizeof err_path, "%s/stderr2.txt", tmpdir); /* no old progress lines */
     const char *a_res[] = {SCENE, "--resume", ckpt, "--threads", "2", NULL};
-    pid = start_mcpt(a_res, err_path);
+    pid = test_start_mcpt(a_res, NULL, err_path, ALARM_S);
     wait_for_progress(err_path);
     kill(pid, SIGTERM);
-    rc = wait_mcpt(pid);
-    read_text(err_path, err, sizeof err);
+    rc = test_wait(pid);
+    test_read_file(err_path, err, sizeof err);
     cr_assert_eq(rc, 143, "exit %d: %s", rc, err);
     cr_assert(strstr(err, "mcpt: interrupted by SIGTERM"), "%s", err);
     assert_partial(part, 4096.0f); /* the stored -o: the same partial image, further on */
-    cr_assert(exists(ckpt));
+    cr_assert(test_exists(ckpt));
 
     /* the last resume names no scene and writes elsewhere */
     const char *a_fin[] = {"--resume", ckpt, "--threads", "2", "--quiet", "-o", final, NULL};
-    rc = run_mcpt(a_fin, err_path);
-    read_text(err_path, err, sizeof err);
+    rc = test_run_mcpt(a_fin, NULL, err_path, ALARM_S);
+    test_read_file(err_path, err, sizeof err);
     cr_assert_eq(rc, 0, "exit %d: %s", rc, err);
     assert_same_exr(full, final);
-    cr_assert_not(exists(ckpt));
+    cr_assert_not(test_exists(ckpt));
 }
 
 /* A second signal exits at once (status 128 + its number) without finishing the render or the
@@ -392,14 +328,14 @@ Test(interrupt, second_signal_exits_at_once, .init = setup, .fini = teardown, .t
     fputs("earlier", f);
     fclose(f);
     const char *args[] = {SCENE, "--spp", SIGNAL_SPP, "--threads", "2", "-o", out, NULL};
-    pid_t pid = start_mcpt(args, err_path);
+    pid_t pid = test_start_mcpt(args, NULL, err_path, ALARM_S);
     wait_for_progress(err_path);
     double t0 = now_s();
     kill(pid, SIGTERM);
     kill(pid, SIGINT);
-    int rc = wait_mcpt(pid);
+    int rc = test_wait(pid);
     double stop_s = now_s() - t0;
-    read_text(err_path, err, sizeof err);
+    test_read_file(err_path, err, sizeof err);
     cr_assert(rc == 130 || rc == 143, "exit %d: %s", rc, err);
     cr_assert_not(strstr(err, "interrupted by"), "the first signal's path ran to the end: %s",
                   err);
@@ -416,7 +352,7 @@ Test(interrupt, second_signal_exits_at_once, .init = setup, .fini = teardown, .t
         cr_assert(image_read_exr(out, &img, &e), "%s", e.msg);
         image_free(&img);
     }
-    if (exists(ckpt)) {
+    if (test_exists(ckpt)) {
         struct film film;
         struct film_checkpoint_info info;
         struct mcpt_error e;

@@ -11,16 +11,14 @@
  * - The integrands' exact integrals against quadrature; independent sampling gives MSE ~ N^-1. */
 #include <criterion/criterion.h>
 
-#include <fcntl.h>
 #include <stdlib.h>
 #include <sys/stat.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include "film.h"
 #include "image.h"
 #include "sample.h"
 #include "stats.h"
+#include "test_util.h"
 
 /* ---- helpers ---- */
 
@@ -380,12 +378,8 @@ static void json_keys(const char *s, int want_depth, char *out, size_t out_bytes
 
 static char *read_text(const char *path)
 {
-    FILE *f = fopen(path, "rb");
-    cr_assert(f, "cannot open %s", path);
     static char buf[1 << 16];
-    size_t n = fread(buf, 1, sizeof buf - 1, f);
-    buf[n] = '\0';
-    fclose(f);
+    cr_assert(test_read_file(path, buf, sizeof buf) >= 0, "cannot open %s", path);
     return buf;
 }
 
@@ -418,8 +412,8 @@ Test(stats, csv_json_formats)
     }
     struct stats_summary sum;
     cr_assert(stats_summarize(&curve, 0.0, &sum));
-    char dir[] = "/tmp/mcpt_stats_XXXXXX";
-    cr_assert(mkdtemp(dir));
+    char dir[256];
+    test_make_dir(dir, sizeof dir, "stats");
     char csv[300], json[300], svg[300], sheet[300];
     snprintf(csv, sizeof csv, "%s/c.csv", dir);
     snprintf(json, sizeof json, "%s/c.json", dir);
@@ -464,52 +458,66 @@ Test(stats, csv_json_formats)
     stats_curve_free(&curve);
     film_free(&film);
     free(pr.data);
-    char cmd[400];
-    snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-    cr_assert_eq(system(cmd), 0);
+    test_remove_dir(dir);
+}
+
+/* Width and height of a PNG, from its IHDR chunk (big-endian, bytes 16-23 of the file). */
+static void png_size(const char *path, uint32_t *width, uint32_t *height)
+{
+    unsigned char head[24];
+    FILE *f = fopen(path, "rb");
+    cr_assert(f && fread(head, 1, sizeof head, f) == sizeof head, "cannot read %s", path);
+    fclose(f);
+    *width = 0;
+    *height = 0;
+    for (int i = 0; i < 4; i++) {
+        *width = *width << 8 | head[16 + i];
+        *height = *height << 8 | head[20 + i];
+    }
+}
+
+/* The sample-count map of a 4 x 3 film is scaled by a whole factor to 256 pixels wide (k = 64)
+ * above a legend of 43 rows: 256 x 235.  A film so narrow and tall that its map would exceed
+ * 65535 rows (1 x 300: k = 256) is refused with a message and no file. */
+Test(stats, count_heatmap_size_and_limit)
+{
+    char dir[256], path[300];
+    test_make_dir(dir, sizeof dir, "stats_count");
+    snprintf(path, sizeof path, "%s/count.png", dir);
+    struct film film;
+    struct mcpt_error err;
+    cr_assert(film_init(&film, 4, 3, &err));
+    for (int i = 0; i < 12; i++)
+        film.pixels[i].n = (uint32_t)(10 * i);
+    cr_assert(stats_write_count_heatmap(path, &film, &err), "%s", err.msg);
+    uint32_t w, h;
+    png_size(path, &w, &h);
+    cr_assert(w == 256 && h == 3 * 64 + 43, "%ux%u", w, h);
+    film_free(&film);
+
+    snprintf(path, sizeof path, "%s/tall.png", dir);
+    cr_assert(film_init(&film, 1, 300, &err));
+    cr_assert_not(stats_write_count_heatmap(path, &film, &err));
+    cr_assert_str_eq(err.msg, "expected a film whose sample-count map is at most 65535 pixels a "
+                              "side, got a 1x300 film");
+    cr_assert_not(test_exists(path));
+    film_free(&film);
+    test_remove_dir(dir);
 }
 
 /* ---- the command line: snapshots, compare, integrate ---- */
 
 static char tmpdir[256];
 
-static void setup(void)
-{
-    snprintf(tmpdir, sizeof tmpdir, "/tmp/mcpt_stats_cli_XXXXXX");
-    cr_assert(mkdtemp(tmpdir));
-}
-
-static void teardown(void)
-{
-    char cmd[512];
-    snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmpdir);
-    cr_assert_eq(system(cmd), 0);
-}
+static void setup(void) { test_make_dir(tmpdir, sizeof tmpdir, "stats_cli"); }
+static void teardown(void) { test_remove_dir(tmpdir); }
 
 /* Runs mcpt with args (NULL-terminated), stdout to tmpdir/stdout.txt; returns the exit status. */
 static int run_mcpt(const char *const *args)
 {
-    const char *bin = getenv("MCPT") ? getenv("MCPT") : "./mcpt";
     char out_path[300];
     snprintf(out_path, sizeof out_path, "%s/stdout.txt", tmpdir);
-    pid_t pid = fork();
-    cr_assert(pid >= 0);
-    if (pid == 0) {
-        int fd = open(out_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-        int null_fd = open("/dev/null", O_WRONLY);
-        dup2(fd, 1);
-        dup2(null_fd, 2);
-        const char *argv[40] = {bin};
-        int n = 1;
-        for (; args[n - 1] && n < 39; n++)
-            argv[n] = args[n - 1];
-        argv[n] = NULL;
-        execv(bin, (char *const *)argv);
-        _exit(127);
-    }
-    int status;
-    cr_assert_eq(waitpid(pid, &status, 0), pid);
-    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    return test_run_mcpt(args, out_path, NULL, 0);
 }
 
 static bool same_bytes(const char *a, const char *b)
