@@ -32,7 +32,8 @@ TEST_SRCS := $(wildcard tests/*_test.c)
 LIB_OBJS := $(LIB_SRCS:%.c=$(BUILD)/%.o)
 TEST_OBJS := $(TEST_SRCS:%.c=$(BUILD)/%.o)
 
-.PHONY: all test check-sanitize check-valgrind fuzz clean sobol-table gallery install uninstall
+.PHONY: all test check-sanitize check-valgrind fuzz clean sobol-table gallery install uninstall \
+        bench bench-embree
 all: mcpt
 
 mcpt: $(BUILD)/main.o $(LIB_OBJS)
@@ -57,6 +58,7 @@ check-sanitize:
 	    EXTRA_CFLAGS="-fsanitize=address,undefined -fno-sanitize-recover=undefined" \
 	    build-san/tests/run_tests build-san/mcpt
 	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
+	    LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp \
 	    MCPT=./build-san/mcpt ./build-san/tests/run_tests $(TEST_ARGS)
 
 # valgrind (memcheck) on two small end-to-end renders (analytic shapes and sky; the OBJ/MTL
@@ -115,7 +117,54 @@ install: mcpt
 uninstall:
 	rm -f $(DESTDIR)$(PREFIX)/bin/mcpt $(DESTDIR)$(PREFIX)/share/man/man1/mcpt.1
 
+# Ray-throughput benchmark (issue 3, docs/bvh.md): bench/raybench builds the BVH of each model
+# and traces the standard ray sets of ../shared/BENCHMARKS.md, written once into $(BUILD)/bench/
+# (delete that folder to regenerate them).  `make bench-embree` traces the same files through
+# Embree 3 in the same invocation and prints mcpt/Embree ratios; it is built only where Embree
+# is installed (Debian: libembree-dev), and nothing else depends on Embree.
+BENCH_MODELS_DIR ?= ../shared/models
+BENCH_MODELS ?= stanford-bunny stanford-dragon-100k sponza-dabrovic
+BENCH_RUNS ?= 5
+BENCH_DIR := $(BUILD)/bench
+BENCH_OBJS := $(BUILD)/bvh.o $(BUILD)/obj.o $(BUILD)/camera.o $(BUILD)/sample.o
+BENCH_RAYS := $(foreach m,$(BENCH_MODELS),$(BENCH_DIR)/$(m)-primary.bin)
+EMBREE_FOUND := $(shell $(PKG_CONFIG) --exists embree3 2>/dev/null && echo yes || \
+                  { test -f /usr/include/embree3/rtcore.h && echo yes; })
+EMBREE_CFLAGS := $(shell $(PKG_CONFIG) --cflags embree3 2>/dev/null)
+EMBREE_LIBS := $(shell $(PKG_CONFIG) --libs embree3 2>/dev/null || echo -lembree3)
+BENCH_CFLAGS = $(filter-out -MMD -MP,$(CFLAGS_ALL))
+
+bench/raybench: bench/raybench.c bench/bench.c bench/bench.h $(BENCH_OBJS)
+	$(CC) $(BENCH_CFLAGS) -o $@ bench/raybench.c bench/bench.c $(BENCH_OBJS) -lpthread -lm
+
+bench/embree_bench: bench/embree_bench.c bench/bench.c bench/bench.h $(BENCH_OBJS)
+	$(CC) $(BENCH_CFLAGS) $(EMBREE_CFLAGS) -o $@ bench/embree_bench.c bench/bench.c $(BENCH_OBJS) \
+	    $(EMBREE_LIBS) -lpthread -lm
+
+# one raybench call writes all three sets of a model
+$(BENCH_DIR)/%-primary.bin: $(BENCH_MODELS_DIR)/%.obj | bench/raybench
+	@mkdir -p $(BENCH_DIR)
+	./bench/raybench $< --gen all -o $(BENCH_DIR)/$*
+
+bench: bench/raybench $(BENCH_RAYS)
+	@for m in $(BENCH_MODELS); do \
+	    ./bench/raybench $(BENCH_MODELS_DIR)/$$m.obj $(BENCH_DIR)/$$m-primary.bin \
+	        $(BENCH_DIR)/$$m-diffuse.bin $(BENCH_DIR)/$$m-shadow.bin --runs $(BENCH_RUNS) \
+	        --packets || exit 1; \
+	done
+
+ifeq ($(EMBREE_FOUND),yes)
+bench-embree: bench/embree_bench $(BENCH_RAYS)
+	@for m in $(BENCH_MODELS); do \
+	    ./bench/embree_bench $(BENCH_MODELS_DIR)/$$m.obj $(BENCH_DIR)/$$m-primary.bin \
+	        $(BENCH_DIR)/$$m-diffuse.bin $(BENCH_DIR)/$$m-shadow.bin --runs $(BENCH_RUNS) || exit 1; \
+	done
+else
+bench-embree:
+	@echo "bench-embree: Embree 3 not found (Debian: apt-get install libembree-dev); skipped"
+endif
+
 clean:
-	rm -rf build build-san build-fuzz build-vg mcpt
+	rm -rf build build-san build-fuzz build-vg mcpt bench/raybench bench/embree_bench
 
 -include $(wildcard $(BUILD)/*.d $(BUILD)/tests/*.d $(FUZZ_BUILD)/*.d)
