@@ -11,6 +11,7 @@
 #include "bvh.h"
 
 #include <assert.h>
+#include <float.h>
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdlib.h>
@@ -49,7 +50,7 @@ struct bvh_tri {
     float p2[3]; /* vertex 2 */
 }; /* 36 bytes */
 
-/* ---- The 8-wide layout ---------------------------------------------------------------------------
+/* ---- The 8-wide layout --------------------------------------------------------------------------
  * Converted from the binary tree (convert_wide): each wide node takes a binary node's children
  * and keeps opening the one of largest surface area until it has BVH_WIDTH (the collapse of
  * Wald et al. 2008).  The child boxes are stored SoA, bounds[2 a][lane] = min along axis a and
@@ -86,6 +87,7 @@ struct bvh {
     struct wide_node *wide;  /* n_wide nodes, root at 0 */
     float *leaf_tris;        /* 9 floats per wide triangle, SoA per leaf, plus 8 padding */
     uint32_t *wide_prim_idx; /* the caller's index of each wide triangle */
+    struct bvh_node bounds;  /* the whole tree's box (the binary root's), for a first test */
     uint32_t n_wide;         /* wide nodes */
     uint32_t n_wide_tris;    /* triangles in the wide leaves (the non-degenerate ones) */
     uint32_t n_tris;         /* triangles given to the build */
@@ -110,17 +112,15 @@ struct bvh {
  * unions and counts are exact), until there are BVH_SUBTREES_PER_THREAD subtrees per thread;
  * those are built in parallel into reserved node ranges and renumbered into the order above. */
 
-/* The constants were chosen by measurement on the 100k-triangle Stanford dragon with the wide
- * traversal (docs/bvh.md, "Build constants"). */
-#ifndef BVH_COST_TRAVERSAL
+/* The constants were chosen by measurement (docs/bvh.md, "Build constants"): for the binary
+ * reference on the 100k-triangle dragon, C_isect = 0.5 traced 15-25% faster than 1.0 and 0.75
+ * was within noise; 32 bins cut node visits by 1.5% but built 28% slower, 8 bins visited 1.5%
+ * more.  For the wide layout, converted from this tree, C_isect = 0.15 and 0.3 (larger binary
+ * leaves) made the wide traversal test 3-11% more triangles per ray at the same node visits on
+ * the bunny, dragon and Sponza, and 1.0 gave the same as 0.5. */
 #define BVH_COST_TRAVERSAL 1.0f /* C_trav: visiting one interior node (two box tests); the unit */
-#endif
-#ifndef BVH_COST_INTERSECT
 #define BVH_COST_INTERSECT 0.5f /* C_isect: one triangle test, in units of C_trav */
-#endif
-#ifndef BVH_N_BINS
 #define BVH_N_BINS 16           /* bins per axis */
-#endif
 #define BVH_MAX_LEAF_TRIS 8     /* a larger node is split even when the SAH prefers a leaf */
 #define BVH_MAX_DEPTH 64        /* deepest node; bounds the build and traversal stacks */
 #define BVH_PARALLEL_MIN_TRIS 65536 /* fewer: build on one thread (the threads cost more) */
@@ -133,22 +133,22 @@ struct prim_ref {
     float min[3];      /* lower corner of the box of the stored vertices */
     uint32_t prim_idx; /* the caller's index of the triangle */
     float max[3];      /* upper corner */
-    float pad;         /* 32 bytes: two refs per cache line */
+    uint32_t is_degenerate; /* 1 for a zero-area triangle (dropped from the wide layout) */
 }; /* 32 bytes */
 
 struct box {
-    float min[3]; /* lower corner; +inf when empty */
-    float max[3]; /* upper corner; -inf when empty */
-}; /* 24 bytes */
+    float min[4]; /* lower corner; +inf when empty; [3] is padding for 4-lane SIMD (kept 0) */
+    float max[4]; /* upper corner; -inf when empty; [3] likewise */
+}; /* 32 bytes */
 
 struct bin {
     struct box box; /* union of the boxes of the triangles whose centre falls in the bin */
     uint32_t n;     /* number of those triangles */
-}; /* 28 bytes */
+}; /* 36 bytes */
 
 struct bins {
     struct bin b[3][BVH_N_BINS]; /* per axis */
-}; /* 1344 bytes */
+}; /* 1728 bytes */
 
 /* A node waiting to be built: refs[begin, end) at depth, with the bounds of the refs' boxes
  * and of their centres (computed while the parent partitioned them). */
@@ -160,7 +160,7 @@ struct build_task {
     uint32_t node_base;       /* parallel subtrees: first node index of its reserved range */
     struct box bounds;        /* of the refs' boxes */
     struct box centre_bounds; /* of their centres */
-}; /* 68 bytes */
+}; /* 84 bytes */
 
 /* A split candidate: sah_sum = A_L N_L + A_R N_R (half areas), the part of C_split that varies. */
 struct split {
@@ -175,14 +175,24 @@ struct build_ctx {
     int n_threads;          /* 1 .. BVH_MAX_THREADS */
 };
 
-static const struct box empty_box = {{INFINITY, INFINITY, INFINITY},
-                                     {-INFINITY, -INFINITY, -INFINITY}};
+static const struct box empty_box = {{INFINITY, INFINITY, INFINITY, 0.0f},
+                                     {-INFINITY, -INFINITY, -INFINITY, 0.0f}};
 
 static void box_grow(struct box *b, const float min[3], const float max[3])
 {
     for (int a = 0; a < 3; a++) {
         b->min[a] = min[a] < b->min[a] ? min[a] : b->min[a];
         b->max[a] = max[a] > b->max[a] ? max[a] : b->max[a];
+    }
+}
+
+/* b grows to contain c: all four lanes (the padding lanes stay 0), which the compiler turns into
+ * one minps and one maxps. */
+static inline void box_union(struct box *b, const struct box *c)
+{
+    for (int a = 0; a < 4; a++) {
+        b->min[a] = c->min[a] < b->min[a] ? c->min[a] : b->min[a];
+        b->max[a] = c->max[a] > b->max[a] ? c->max[a] : b->max[a];
     }
 }
 
@@ -224,7 +234,44 @@ static void bins_clear(struct bins *bins)
             bins->b[axis][k] = (struct bin){empty_box, 0};
 }
 
-/* One pass fills the bins of all three axes (Wald 2007, sec. 3.2). */
+/* One pass fills the bins of all three axes (Wald 2007, sec. 3.2).  With SSE2 one ref's box,
+ * centre and three bin indices are each one 4-lane operation (lane 3 is zeroed padding); the
+ * scalar loop below is the same arithmetic lane by lane, so both give the same bins. */
+#if defined(__SSE2__) && !defined(BVH_NO_SIMD)
+#include <emmintrin.h>
+
+static inline __m128 box_lane_mask(void)
+{
+    return _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
+}
+
+static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t begin,
+                      uint32_t end, const struct box *centre_bounds)
+{
+    const __m128 xyz = box_lane_mask();
+    const __m128 c_min = _mm_and_ps(_mm_loadu_ps(centre_bounds->min), xyz);
+    const __m128 scale = _mm_setr_ps(bin_scale(centre_bounds, 0), bin_scale(centre_bounds, 1),
+                                     bin_scale(centre_bounds, 2), 0.0f);
+    const __m128 half = _mm_set1_ps(0.5f);
+    const __m128 last = _mm_set1_ps((float)(BVH_N_BINS - 1));
+    for (uint32_t i = begin; i < end; i++) {
+        const struct prim_ref *r = &refs[i];
+        __m128 lo = _mm_and_ps(_mm_loadu_ps(r->min), xyz); /* lane 3 held prim_idx */
+        __m128 hi = _mm_and_ps(_mm_loadu_ps(r->max), xyz);
+        __m128 c = _mm_mul_ps(half, _mm_add_ps(lo, hi));
+        /* bin_index: (int) min((c - c_min) scale, N - 1), which equals min((int) ..., N - 1) */
+        __m128i k = _mm_cvttps_epi32(_mm_min_ps(_mm_mul_ps(_mm_sub_ps(c, c_min), scale), last));
+        int idx[4];
+        _mm_storeu_si128((__m128i *)idx, k);
+        for (int axis = 0; axis < 3; axis++) {
+            struct bin *b = &bins->b[axis][idx[axis]];
+            _mm_storeu_ps(b->box.min, _mm_min_ps(lo, _mm_loadu_ps(b->box.min)));
+            _mm_storeu_ps(b->box.max, _mm_max_ps(hi, _mm_loadu_ps(b->box.max)));
+            b->n++;
+        }
+    }
+}
+#else
 static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t begin,
                       uint32_t end, const struct box *centre_bounds)
 {
@@ -243,19 +290,70 @@ static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t b
         }
     }
 }
+#endif
 
 static void bins_merge(struct bins *into, const struct bins *from)
 {
     for (int axis = 0; axis < 3; axis++) {
         for (int k = 0; k < BVH_N_BINS; k++) {
-            box_grow(&into->b[axis][k].box, from->b[axis][k].box.min, from->b[axis][k].box.max);
+            box_union(&into->b[axis][k].box, &from->b[axis][k].box);
             into->b[axis][k].n += from->b[axis][k].n;
         }
     }
 }
 
 /* The cheapest plane of n binned refs: per axis a sweep from the right gathers the right
- * children's areas and one from the left evaluates every plane. */
+ * children's areas and one from the left evaluates every plane.  With SSE2 the running box is
+ * one register and its half area dx dy + dy dz + dz dx is formed from one shuffled product,
+ * added in the same order as box_half_area, so both paths give the same split. */
+#if defined(__SSE2__) && !defined(BVH_NO_SIMD)
+static inline float half_area_sse(__m128 lo, __m128 hi)
+{
+    __m128 d = _mm_sub_ps(hi, lo);
+    __m128 d_yzx = _mm_shuffle_ps(d, d, _MM_SHUFFLE(3, 0, 2, 1));
+    __m128 p = _mm_mul_ps(d, d_yzx); /* dx dy, dy dz, dz dx */
+    float q[4];
+    _mm_storeu_ps(q, p);
+    return q[0] + q[1] + q[2];
+}
+
+static struct split bins_best_split(const struct bins *bins, uint32_t n)
+{
+    struct split best = {-1, 0, INFINITY};
+    const __m128 empty_lo = _mm_loadu_ps(empty_box.min);
+    const __m128 empty_hi = _mm_loadu_ps(empty_box.max);
+    for (int axis = 0; axis < 3; axis++) {
+        const struct bin *b = bins->b[axis];
+        float right_area[BVH_N_BINS];
+        uint32_t right_n[BVH_N_BINS];
+        __m128 lo = empty_lo;
+        __m128 hi = empty_hi;
+        uint32_t acc_n = 0;
+        for (int k = BVH_N_BINS - 1; k > 0; k--) {
+            lo = _mm_min_ps(_mm_loadu_ps(b[k].box.min), lo);
+            hi = _mm_max_ps(_mm_loadu_ps(b[k].box.max), hi);
+            acc_n += b[k].n;
+            right_area[k] = acc_n > 0 ? half_area_sse(lo, hi) : 0.0f;
+            right_n[k] = acc_n;
+        }
+        lo = empty_lo;
+        hi = empty_hi;
+        acc_n = 0;
+        for (int k = 0; k < BVH_N_BINS - 1; k++) {
+            lo = _mm_min_ps(_mm_loadu_ps(b[k].box.min), lo);
+            hi = _mm_max_ps(_mm_loadu_ps(b[k].box.max), hi);
+            acc_n += b[k].n;
+            if (acc_n == 0 || acc_n == n)
+                continue;
+            float sah_sum = half_area_sse(lo, hi) * (float)acc_n +
+                            right_area[k + 1] * (float)right_n[k + 1];
+            if (sah_sum < best.sah_sum)
+                best = (struct split){axis, k, sah_sum};
+        }
+    }
+    return best;
+}
+#else
 static struct split bins_best_split(const struct bins *bins, uint32_t n)
 {
     struct split best = {-1, 0, INFINITY};
@@ -267,7 +365,7 @@ static struct split bins_best_split(const struct bins *bins, uint32_t n)
         struct box acc = empty_box;
         uint32_t acc_n = 0;
         for (int k = BVH_N_BINS - 1; k > 0; k--) {
-            box_grow(&acc, b[k].box.min, b[k].box.max);
+            box_union(&acc, &b[k].box);
             acc_n += b[k].n;
             right_area[k] = acc_n > 0 ? box_half_area(&acc) : 0.0f;
             right_n[k] = acc_n;
@@ -276,7 +374,7 @@ static struct split bins_best_split(const struct bins *bins, uint32_t n)
         acc = empty_box;
         acc_n = 0;
         for (int k = 0; k < BVH_N_BINS - 1; k++) {
-            box_grow(&acc, b[k].box.min, b[k].box.max);
+            box_union(&acc, &b[k].box);
             acc_n += b[k].n;
             if (acc_n == 0 || acc_n == n)
                 continue; /* one side would be empty */
@@ -288,6 +386,7 @@ static struct split bins_best_split(const struct bins *bins, uint32_t n)
     }
     return best;
 }
+#endif
 
 /* Fork-join on up to n_threads threads: fn(arg + i * arg_bytes) for i in [0, n_jobs), job 0 on
  * the calling thread.  A thread that cannot be started runs its job inline. */
@@ -296,8 +395,10 @@ static void run_jobs(int n_jobs, void *(*fn)(void *), void *args, size_t arg_byt
     pthread_t threads[BVH_MAX_THREADS];
     bool started[BVH_MAX_THREADS] = {false};
     assert(n_jobs <= BVH_MAX_THREADS);
-    for (int i = 1; i < n_jobs; i++)
-        started[i] = pthread_create(&threads[i], NULL, fn, (char *)args + (size_t)i * arg_bytes) == 0;
+    for (int i = 1; i < n_jobs; i++) {
+        void *arg = (char *)args + (size_t)i * arg_bytes;
+        started[i] = pthread_create(&threads[i], NULL, fn, arg) == 0;
+    }
     fn(args);
     for (int i = 1; i < n_jobs; i++) {
         if (started[i])
@@ -370,7 +471,9 @@ static uint32_t split_task(const struct build_ctx *ctx, const struct build_task 
     uint32_t begin = task->begin;
     uint32_t end = task->end;
     uint32_t n = end - begin;
-    if (n <= 1 || task->depth >= BVH_MAX_DEPTH)
+    /* C_split >= C_trav A (children's areas are >= 0) while C_leaf = C_isect N A: for
+     * N <= C_trav / C_isect (= 2) the leaf always wins, and binning is skipped */
+    if (n * BVH_COST_INTERSECT <= BVH_COST_TRAVERSAL || task->depth >= BVH_MAX_DEPTH)
         return begin;
     struct bins bins;
     if (n_threads > 1 && n >= BVH_PARALLEL_BIN_MIN) {
@@ -404,6 +507,40 @@ static uint32_t split_task(const struct build_ctx *ctx, const struct build_task 
     }
     uint32_t i = begin;
     uint32_t j = end;
+#if defined(__SSE2__) && !defined(BVH_NO_SIMD)
+    /* the scalar loop below, four lanes at a time: the side's box and centre bounds grow */
+    const __m128 xyz = box_lane_mask();
+    const __m128 half = _mm_set1_ps(0.5f);
+    __m128 side_lo[2] = {_mm_loadu_ps(empty_box.min), _mm_loadu_ps(empty_box.min)};
+    __m128 side_hi[2] = {_mm_loadu_ps(empty_box.max), _mm_loadu_ps(empty_box.max)};
+    __m128 side_c_lo[2] = {side_lo[0], side_lo[0]};
+    __m128 side_c_hi[2] = {side_hi[0], side_hi[0]};
+    while (i < j) {
+        __m128 lo = _mm_and_ps(_mm_loadu_ps(refs[i].min), xyz);
+        __m128 hi = _mm_and_ps(_mm_loadu_ps(refs[i].max), xyz);
+        __m128 c = _mm_mul_ps(half, _mm_add_ps(lo, hi));
+        float c_axis[4];
+        _mm_storeu_ps(c_axis, c);
+        int side = bin_index(c_axis[axis], c_min, scale) <= best.bin ? 0 : 1;
+        side_lo[side] = _mm_min_ps(lo, side_lo[side]);
+        side_hi[side] = _mm_max_ps(hi, side_hi[side]);
+        side_c_lo[side] = _mm_min_ps(c, side_c_lo[side]);
+        side_c_hi[side] = _mm_max_ps(c, side_c_hi[side]);
+        if (side == 0) {
+            i++;
+        } else {
+            struct prim_ref tmp = refs[i];
+            refs[i] = refs[--j];
+            refs[j] = tmp;
+        }
+    }
+    for (int side = 0; side < 2; side++) {
+        _mm_storeu_ps(child_bounds[side].min, side_lo[side]);
+        _mm_storeu_ps(child_bounds[side].max, side_hi[side]);
+        _mm_storeu_ps(child_centres[side].min, side_c_lo[side]);
+        _mm_storeu_ps(child_centres[side].max, side_c_hi[side]);
+    }
+#else
     while (i < j) { /* left takes bins 0..best.bin; each ref's side grows that side's bounds */
         float c[3];
         ref_centre(&refs[i], c);
@@ -419,6 +556,7 @@ static uint32_t split_task(const struct build_ctx *ctx, const struct build_task 
             refs[j] = tmp;
         }
     }
+#endif
     assert(i > begin && i < end); /* bins_best_split only offers planes with both sides used */
     return i;
 }
@@ -599,7 +737,8 @@ static uint32_t build_tree(struct build_ctx *ctx, uint32_t n, const struct box *
         while (n_pending < target) {
             uint32_t largest = 0;
             for (uint32_t i = 1; i < n_pending; i++)
-                if (pending[i].end - pending[i].begin > pending[largest].end - pending[largest].begin)
+                if (pending[i].end - pending[i].begin >
+                    pending[largest].end - pending[largest].begin)
                     largest = i;
             struct build_task task = pending[largest];
             if (task.end - task.begin < BVH_PARALLEL_BIN_MIN)
@@ -724,11 +863,13 @@ static void *ref_job_run(void *arg)
         load_tri(&tri, job->positions, job->indices, i);
         struct prim_ref *r = &job->refs[i];
         for (int a = 0; a < 3; a++) {
-            r->min[a] = fminf(tri.p0[a], fminf(tri.p1[a], tri.p2[a]));
-            r->max[a] = fmaxf(tri.p0[a], fmaxf(tri.p1[a], tri.p2[a]));
+            float lo = tri.p0[a] < tri.p1[a] ? tri.p0[a] : tri.p1[a];
+            float hi = tri.p0[a] > tri.p1[a] ? tri.p0[a] : tri.p1[a];
+            r->min[a] = tri.p2[a] < lo ? tri.p2[a] : lo; /* finite: no NaN rules needed */
+            r->max[a] = tri.p2[a] > hi ? tri.p2[a] : hi;
         }
         r->prim_idx = i;
-        r->pad = 0.0f;
+        r->is_degenerate = tri_is_collapsed(&tri) ? 1u : 0u;
         float c[3];
         ref_centre(r, c);
         box_grow(&job->bounds, r->min, r->max);
@@ -744,7 +885,8 @@ static double now_ms(void)
     return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
 }
 
-static bool convert_wide(struct bvh *bvh, const vec3 *positions, const uint32_t *indices);
+static bool convert_wide(struct bvh *bvh, const vec3 *positions, const uint32_t *indices,
+                         const uint8_t *degenerate);
 static void compute_stats(struct bvh *bvh);
 
 struct bvh *bvh_build(const vec3 *positions, const uint32_t *indices, uint32_t n_tris,
@@ -765,6 +907,7 @@ struct bvh *bvh_build_with(const vec3 *positions, const uint32_t *indices, uint3
     int n_threads = o.n_threads < 1 ? 1 : o.n_threads > BVH_MAX_THREADS ? BVH_MAX_THREADS
                                                                           : o.n_threads;
     struct build_ctx ctx = {NULL, NULL, n_threads};
+    uint8_t *degenerate = NULL; /* per binary triangle position, for the conversion */
     struct bvh *bvh = calloc(1, sizeof *bvh);
     if (!bvh)
         goto fail;
@@ -781,11 +924,10 @@ struct bvh *bvh_build_with(const vec3 *positions, const uint32_t *indices, uint3
         int n_jobs = n_tris >= BVH_PARALLEL_MIN_TRIS ? n_threads : 1;
         struct ref_job jobs[BVH_MAX_THREADS];
         for (int i = 0; i < n_jobs; i++) {
-            jobs[i] = (struct ref_job){ctx.refs, positions, indices,
-                                       (uint32_t)((uint64_t)n_tris * (uint64_t)i / (uint64_t)n_jobs),
-                                       (uint32_t)((uint64_t)n_tris * (uint64_t)(i + 1) /
-                                                  (uint64_t)n_jobs),
-                                       empty_box, empty_box};
+            uint32_t begin = (uint32_t)((uint64_t)n_tris * (uint64_t)i / (uint64_t)n_jobs);
+            uint32_t end = (uint32_t)((uint64_t)n_tris * (uint64_t)(i + 1) / (uint64_t)n_jobs);
+            jobs[i] = (struct ref_job){ctx.refs, positions, indices, begin, end, empty_box,
+                                       empty_box};
         }
         run_jobs(n_jobs, ref_job_run, jobs, sizeof jobs[0]);
         struct box bounds = empty_box;
@@ -798,17 +940,25 @@ struct bvh *bvh_build_with(const vec3 *positions, const uint32_t *indices, uint3
         if (depth == UINT32_MAX)
             goto fail;
         bvh->stats.max_depth = depth;
-        for (uint32_t i = 0; i < n_tris; i++)
+        /* the refs are in BVH order now; keep what the conversion needs of them */
+        degenerate = alloc_array(n_tris, sizeof *degenerate);
+        if (!degenerate)
+            goto fail;
+        for (uint32_t i = 0; i < n_tris; i++) {
             bvh->prim_idx[i] = ctx.refs[i].prim_idx;
+            degenerate[i] = (uint8_t)ctx.refs[i].is_degenerate;
+        }
         free(ctx.refs);
         ctx.refs = NULL;
         compute_stats(bvh); /* of the binary tree, before it may be dropped */
         if (layouts & BVH_LAYOUT_WIDE) {
             double t_convert_ms = now_ms();
-            if (!convert_wide(bvh, positions, indices))
+            if (!convert_wide(bvh, positions, indices, degenerate))
                 goto fail;
             bvh->stats.convert_ms = now_ms() - t_convert_ms;
         }
+        free(degenerate);
+        degenerate = NULL;
         if (layouts & BVH_LAYOUT_BINARY) {
             bvh->tris = alloc_array(n_tris, sizeof *bvh->tris);
             if (!bvh->tris)
@@ -841,6 +991,7 @@ struct bvh *bvh_build_with(const vec3 *positions, const uint32_t *indices, uint3
     return bvh;
 fail:
     free(ctx.refs);
+    free(degenerate);
     bvh_free(bvh);
     return NULL;
 }
@@ -848,23 +999,52 @@ fail:
 unsigned bvh_layouts(const struct bvh *bvh) { return bvh->layouts; }
 
 /* ---- Conversion to the wide layout ----------------------------------------------------------
- * Depth first from the binary root.  A wide node starts with a binary node's two children and
- * repeatedly replaces its interior child of largest surface area by that child's two children,
- * until it holds BVH_WIDTH children or only leaves (Wald et al. 2008, sec. 3).  A first pass
- * counts nodes and triangles so that the arrays are allocated once at their exact size. */
+ * The binary tree is collapsed into 8-wide nodes by the SAH-optimal dynamic programme of
+ * Ylitie, Karras, Laine 2017, "Efficient Incoherent Ray Traversal on GPUs Through Compressed
+ * Wide BVHs", sec. 4.1.  For each binary node n and i = 1..8 slots of a wide parent, C(n, i) is
+ * the least SAH cost of representing n's subtree by at most i children:
+ *   C(n, 1)  = min(C_leaf(n), C_node(n))
+ *   C(n, i)  = min(C(n, i - 1), C_split(n, i))                          for i > 1
+ *   C_split(n, j) = min over 0 < k < j of C(left, k) + C(right, j - k)
+ *   C_node(n) = A(n) c_node + C_split(n, 8)       (n becomes a wide node)
+ *   C_leaf(n) = A(n) c_leaf if n's subtree has at most 8 triangles, else infinite
+ * with A(n) the surface area of n's box.  A leaf costs the same for 1..8 triangles (one woop8
+ * call tests them all), so small subtrees merge into one leaf.  Costs are filled bottom up (a
+ * node's children have larger indices), then the wide tree is emitted top down following the
+ * recorded choices.  A binary leaf of more than 8 triangles (only the depth cap makes one)
+ * becomes a small wide subtree of 8-triangle parts.  A first pass counts nodes and triangles so
+ * that the arrays are allocated once at their exact size. */
+#define WIDE_COST_NODE 1.0f /* c_node: one wide node visit (eight box tests) */
+#define WIDE_COST_LEAF 1.0f /* c_leaf: one leaf (woop8), in units of c_node; 1.5 and 2.0 gave
+                               the same visits per ray within 1% (docs/bvh.md) */
+
+#define CHOICE_FEWER 0   /* C(n, i) = C(n, i - 1) */
+#define CHOICE_LEAF 0xFE /* C(n, 1): n's subtree is one leaf */
+#define CHOICE_NODE 0xFF /* C(n, 1): n is a wide node */
+
+struct collapse_entry {
+    float cost[BVH_WIDTH];     /* C(n, i), i = 1..8 */
+    uint8_t choice[BVH_WIDTH]; /* i = 1: LEAF or NODE; i > 1: FEWER or k, the left's slots */
+    uint8_t node_k;            /* C_node: the left child's share of the 8 slots */
+    uint32_t first;            /* the subtree's triangles: [first, first + n_tris) */
+    uint32_t n_tris;
+}; /* 52 bytes */
+
 struct convert {
-    const struct bvh *bvh;     /* binary tree: nodes, prim_idx */
-    const vec3 *positions;     /* the caller's mesh, read again for the leaves */
-    const uint32_t *indices;   /* (the wide leaves keep the same vertices as struct bvh_tri) */
-    struct wide_node *wide;    /* NULL in the counting pass */
-    float *leaf_tris;          /* SoA leaves */
-    uint32_t *prim_idx;        /* of the wide triangles */
-    uint32_t *scratch;         /* valid triangles of a big leaf */
-    uint32_t n_wide;           /* nodes allocated so far */
-    uint32_t n_wide_tris;      /* triangles written so far */
-    uint32_t n_leaves;         /* wide leaves */
-    uint32_t depth;            /* current wide depth, root = 0 */
-    uint32_t max_depth;        /* deepest wide node */
+    const struct bvh *bvh;       /* binary tree: nodes, prim_idx */
+    const uint8_t *degenerate;   /* per binary triangle position: zero area, dropped */
+    const struct collapse_entry *dp; /* per binary node */
+    const vec3 *positions;       /* the caller's mesh, read again for the leaves */
+    const uint32_t *indices;     /* (the wide leaves keep the same vertices as struct bvh_tri) */
+    struct wide_node *wide;      /* NULL in the counting pass */
+    float *leaf_tris;            /* SoA leaves */
+    uint32_t *prim_idx;          /* of the wide triangles */
+    uint32_t *scratch;           /* valid triangles of one leaf */
+    uint32_t n_wide;             /* nodes allocated so far */
+    uint32_t n_wide_tris;        /* triangles written so far */
+    uint32_t n_leaves;           /* wide leaves */
+    uint32_t depth;              /* current wide depth, root = 0 */
+    uint32_t max_depth;          /* deepest wide node */
 };
 
 /* Wide depth stays below the binary depth cap plus the levels of one oversized leaf
@@ -877,6 +1057,58 @@ static float node_half_area(const struct bvh_node *node)
     struct box b = {{node->min[0], node->min[1], node->min[2]},
                     {node->max[0], node->max[1], node->max[2]}};
     return box_half_area(&b);
+}
+
+/* Fills the cost table bottom up; children always have larger indices than their parent. */
+static void collapse_costs(const struct bvh *bvh, struct collapse_entry *dp)
+{
+    const struct bvh_node *nodes = bvh->nodes;
+    for (uint32_t idx = bvh->n_nodes; idx-- > 0;) {
+        if (idx == 1)
+            continue;
+        const struct bvh_node *node = &nodes[idx];
+        struct collapse_entry *e = &dp[idx];
+        float area = node_half_area(node);
+        if (node->n_tris > 0) {
+            e->first = node->left_first;
+            e->n_tris = node->n_tris;
+            /* an oversized leaf is emitted in 8-triangle parts */
+            float n_parts = (float)((node->n_tris + BVH_WIDTH - 1) / BVH_WIDTH);
+            for (int i = 0; i < BVH_WIDTH; i++) {
+                e->cost[i] = area * WIDE_COST_LEAF * n_parts;
+                e->choice[i] = i == 0 ? CHOICE_LEAF : CHOICE_FEWER;
+            }
+            e->node_k = 0;
+            continue;
+        }
+        const struct collapse_entry *l = &dp[node->left_first];
+        const struct collapse_entry *r = &dp[node->left_first + 1];
+        e->first = l->first;
+        e->n_tris = l->n_tris + r->n_tris;
+        float split[BVH_WIDTH + 1];
+        uint8_t split_k[BVH_WIDTH + 1];
+        for (int j = 2; j <= BVH_WIDTH; j++) {
+            split[j] = INFINITY;
+            split_k[j] = 1;
+            for (int k = 1; k < j; k++) {
+                float c = l->cost[k - 1] + r->cost[j - k - 1];
+                if (c < split[j]) {
+                    split[j] = c;
+                    split_k[j] = (uint8_t)k;
+                }
+            }
+        }
+        float c_node = area * WIDE_COST_NODE + split[BVH_WIDTH];
+        float c_leaf = e->n_tris <= BVH_WIDTH ? area * WIDE_COST_LEAF : INFINITY;
+        e->node_k = split_k[BVH_WIDTH];
+        e->cost[0] = c_leaf <= c_node ? c_leaf : c_node;
+        e->choice[0] = c_leaf <= c_node ? CHOICE_LEAF : CHOICE_NODE;
+        for (int i = 2; i <= BVH_WIDTH; i++) {
+            bool fewer = e->cost[i - 2] <= split[i];
+            e->cost[i - 1] = fewer ? e->cost[i - 2] : split[i];
+            e->choice[i - 1] = fewer ? CHOICE_FEWER : split_k[i];
+        }
+    }
 }
 
 static void wide_node_init(struct wide_node *w)
@@ -911,6 +1143,8 @@ static uint32_t emit_leaf(struct convert *cv, const uint32_t *tris, uint32_t n, 
     uint32_t first = cv->n_wide_tris;
     cv->n_wide_tris += n;
     cv->n_leaves++;
+    if (!cv->wide) /* counting pass */
+        return WIDE_LEAF | first << 3 | (n - 1);
     for (uint32_t i = 0; i < n; i++) {
         struct bvh_tri tri;
         uint32_t prim = cv->bvh->prim_idx[tris[i]];
@@ -918,8 +1152,6 @@ static uint32_t emit_leaf(struct convert *cv, const uint32_t *tris, uint32_t n, 
         box_grow(box, tri.p0, tri.p0);
         box_grow(box, tri.p1, tri.p1);
         box_grow(box, tri.p2, tri.p2);
-        if (!cv->wide)
-            continue;
         float *base = cv->leaf_tris + 9 * (size_t)first;
         const float *p[3] = {tri.p0, tri.p1, tri.p2};
         for (int k = 0; k < 3; k++)
@@ -957,48 +1189,60 @@ static uint32_t emit_triangles(struct convert *cv, const uint32_t *tris, uint32_
     return w;
 }
 
-/* The wide reference of binary leaf `leaf` without its degenerate triangles; false when none
- * is left (the leaf is dropped).  *box is the binary leaf's box. */
-static bool emit_binary_leaf(struct convert *cv, const struct bvh_node *leaf, uint32_t *ref)
+/* The wide leaf of binary subtree idx without its degenerate triangles; false when none is
+ * left (the leaf is dropped). */
+static bool emit_subtree_leaf(struct convert *cv, uint32_t idx, uint32_t *ref)
 {
-    uint32_t local[BVH_MAX_LEAF_TRIS];
-    uint32_t *tris = leaf->n_tris <= BVH_MAX_LEAF_TRIS ? local : cv->scratch;
+    const struct collapse_entry *e = &cv->dp[idx];
     uint32_t n = 0;
-    for (uint32_t i = leaf->left_first; i < leaf->left_first + leaf->n_tris; i++) {
-        struct bvh_tri tri;
-        load_tri(&tri, cv->positions, cv->indices, cv->bvh->prim_idx[i]);
-        if (!tri_is_collapsed(&tri))
-            tris[n++] = i;
-    }
+    for (uint32_t i = e->first; i < e->first + e->n_tris; i++)
+        if (!cv->degenerate[i])
+            cv->scratch[n++] = i;
     if (n == 0)
         return false;
     struct box unused = empty_box;
-    *ref = emit_triangles(cv, tris, n, &unused);
+    *ref = emit_triangles(cv, cv->scratch, n, &unused);
     return true;
 }
 
-/* A wide node over the binary nodes slots[0, n_slots); returns its index. */
-static uint32_t emit_wide(struct convert *cv, uint32_t *slots, int n_slots)
+static uint32_t emit_wide(struct convert *cv, uint32_t idx);
+
+/* Binary node idx given i slots: appends its children (binary indices) to slots[]. */
+static void gather_slots(const struct convert *cv, uint32_t idx, int i, uint32_t *slots,
+                         int *n_slots)
+{
+    const struct collapse_entry *e = &cv->dp[idx];
+    while (i > 1 && e->choice[i - 1] == CHOICE_FEWER)
+        i--;
+    if (i == 1) {
+        slots[(*n_slots)++] = idx;
+        return;
+    }
+    uint32_t left = cv->bvh->nodes[idx].left_first;
+    int k = e->choice[i - 1];
+    gather_slots(cv, left, k, slots, n_slots);
+    gather_slots(cv, left + 1, i - k, slots, n_slots);
+}
+
+/* One slot: binary node idx as a leaf or as a wide node, by C(idx, 1)'s choice. */
+static bool emit_slot(struct convert *cv, uint32_t idx, uint32_t *ref)
+{
+    if (cv->dp[idx].choice[0] == CHOICE_LEAF)
+        return emit_subtree_leaf(cv, idx, ref);
+    *ref = emit_wide(cv, idx);
+    return true;
+}
+
+/* A wide node for binary interior node idx (C_node's split of its 8 slots); returns its index. */
+static uint32_t emit_wide(struct convert *cv, uint32_t idx)
 {
     const struct bvh_node *nodes = cv->bvh->nodes;
-    /* open the interior child of largest surface area until BVH_WIDTH children */
-    while (n_slots < BVH_WIDTH) {
-        int best = -1;
-        float best_area = -1.0f;
-        for (int i = 0; i < n_slots; i++) {
-            const struct bvh_node *c = &nodes[slots[i]];
-            float area = node_half_area(c);
-            if (c->n_tris == 0 && area > best_area) {
-                best = i;
-                best_area = area;
-            }
-        }
-        if (best < 0)
-            break;
-        uint32_t left = nodes[slots[best]].left_first;
-        slots[best] = left;
-        slots[n_slots++] = left + 1;
-    }
+    uint32_t slots[BVH_WIDTH];
+    int n_slots = 0;
+    uint32_t left = nodes[idx].left_first;
+    int k = cv->dp[idx].node_k;
+    gather_slots(cv, left, k, slots, &n_slots);
+    gather_slots(cv, left + 1, BVH_WIDTH - k, slots, &n_slots);
     uint32_t w = cv->n_wide++;
     if (cv->wide)
         wide_node_init(&cv->wide[w]);
@@ -1009,47 +1253,45 @@ static uint32_t emit_wide(struct convert *cv, uint32_t *slots, int n_slots)
         const struct bvh_node *c = &nodes[slots[i]];
         struct box b = {{c->min[0], c->min[1], c->min[2]}, {c->max[0], c->max[1], c->max[2]}};
         uint32_t ref;
-        if (c->n_tris > 0) {
-            if (!emit_binary_leaf(cv, c, &ref))
-                continue;
-        } else {
-            uint32_t child_slots[BVH_WIDTH] = {c->left_first, c->left_first + 1};
-            ref = emit_wide(cv, child_slots, 2);
-        }
-        if (cv->wide)
+        if (emit_slot(cv, slots[i], &ref) && cv->wide)
             wide_node_add(&cv->wide[w], &b, ref);
     }
     cv->depth--;
     return w;
 }
 
-static uint32_t max_leaf_size(const struct bvh *bvh)
+/* The whole tree: the root is always a wide node (with one leaf child when the binary root
+ * is best as a leaf). */
+static void emit_root(struct convert *cv)
 {
-    uint32_t n = 0;
-    for (uint32_t i = 0; i < bvh->n_nodes; i++)
-        if (i != 1 && bvh->nodes[i].n_tris > n)
-            n = bvh->nodes[i].n_tris;
-    return n;
+    if (cv->dp[0].choice[0] == CHOICE_NODE) {
+        emit_wide(cv, 0);
+        return;
+    }
+    uint32_t w = cv->n_wide++;
+    if (cv->wide)
+        wide_node_init(&cv->wide[w]);
+    uint32_t ref;
+    const struct bvh_node *root = &cv->bvh->nodes[0];
+    struct box b = {{root->min[0], root->min[1], root->min[2]},
+                    {root->max[0], root->max[1], root->max[2]}};
+    if (emit_subtree_leaf(cv, 0, &ref) && cv->wide)
+        wide_node_add(&cv->wide[w], &b, ref);
 }
 
-static bool convert_wide(struct bvh *bvh, const vec3 *positions, const uint32_t *indices)
+static bool convert_wide(struct bvh *bvh, const vec3 *positions, const uint32_t *indices,
+                         const uint8_t *degenerate)
 {
-    struct convert cv = {bvh, positions, indices, NULL, NULL, NULL, NULL, 0, 0, 0, 0, 0};
-    uint32_t big = max_leaf_size(bvh);
-    if (big > BVH_MAX_LEAF_TRIS) {
-        cv.scratch = alloc_array(big, sizeof *cv.scratch);
-        if (!cv.scratch)
-            return false;
-    }
-    /* pass 1: count; the root is a wide node whose children are the binary root's (or the
-     * binary root itself when it is a leaf) */
-    uint32_t root_slots[BVH_WIDTH] = {0};
-    bool root_is_leaf = bvh->nodes[0].n_tris > 0;
-    if (!root_is_leaf) {
-        root_slots[0] = bvh->nodes[0].left_first;
-        root_slots[1] = root_slots[0] + 1;
-    }
-    emit_wide(&cv, root_slots, root_is_leaf ? 1 : 2);
+    bool ok = false;
+    struct collapse_entry *dp = alloc_array(bvh->n_nodes, sizeof *dp);
+    uint32_t *scratch = alloc_array(bvh->n_tris, sizeof *scratch);
+    if (!dp || !scratch)
+        goto done;
+    collapse_costs(bvh, dp);
+    /* pass 1: count */
+    struct convert cv = {bvh,  degenerate, dp, positions, indices, NULL, NULL, NULL, scratch, 0, 0,
+                         0,    0,          0};
+    emit_root(&cv);
     assert(cv.max_depth <= WIDE_MAX_DEPTH);
     uint32_t n_wide = cv.n_wide;
     uint32_t n_wide_tris = cv.n_wide_tris;
@@ -1057,24 +1299,25 @@ static bool convert_wide(struct bvh *bvh, const vec3 *positions, const uint32_t 
     bvh->wide = alloc_aligned(n_wide, sizeof *bvh->wide);
     bvh->leaf_tris = alloc_aligned(9 * (size_t)n_wide_tris + 8, sizeof(float));
     bvh->wide_prim_idx = alloc_array(n_wide_tris, sizeof(uint32_t));
-    if (!bvh->wide || !bvh->leaf_tris || !bvh->wide_prim_idx) {
-        free(cv.scratch);
-        return false;
-    }
+    if (!bvh->wide || !bvh->leaf_tris || !bvh->wide_prim_idx)
+        goto done;
     memset(bvh->leaf_tris + 9 * (size_t)n_wide_tris, 0, 8 * sizeof(float));
-    cv = (struct convert){bvh,  positions, indices, bvh->wide, bvh->leaf_tris, bvh->wide_prim_idx,
-                          cv.scratch, 0, 0, 0, 0, 0};
-    if (!root_is_leaf) {
-        root_slots[0] = bvh->nodes[0].left_first;
-        root_slots[1] = root_slots[0] + 1;
-    }
-    emit_wide(&cv, root_slots, root_is_leaf ? 1 : 2);
+    cv = (struct convert){bvh,       degenerate,     dp,
+                          positions, indices,        bvh->wide,
+                          bvh->leaf_tris, bvh->wide_prim_idx, scratch,
+                          0,         0,              0,
+                          0,         0};
+    emit_root(&cv);
     assert(cv.n_wide == n_wide && cv.n_wide_tris == n_wide_tris);
     bvh->n_wide = n_wide;
     bvh->n_wide_tris = n_wide_tris;
+    bvh->bounds = bvh->nodes[0];
     bvh->stats.n_wide_leaves = cv.n_leaves;
-    free(cv.scratch);
-    return true;
+    ok = true;
+done:
+    free(dp);
+    free(scratch);
+    return ok;
 }
 
 /* ---- Reference traversal ----------------------------------------------------------------------
@@ -1095,12 +1338,13 @@ static bool convert_wide(struct bvh *bvh, const vec3 *positions, const uint32_t 
 /* Per-ray constants, computed once per ray and shared by every box and triangle test. */
 struct ray_pre {
     float o[3];        /* origin */
+    float d[3];        /* direction */
     float inv_d[3];    /* 1 / d per axis; +-inf where d is +-0 */
     int is_neg[3];     /* inv_d[a] < 0: the slab's near plane is max[a], the far plane min[a] */
     float far_scale;   /* 1 + 2 gamma(3), PBRT 4e, ch. 6, "Conservative Ray-Bounds Intersections" */
     int kx, ky, kz;    /* Woop et al. 2013: kz = argmax |d|, (kx, ky) swapped when d[kz] < 0 */
     float sx, sy, sz;  /* shear: sx = d[kx] / d[kz], sy = d[ky] / d[kz], sz = 1 / d[kz] */
-}; /* 60 bytes */
+}; /* 72 bytes */
 
 /* max(running, candidate) and min(...) where a NaN candidate leaves running unchanged: fmaxf /
  * fminf semantics for the one operand that can be NaN, written as a comparison so that gcc
@@ -1114,18 +1358,25 @@ static inline float min_num(float running, float candidate)
     return candidate < running ? candidate : running;
 }
 
-static void ray_setup(const struct ray *ray, struct ray_pre *rp)
+/* The slab test's constants. */
+static inline void ray_setup_box(const struct ray *ray, struct ray_pre *rp)
 {
     float o[3] = {ray->o.x, ray->o.y, ray->o.z};
     float d[3] = {ray->d.x, ray->d.y, ray->d.z};
     for (int a = 0; a < 3; a++) {
         rp->o[a] = o[a];
+        rp->d[a] = d[a];
         rp->inv_d[a] = 1.0f / d[a]; /* +-inf for d = +-0 (IEEE 754) */
         rp->is_neg[a] = rp->inv_d[a] < 0.0f;
     }
     rp->far_scale = 1.0f + 2.0f * mcpt_gamma(3);
-    /* Woop et al. 2013, ray preparation: the dimension where |d| is largest becomes z; kx, ky
-     * are swapped when d[kz] < 0 to keep the triangles' winding; then the shear constants. */
+}
+
+/* Woop et al. 2013, ray preparation: the dimension where |d| is largest becomes z; kx, ky are
+ * swapped when d[kz] < 0 to keep the triangles' winding; then the shear constants. */
+static inline void ray_setup_woop(struct ray_pre *rp)
+{
+    const float *d = rp->d;
     float ad[3] = {fabsf(d[0]), fabsf(d[1]), fabsf(d[2])};
     int kz = ad[0] >= ad[1] ? (ad[0] >= ad[2] ? 0 : 2) : (ad[1] >= ad[2] ? 1 : 2);
     int kx = kz == 2 ? 0 : kz + 1;
@@ -1141,6 +1392,12 @@ static void ray_setup(const struct ray *ray, struct ray_pre *rp)
     rp->sx = d[kx] / d[kz];
     rp->sy = d[ky] / d[kz];
     rp->sz = 1.0f / d[kz];
+}
+
+static void ray_setup(const struct ray *ray, struct ray_pre *rp)
+{
+    ray_setup_box(ray, rp);
+    ray_setup_woop(rp);
 }
 
 /* Slab test (Kay, Kajiya 1986, "Ray Tracing Complex Scenes") in the (min - o) * inv_d form of
@@ -1413,7 +1670,7 @@ static bool tri_hit(const struct bvh_tri *tri, const struct ray_pre *rp, float t
  * each operation is one instruction on a 256-bit register; otherwise it is the loop written
  * beside it, which is also the definition of what the AVX2 instruction computes.  max_num and
  * min_num keep the running value when the candidate is NaN, as the scalar ones above do. */
-#if defined(__AVX2__)
+#if defined(__AVX2__) && !defined(BVH_NO_SIMD)
 #include <immintrin.h>
 
 struct f8 {
@@ -1429,10 +1686,36 @@ static inline struct f8 f8_set1(float s) { return (struct f8){_mm256_set1_ps(s)}
 static inline struct f8 f8_load(const float *p) { return (struct f8){_mm256_load_ps(p)}; }
 static inline struct f8 f8_loadu(const float *p) { return (struct f8){_mm256_loadu_ps(p)}; }
 static inline void f8_store(float *p, struct f8 a) { _mm256_storeu_ps(p, a.v); }
-static inline struct f8 f8_add(struct f8 a, struct f8 b) { return (struct f8){_mm256_add_ps(a.v, b.v)}; }
-static inline struct f8 f8_sub(struct f8 a, struct f8 b) { return (struct f8){_mm256_sub_ps(a.v, b.v)}; }
-static inline struct f8 f8_mul(struct f8 a, struct f8 b) { return (struct f8){_mm256_mul_ps(a.v, b.v)}; }
-static inline struct f8 f8_div(struct f8 a, struct f8 b) { return (struct f8){_mm256_div_ps(a.v, b.v)}; }
+static inline struct f8 f8_add(struct f8 a, struct f8 b)
+{
+    return (struct f8){_mm256_add_ps(a.v, b.v)};
+}
+static inline struct f8 f8_sub(struct f8 a, struct f8 b)
+{
+    return (struct f8){_mm256_sub_ps(a.v, b.v)};
+}
+static inline struct f8 f8_mul(struct f8 a, struct f8 b)
+{
+    return (struct f8){_mm256_mul_ps(a.v, b.v)};
+}
+static inline struct f8 f8_div(struct f8 a, struct f8 b)
+{
+    return (struct f8){_mm256_div_ps(a.v, b.v)};
+}
+#if defined(__FMA__)
+#define BVH_FUSED_SLABS 1
+/* a b - c rounded once (vfmsub); only the slab test's fast path uses it */
+static inline struct f8 f8_fmsub(struct f8 a, struct f8 b, struct f8 c)
+{
+    return (struct f8){_mm256_fmsub_ps(a.v, b.v, c.v)};
+}
+#else
+#define BVH_FUSED_SLABS 0
+static inline struct f8 f8_fmsub(struct f8 a, struct f8 b, struct f8 c)
+{
+    return (struct f8){_mm256_sub_ps(_mm256_mul_ps(a.v, b.v), c.v)}; /* never called */
+}
+#endif
 /* candidate > running ? candidate : running (vmaxps returns its second operand on NaN) */
 static inline struct f8 f8_max_num(struct f8 running, struct f8 candidate)
 {
@@ -1446,12 +1729,30 @@ static inline struct f8 f8_abs(struct f8 a)
 {
     return (struct f8){_mm256_andnot_ps(_mm256_set1_ps(-0.0f), a.v)};
 }
-static inline struct m8 f8_lt(struct f8 a, struct f8 b) { return (struct m8){_mm256_cmp_ps(a.v, b.v, _CMP_LT_OQ)}; }
-static inline struct m8 f8_le(struct f8 a, struct f8 b) { return (struct m8){_mm256_cmp_ps(a.v, b.v, _CMP_LE_OQ)}; }
-static inline struct m8 f8_gt(struct f8 a, struct f8 b) { return (struct m8){_mm256_cmp_ps(a.v, b.v, _CMP_GT_OQ)}; }
-static inline struct m8 f8_eq(struct f8 a, struct f8 b) { return (struct m8){_mm256_cmp_ps(a.v, b.v, _CMP_EQ_OQ)}; }
-static inline struct m8 m8_or(struct m8 a, struct m8 b) { return (struct m8){_mm256_or_ps(a.v, b.v)}; }
-static inline struct m8 m8_and(struct m8 a, struct m8 b) { return (struct m8){_mm256_and_ps(a.v, b.v)}; }
+static inline struct m8 f8_lt(struct f8 a, struct f8 b)
+{
+    return (struct m8){_mm256_cmp_ps(a.v, b.v, _CMP_LT_OQ)};
+}
+static inline struct m8 f8_le(struct f8 a, struct f8 b)
+{
+    return (struct m8){_mm256_cmp_ps(a.v, b.v, _CMP_LE_OQ)};
+}
+static inline struct m8 f8_gt(struct f8 a, struct f8 b)
+{
+    return (struct m8){_mm256_cmp_ps(a.v, b.v, _CMP_GT_OQ)};
+}
+static inline struct m8 f8_eq(struct f8 a, struct f8 b)
+{
+    return (struct m8){_mm256_cmp_ps(a.v, b.v, _CMP_EQ_OQ)};
+}
+static inline struct m8 m8_or(struct m8 a, struct m8 b)
+{
+    return (struct m8){_mm256_or_ps(a.v, b.v)};
+}
+static inline struct m8 m8_and(struct m8 a, struct m8 b)
+{
+    return (struct m8){_mm256_and_ps(a.v, b.v)};
+}
 static inline uint32_t m8_bits(struct m8 m) { return (uint32_t)_mm256_movemask_ps(m.v); }
 /* lane i set when bit i of bits is */
 static inline struct m8 m8_from_bits(uint32_t bits)
@@ -1502,6 +1803,13 @@ static inline struct f8 f8_add(struct f8 a, struct f8 b) { F8_MAP(a.v[i] + b.v[i
 static inline struct f8 f8_sub(struct f8 a, struct f8 b) { F8_MAP(a.v[i] - b.v[i]); }
 static inline struct f8 f8_mul(struct f8 a, struct f8 b) { F8_MAP(a.v[i] * b.v[i]); }
 static inline struct f8 f8_div(struct f8 a, struct f8 b) { F8_MAP(a.v[i] / b.v[i]); }
+/* fmaf is a slow library call without FMA hardware: the portable build keeps the
+ * sub-and-multiply slab test (this is never called there) */
+#define BVH_FUSED_SLABS 0
+static inline struct f8 f8_fmsub(struct f8 a, struct f8 b, struct f8 c)
+{
+    F8_MAP(fmaf(a.v[i], b.v[i], -c.v[i]));
+}
 static inline struct f8 f8_max_num(struct f8 running, struct f8 candidate)
 {
     F8_MAP(max_num(running.v[i], candidate.v[i]));
@@ -1538,6 +1846,14 @@ static inline float f8_hmin(struct f8 a)
 }
 #undef F8_MAP
 #undef M8_MAP
+#endif
+
+/* The traversal loops take `fast` as a constant argument; inlining them at each call gives
+ * one specialised copy per slab-test form instead of a branch per node. */
+#if defined(__GNUC__)
+#define ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define ALWAYS_INLINE inline
 #endif
 
 static inline int lowest_bit(uint32_t bits)
@@ -1653,7 +1969,7 @@ static inline uint32_t woop8(const struct woop8_in *in, uint32_t valid, struct w
     return hit;
 }
 
-/* ---- Wide traversal, one ray ---------------------------------------------------------------------
+/* ---- Wide traversal, one ray --------------------------------------------------------------------
  * The eight child boxes of a node are slab-tested at once (the box_hit formulas, one lane per
  * child; the far-plane allowance is folded into inv_d_far = inv_d (1 + 4 gamma(3)), twice
  * PBRT's, which also covers the rounding of that product).  The children hit are visited
@@ -1661,75 +1977,166 @@ static inline uint32_t woop8(const struct woop8_in *in, uint32_t valid, struct w
  * pushed and insertion-sorted on the stack (nearest on top) (Wald et al. 2008, sec. 4).
  * A stack entry keeps its entry distance, and an entry beyond the closest hit is dropped when
  * popped.  A leaf's triangles are tested by woop8, eight lanes at once. */
+/* Per-ray constants of the wide traversal, scalars; the traversal broadcasts them into
+ * registers (struct wide_ray8).  The slab axes are in slab order (see slab_order). */
 struct wide_ray {
-    struct f8 o[3];         /* origin, broadcast */
-    struct f8 inv_d[3];     /* 1 / d */
-    struct f8 inv_d_far[3]; /* inv_d (1 + 4 gamma(3)): the conservative far plane */
-    int near_row[3];        /* bounds row of the near plane per axis: 2 a + is_neg */
-    int far_row[3];         /* and of the far plane: 2 a + 1 - is_neg */
-    int k[3];               /* kx, ky, kz */
-    struct f8 o_k[3];       /* o[kx], o[ky], o[kz] */
-    struct f8 sx;           /* shear constants */
+    float o[3];         /* origin, slab order */
+    float inv_d[3];     /* 1 / d */
+    float inv_d_far[3]; /* inv_d (1 + 4 gamma(3)): the conservative far plane */
+    int near_row[3];    /* bounds row of the near plane: 2 a + is_neg */
+    int far_row[3];     /* and of the far plane: 2 a + 1 - is_neg */
+    float c_near[3];    /* fused form: o inv_d rounded up by its error bound */
+    float c_far[3];     /* o inv_d_far rounded down by its error bound */
+    bool fast;          /* the fused form applies (every constant finite) */
+    float t_min;
+    struct ray_pre *rp; /* for Woop's constants, computed at the first leaf */
+}; /* 104 bytes */
+
+struct wide_ray8 {
+    struct f8 o[3];
+    struct f8 inv_d[3];
+    struct f8 inv_d_far[3];
+    struct f8 c_near[3];
+    struct f8 c_far[3];
+    struct f8 t_min;
+    struct f8 o_k[3]; /* Woop: o[kx], o[ky], o[kz] */
+    struct f8 sx;
     struct f8 sy;
     struct f8 sz;
-    struct f8 t_min;        /* t_min, broadcast */
-}; /* 512 bytes with AVX2 */
+    int k[3];             /* kx, ky, kz */
+    size_t near_off[3];   /* byte offsets of the near and far bounds rows in a node */
+    size_t far_off[3];
+    const struct wide_node *wide; /* the node array */
+};
 
-static void wide_ray_setup(const struct ray_pre *rp, float t_min, struct wide_ray *wr)
+/* The slab test takes max(max(t_0, t_1), max(t_2, t_min)) as a tree, which shortens the chain
+ * of dependent instructions per node.  A slab distance is NaN only where inv_d is infinite
+ * (d_a = 0, or subnormal) and the origin lies on that plane; max_num drops a NaN candidate but
+ * not a NaN running value, so such axes take slots 0 and 2 (candidates) and slot 1 (a running
+ * value) gets an axis with finite inv_d.  With at most two infinite axes (a valid direction)
+ * this gives the sequential chain's result bit for bit.  Row: bit a set when inv_d[a] is
+ * infinite. */
+static const int8_t slab_order[8][3] = {
+    {0, 1, 2}, {0, 1, 2}, {1, 0, 2}, {0, 2, 1}, {2, 0, 1}, {0, 1, 2}, {1, 0, 2}, {0, 1, 2},
+};
+
+/* The fused slab distances (fast path).  PBRT's form (b - o) inv_d costs a subtraction and a
+ * product; b inv_d - o inv_d is one fused multiply-add (Embree's form), but the rounding of
+ * o inv_d is an absolute error that can exceed the distance itself.  So the constant is
+ * biased by its error bound: c_near >= o inv_d and c_far <= o inv_d_far exactly, hence
+ *   t_near = fl(b inv_d - c_near) <= fl((b - o) inv_d),  t_far = fl(b inv_d_far - c_far)
+ *   >= fl((b - o) inv_d_far)
+ * (rounding is monotone, and the fused product is exact), and the test is at least as
+ * conservative as the sub-and-multiply one.  fl(x y) is within 2^-24 |x y| of x y in the normal
+ * range (and within 2^-150 below it), so a bias of 2^-21 |c| + FLT_MIN covers it and the
+ * rounding of the bias's own addition.  Rays with an infinite inv_d (d_a = 0) or an infinite
+ * constant take the sub-and-multiply path, whose NaN rules give flat boxes and origins on a
+ * face their meaning. */
+#define SLAB_BIAS 0x1p-21f
+
+static inline void wide_ray_setup(struct ray_pre *rp, float t_min, struct wide_ray *wr)
 {
     const float far_scale = 1.0f + 4.0f * mcpt_gamma(3);
-    for (int a = 0; a < 3; a++) {
-        wr->o[a] = f8_set1(rp->o[a]);
-        wr->inv_d[a] = f8_set1(rp->inv_d[a]);
-        wr->inv_d_far[a] = f8_set1(rp->inv_d[a] * far_scale);
-        wr->near_row[a] = 2 * a + rp->is_neg[a];
-        wr->far_row[a] = 2 * a + 1 - rp->is_neg[a];
+    unsigned inf_bits = (fabsf(rp->inv_d[0]) > FLT_MAX ? 1u : 0u) |
+                        (fabsf(rp->inv_d[1]) > FLT_MAX ? 2u : 0u) |
+                        (fabsf(rp->inv_d[2]) > FLT_MAX ? 4u : 0u);
+    const int8_t *order = slab_order[inf_bits];
+    float magnitude = 0.0f; /* infinite or NaN when some constant is: then the safe path */
+    for (int j = 0; j < 3; j++) {
+        int a = order[j];
+        float o = rp->o[a];
+        float inv_d = rp->inv_d[a];
+        float inv_d_far = inv_d * far_scale;
+        wr->o[j] = o;
+        wr->inv_d[j] = inv_d;
+        wr->inv_d_far[j] = inv_d_far;
+        wr->near_row[j] = 2 * a + rp->is_neg[a];
+        wr->far_row[j] = 2 * a + 1 - rp->is_neg[a];
+        float on = o * inv_d;
+        float of = o * inv_d_far;
+        wr->c_near[j] = on + (SLAB_BIAS * fabsf(on) + FLT_MIN);
+        wr->c_far[j] = of - (SLAB_BIAS * fabsf(of) + FLT_MIN);
+        magnitude += fabsf(inv_d_far) + fabsf(wr->c_near[j]) + fabsf(wr->c_far[j]);
     }
-    wr->k[0] = rp->kx;
-    wr->k[1] = rp->ky;
-    wr->k[2] = rp->kz;
+    /* a sum that overflows only sends a valid ray down the safe path */
+    wr->fast = BVH_FUSED_SLABS && inf_bits == 0 && magnitude <= FLT_MAX;
+    wr->t_min = t_min;
+    wr->rp = rp;
+}
+
+static inline void wide_ray8_box(const struct bvh *bvh, const struct wide_ray *wr,
+                                 struct wide_ray8 *v)
+{
+    v->wide = bvh->wide;
+    for (int j = 0; j < 3; j++) {
+        v->near_off[j] = (size_t)wr->near_row[j] * sizeof(float) * BVH_WIDTH;
+        v->far_off[j] = (size_t)wr->far_row[j] * sizeof(float) * BVH_WIDTH;
+        v->o[j] = f8_set1(wr->o[j]);
+        v->inv_d[j] = f8_set1(wr->inv_d[j]);
+        v->inv_d_far[j] = f8_set1(wr->inv_d_far[j]);
+        v->c_near[j] = f8_set1(wr->c_near[j]);
+        v->c_far[j] = f8_set1(wr->c_far[j]);
+    }
+    v->t_min = f8_set1(wr->t_min);
+}
+
+/* Woop's constants: computed into *rp (which the caller owns) on the first leaf. */
+static inline void wide_ray8_woop(const struct wide_ray *wr, struct wide_ray8 *v)
+{
+    struct ray_pre *rp = wr->rp;
+    ray_setup_woop(rp);
+    v->k[0] = rp->kx;
+    v->k[1] = rp->ky;
+    v->k[2] = rp->kz;
     for (int j = 0; j < 3; j++)
-        wr->o_k[j] = f8_set1(rp->o[wr->k[j]]);
-    wr->sx = f8_set1(rp->sx);
-    wr->sy = f8_set1(rp->sy);
-    wr->sz = f8_set1(rp->sz);
-    wr->t_min = f8_set1(t_min);
+        v->o_k[j] = f8_set1(rp->o[v->k[j]]);
+    v->sx = f8_set1(rp->sx);
+    v->sy = f8_set1(rp->sy);
+    v->sz = f8_set1(rp->sz);
 }
 
 /* Slab test of one ray against a wide node's children; returns the mask of children hit in
  * [t_min, t_max] and their entry distances. */
-static inline uint32_t wide_box_hit(const struct wide_node *node, const struct wide_ray *wr,
-                                    float t_max, struct f8 *t_entry)
+static inline uint32_t wide_box_hit(const struct wide_node *node, const struct wide_ray8 *v,
+                                    const bool fast, float t_max, struct f8 *t_entry)
 {
-    struct f8 t0 = wr->t_min;
-    struct f8 t1 = f8_set1(t_max);
-    for (int a = 0; a < 3; a++) {
-        struct f8 near = f8_load(node->bounds[wr->near_row[a]]);
-        struct f8 far = f8_load(node->bounds[wr->far_row[a]]);
-        t0 = f8_max_num(t0, f8_mul(f8_sub(near, wr->o[a]), wr->inv_d[a]));
-        t1 = f8_min_num(t1, f8_mul(f8_sub(far, wr->o[a]), wr->inv_d_far[a]));
+    struct f8 t_near[3];
+    struct f8 t_far[3];
+    const char *base = (const char *)node->bounds;
+    for (int j = 0; j < 3; j++) {
+        struct f8 near = f8_load((const float *)(base + v->near_off[j]));
+        struct f8 far = f8_load((const float *)(base + v->far_off[j]));
+        if (fast) {
+            t_near[j] = f8_fmsub(near, v->inv_d[j], v->c_near[j]);
+            t_far[j] = f8_fmsub(far, v->inv_d_far[j], v->c_far[j]);
+        } else {
+            t_near[j] = f8_mul(f8_sub(near, v->o[j]), v->inv_d[j]);
+            t_far[j] = f8_mul(f8_sub(far, v->o[j]), v->inv_d_far[j]);
+        }
     }
+    struct f8 t0 = f8_max_num(f8_max_num(v->t_min, t_near[2]), f8_max_num(t_near[1], t_near[0]));
+    struct f8 t1 = f8_min_num(f8_min_num(f8_set1(t_max), t_far[2]), f8_min_num(t_far[1], t_far[0]));
     *t_entry = t0;
     return m8_bits(f8_le(t0, t1));
 }
 
 /* woop8 of one ray against the n (1..8) triangles of the leaf at wide triangle `first`. */
 static inline uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint32_t n,
-                                     const struct wide_ray *wr, float t_max,
+                                     const struct wide_ray8 *v, float t_max,
                                      struct woop8_out *out)
 {
     const float *base = bvh->leaf_tris + 9 * (size_t)first;
     struct woop8_in in;
     for (int j = 0; j < 3; j++) {
-        size_t row = (size_t)wr->k[j] * n;
-        in.a[j] = f8_sub(f8_loadu(base + row), wr->o_k[j]);
-        in.b[j] = f8_sub(f8_loadu(base + 3 * (size_t)n + row), wr->o_k[j]);
-        in.c[j] = f8_sub(f8_loadu(base + 6 * (size_t)n + row), wr->o_k[j]);
+        size_t row = (size_t)v->k[j] * n;
+        in.a[j] = f8_sub(f8_loadu(base + row), v->o_k[j]);
+        in.b[j] = f8_sub(f8_loadu(base + 3 * (size_t)n + row), v->o_k[j]);
+        in.c[j] = f8_sub(f8_loadu(base + 6 * (size_t)n + row), v->o_k[j]);
     }
-    in.sx = wr->sx;
-    in.sy = wr->sy;
-    in.sz = wr->sz;
-    in.t_min = wr->t_min;
+    in.sx = v->sx;
+    in.sy = v->sy;
+    in.sz = v->sz;
+    in.t_min = v->t_min;
     in.t_max = f8_set1(t_max);
     return woop8(&in, (1u << n) - 1u, out);
 }
@@ -1741,23 +2148,6 @@ struct wide_hit {
     float v;
     uint32_t tri; /* wide triangle index, UINT32_MAX while none */
 };
-
-/* Asks for the memory of wide reference ref (a node's four cache lines or a leaf's
- * triangles) ahead of its visit: a hint, no effect on results. */
-static inline void prefetch_ref(const struct bvh *bvh, uint32_t ref)
-{
-    const char *p;
-    size_t bytes;
-    if (ref & WIDE_LEAF) {
-        p = (const char *)(bvh->leaf_tris + 9 * (size_t)((ref & ~WIDE_LEAF) >> 3));
-        bytes = 36 * ((ref & 7u) + 1);
-    } else {
-        p = (const char *)&bvh->wide[ref];
-        bytes = sizeof(struct wide_node);
-    }
-    for (size_t off = 0; off < bytes; off += 64)
-        __builtin_prefetch(p + off);
-}
 
 /* Pushes the children in mask (at least three) and sorts them so the nearest is on top. */
 static inline void push_sorted(struct stack_entry *stack, uint32_t *n_stack,
@@ -1779,37 +2169,31 @@ static inline void push_sorted(struct stack_entry *stack, uint32_t *n_stack,
     *n_stack = n;
 }
 
-#ifdef BVH_COUNT
-_Thread_local unsigned long long bvh_n_nodes_visited, bvh_n_leaves_visited, bvh_n_children_hit, bvh_n_tris_tested;
-#define COUNT(x) (x)
-#else
-#define COUNT(x) ((void)0)
-#endif
 /* Closest hit below wide reference `root` (a node or a leaf) for t in (t_min, hit->t). */
-static void wide_closest(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
-                         struct wide_hit *hit)
+static ALWAYS_INLINE void wide_closest(const struct bvh *bvh, uint32_t root,
+                                       const struct wide_ray *wr, struct wide_hit *hit,
+                                       const bool fast)
 {
+    struct wide_ray8 v;
+    wide_ray8_box(bvh, wr, &v);
+    bool woop_ready = false;
     struct stack_entry stack[WIDE_STACK_SIZE];
     uint32_t n_stack = 0;
     uint32_t ref = root;
     for (;;) {
         if (!(ref & WIDE_LEAF)) {
-            const struct wide_node *node = &bvh->wide[ref];
+            const struct wide_node *node = &v.wide[ref];
             struct f8 t_entry;
-            uint32_t mask = wide_box_hit(node, wr, hit->t, &t_entry);
-            COUNT(bvh_n_nodes_visited++);
-            COUNT(bvh_n_children_hit += (unsigned)__builtin_popcount(mask));
+            uint32_t mask = wide_box_hit(node, &v, fast, hit->t, &t_entry);
             if (mask) {
-                float dist[8];
-                f8_store(dist, t_entry);
                 int c0 = lowest_bit(mask);
                 uint32_t rest = mask & (mask - 1);
                 if (!rest) {
                     ref = node->child[c0];
                     continue;
                 }
-                for (uint32_t bits = mask; bits; bits &= bits - 1)
-                    prefetch_ref(bvh, node->child[lowest_bit(bits)]);
+                float dist[8];
+                f8_store(dist, t_entry);
                 int c1 = lowest_bit(rest);
                 if (!(rest & (rest - 1))) {
                     if (dist[c1] < dist[c0]) {
@@ -1827,22 +2211,24 @@ static void wide_closest(const struct bvh *bvh, uint32_t root, const struct wide
                 continue;
             }
         } else {
+            if (!woop_ready) {
+                wide_ray8_woop(wr, &v);
+                woop_ready = true;
+            }
             uint32_t first = (ref & ~WIDE_LEAF) >> 3;
             uint32_t n = (ref & 7u) + 1;
             struct woop8_out out;
-            COUNT(bvh_n_leaves_visited++);
-            COUNT(bvh_n_tris_tested += n);
-            uint32_t hits = wide_leaf_hit(bvh, first, n, wr, hit->t, &out);
+            uint32_t hits = wide_leaf_hit(bvh, first, n, &v, hit->t, &out);
             if (hits) {
                 struct f8 t_hits = f8_select(m8_from_bits(hits), out.t, f8_set1(INFINITY));
                 float t_best = f8_hmin(t_hits);
                 /* among equal t the lowest lane: the first in BVH order, as brute force */
                 int lane = lowest_bit(hits & m8_bits(f8_eq(t_hits, f8_set1(t_best))));
                 float u[8];
-                float v[8];
+                float uv_v[8];
                 f8_store(u, out.u);
-                f8_store(v, out.v);
-                *hit = (struct wide_hit){t_best, u[lane], v[lane], first + (uint32_t)lane};
+                f8_store(uv_v, out.v);
+                *hit = (struct wide_hit){t_best, u[lane], uv_v[lane], first + (uint32_t)lane};
             }
         }
         /* pop the next pending node that still starts before the closest hit */
@@ -1855,17 +2241,22 @@ static void wide_closest(const struct bvh *bvh, uint32_t root, const struct wide
     }
 }
 
-/* Any hit below `root` for t in (t_min, t_max): children in any order, the first hit ends it. */
-static bool wide_any(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr, float t_max)
+/* Any hit below `root` for t in (t_min, t_max): children in any order, the first hit ends it
+ * (nearest-first order measured no faster for shadow rays, docs/bvh.md). */
+static ALWAYS_INLINE bool wide_any(const struct bvh *bvh, uint32_t root,
+                                   const struct wide_ray *wr, float t_max, const bool fast)
 {
+    struct wide_ray8 v;
+    wide_ray8_box(bvh, wr, &v);
+    bool woop_ready = false;
     uint32_t stack[WIDE_STACK_SIZE];
     uint32_t n_stack = 0;
     uint32_t ref = root;
     for (;;) {
         if (!(ref & WIDE_LEAF)) {
-            const struct wide_node *node = &bvh->wide[ref];
+            const struct wide_node *node = &v.wide[ref];
             struct f8 t_entry;
-            uint32_t mask = wide_box_hit(node, wr, t_max, &t_entry);
+            uint32_t mask = wide_box_hit(node, &v, fast, t_max, &t_entry);
             if (mask) {
                 ref = node->child[lowest_bit(mask)];
                 assert(n_stack + 8 <= WIDE_STACK_SIZE);
@@ -1874,8 +2265,12 @@ static bool wide_any(const struct bvh *bvh, uint32_t root, const struct wide_ray
                 continue;
             }
         } else {
+            if (!woop_ready) {
+                wide_ray8_woop(wr, &v);
+                woop_ready = true;
+            }
             struct woop8_out out;
-            if (wide_leaf_hit(bvh, (ref & ~WIDE_LEAF) >> 3, (ref & 7u) + 1, wr, t_max, &out))
+            if (wide_leaf_hit(bvh, (ref & ~WIDE_LEAF) >> 3, (ref & 7u) + 1, &v, t_max, &out))
                 return true;
         }
         if (n_stack == 0)
@@ -1884,16 +2279,48 @@ static bool wide_any(const struct bvh *bvh, uint32_t root, const struct wide_ray
     }
 }
 
+static void wide_closest_fast(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
+                              struct wide_hit *hit)
+{
+    wide_closest(bvh, root, wr, hit, true);
+}
+
+static void wide_closest_safe(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
+                              struct wide_hit *hit)
+{
+    wide_closest(bvh, root, wr, hit, false);
+}
+
+static bool wide_any_fast(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
+                          float t_max)
+{
+    return wide_any(bvh, root, wr, t_max, true);
+}
+
+static bool wide_any_safe(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
+                          float t_max)
+{
+    return wide_any(bvh, root, wr, t_max, false);
+}
+
+/* Most camera rays of a small object miss it altogether: a scalar test against the tree's box
+ * (box_hit, the reference form) lets them return before any SIMD setup. */
 static bool wide_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *out)
 {
     if (bvh->n_wide == 0)
         return false;
     struct ray_pre rp;
-    ray_setup(ray, &rp);
+    ray_setup_box(ray, &rp);
+    float t_entry;
+    if (!box_hit(&bvh->bounds, &rp, ray->t_min, ray->t_max, &t_entry))
+        return false;
     struct wide_ray wr;
     wide_ray_setup(&rp, ray->t_min, &wr);
     struct wide_hit hit = {ray->t_max, 0.0f, 0.0f, UINT32_MAX};
-    wide_closest(bvh, 0, &wr, &hit);
+    if (wr.fast)
+        wide_closest_fast(bvh, 0, &wr, &hit);
+    else
+        wide_closest_safe(bvh, 0, &wr, &hit);
     if (hit.tri == UINT32_MAX)
         return false;
     *out = (struct bvh_hit){hit.t, hit.u, hit.v, bvh->wide_prim_idx[hit.tri]};
@@ -1905,10 +2332,14 @@ static bool wide_occluded(const struct bvh *bvh, const struct ray *ray)
     if (bvh->n_wide == 0)
         return false;
     struct ray_pre rp;
-    ray_setup(ray, &rp);
+    ray_setup_box(ray, &rp);
+    float t_entry;
+    if (!box_hit(&bvh->bounds, &rp, ray->t_min, ray->t_max, &t_entry))
+        return false;
     struct wide_ray wr;
     wide_ray_setup(&rp, ray->t_min, &wr);
-    return wide_any(bvh, 0, &wr, ray->t_max);
+    return wr.fast ? wide_any_fast(bvh, 0, &wr, ray->t_max)
+                   : wide_any_safe(bvh, 0, &wr, ray->t_max);
 }
 
 bool bvh_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *hit)
@@ -1939,7 +2370,7 @@ bool bvh_occluded_layout(const struct bvh *bvh, enum bvh_layout layout, const st
     return layout == BVH_LAYOUT_WIDE ? wide_occluded(bvh, ray) : binary_occluded(bvh, ray);
 }
 
-/* ---- Packets: eight rays through the wide layout -------------------------------------------------
+/* ---- Packets: eight rays through the wide layout ------------------------------------------------
  * Lanes are rays.  At a node each child box is slab-tested against all active rays (one lane
  * per ray, near and far planes picked per lane by the sign of d), giving the child's ray mask;
  * children hit by some ray are pushed with that mask and the smallest entry distance among
@@ -1955,45 +2386,68 @@ struct packet_pre {
     struct f8 o[3];
     struct f8 inv_d[3];
     struct f8 inv_d_far[3];
-    struct m8 is_neg[3]; /* near plane is max */
+    struct f8 c_near[3];  /* the fused slab constants of wide_ray_setup, per lane */
+    struct f8 c_far[3];
+    struct m8 is_neg[3];  /* near plane is max */
     struct m8 k_is[3][2]; /* k_is[j][m]: lane's k[j] == m (m = 0, 1; else 2) */
     struct f8 o_k[3];     /* o[k[j]] per lane */
     struct f8 sx;
     struct f8 sy;
     struct f8 sz;
     struct f8 t_min;
+    bool coherent;   /* every lane: same direction signs, fused constants finite */
+    int near_row[3]; /* when coherent: bounds rows of the near and far planes */
+    int far_row[3];
+    bool uniform_k;  /* every lane has the same (kx, ky, kz) */
+    int k[3];        /* when uniform_k */
     struct ray_pre rp[BVH_PACKET_SIZE]; /* per lane, for the single-ray fallback */
 };
 
-/* Per-lane constants of the active rays; inactive lanes (whose fields may be uninitialised)
- * get a harmless ray with an empty interval, t_max[lane] = -inf. */
+/* Per-lane constants.  An inactive lane (whose fields may be uninitialised) gets a copy of the
+ * first active ray with an empty interval, t_max[lane] = -inf, so that it never hits and never
+ * spoils the packet's coherence. */
 static void packet_setup(const struct bvh_packet *p, uint32_t active, struct packet_pre *pp,
                          float t_max[BVH_PACKET_SIZE])
 {
-    float o[3][8], t_min[8], inv_d[3][8], inv_d_far[3][8], is_neg[3][8], k_is[3][2][8];
-    float o_k[3][8], s[3][8];
+    float o[3][8], t_min[8], inv_d[3][8], inv_d_far[3][8], c_near[3][8], c_far[3][8];
+    float is_neg[3][8], k_is[3][2][8], o_k[3][8], s[3][8];
     const float far_scale = 1.0f + 4.0f * mcpt_gamma(3);
+    int first = active ? lowest_bit(active) : 0;
+    bool coherent = true;
+    bool uniform_k = true;
     for (int lane = 0; lane < BVH_PACKET_SIZE; lane++) {
-        struct ray r = {{0.0f, 0.0f, 0.0f}, 0.0f, {0.0f, 0.0f, 1.0f}, -INFINITY};
-        if (active >> lane & 1u)
-            r = (struct ray){{p->o[0][lane], p->o[1][lane], p->o[2][lane]}, p->t_min[lane],
-                             {p->d[0][lane], p->d[1][lane], p->d[2][lane]}, p->t_max[lane]};
+        int src = active >> lane & 1u ? lane : first;
+        struct ray r = {{p->o[0][src], p->o[1][src], p->o[2][src]}, p->t_min[src],
+                        {p->d[0][src], p->d[1][src], p->d[2][src]}, p->t_max[src]};
+        if (!active) /* nothing to trace: any finite ray */
+            r = (struct ray){{0.0f, 0.0f, 0.0f}, 0.0f, {0.0f, 0.0f, 1.0f}, -INFINITY};
         o[0][lane] = r.o.x;
         o[1][lane] = r.o.y;
         o[2][lane] = r.o.z;
         t_min[lane] = r.t_min;
-        t_max[lane] = r.t_max;
+        t_max[lane] = src == lane ? r.t_max : -INFINITY;
         struct ray_pre *rp = &pp->rp[lane];
         ray_setup(&r, rp);
         int k[3] = {rp->kx, rp->ky, rp->kz};
+        float magnitude = 0.0f; /* as in wide_ray_setup: finite fused constants */
         for (int a = 0; a < 3; a++) {
             inv_d[a][lane] = rp->inv_d[a];
             inv_d_far[a][lane] = rp->inv_d[a] * far_scale;
+            float on = rp->o[a] * inv_d[a][lane];
+            float of = rp->o[a] * inv_d_far[a][lane];
+            c_near[a][lane] = on + (SLAB_BIAS * fabsf(on) + FLT_MIN);
+            c_far[a][lane] = of - (SLAB_BIAS * fabsf(of) + FLT_MIN);
+            magnitude += fabsf(inv_d[a][lane]) + fabsf(inv_d_far[a][lane]) +
+                         fabsf(c_near[a][lane]) + fabsf(c_far[a][lane]);
             is_neg[a][lane] = rp->is_neg[a] ? 1.0f : 0.0f;
             k_is[a][0][lane] = k[a] == 0 ? 1.0f : 0.0f;
             k_is[a][1][lane] = k[a] == 1 ? 1.0f : 0.0f;
             o_k[a][lane] = rp->o[k[a]];
+            coherent = coherent && rp->is_neg[a] == pp->rp[0].is_neg[a];
         }
+        coherent = coherent && magnitude <= FLT_MAX;
+        uniform_k = uniform_k && rp->kx == pp->rp[0].kx && rp->ky == pp->rp[0].ky &&
+                    rp->kz == pp->rp[0].kz;
         s[0][lane] = rp->sx;
         s[1][lane] = rp->sy;
         s[2][lane] = rp->sz;
@@ -2003,22 +2457,48 @@ static void packet_setup(const struct bvh_packet *p, uint32_t active, struct pac
         pp->o[a] = f8_loadu(o[a]);
         pp->inv_d[a] = f8_loadu(inv_d[a]);
         pp->inv_d_far[a] = f8_loadu(inv_d_far[a]);
+        pp->c_near[a] = f8_loadu(c_near[a]);
+        pp->c_far[a] = f8_loadu(c_far[a]);
         pp->is_neg[a] = f8_eq(f8_loadu(is_neg[a]), one);
         pp->k_is[a][0] = f8_eq(f8_loadu(k_is[a][0]), one);
         pp->k_is[a][1] = f8_eq(f8_loadu(k_is[a][1]), one);
         pp->o_k[a] = f8_loadu(o_k[a]);
+        pp->near_row[a] = 2 * a + pp->rp[0].is_neg[a];
+        pp->far_row[a] = 2 * a + 1 - pp->rp[0].is_neg[a];
     }
+    pp->k[0] = pp->rp[0].kx;
+    pp->k[1] = pp->rp[0].ky;
+    pp->k[2] = pp->rp[0].kz;
+    pp->coherent = BVH_FUSED_SLABS && coherent;
+    pp->uniform_k = uniform_k;
     pp->sx = f8_loadu(s[0]);
     pp->sy = f8_loadu(s[1]);
     pp->sz = f8_loadu(s[2]);
     pp->t_min = f8_loadu(t_min);
 }
 
-/* Slab test of child `lane` of node against every ray; returns the mask of rays hitting it. */
-static inline uint32_t packet_box_hit(const struct wide_node *node, int lane,
-                                      const struct packet_pre *pp, struct f8 t_max,
-                                      struct f8 *t_entry)
+/* Slab test of child `lane` of node against every ray; returns the mask of rays hitting it.
+ * Coherent packets (coherent == true, the caller checked pp->coherent) share the near and far
+ * rows and use the fused form of the single-ray fast path, no NaN can arise, and the maxima are
+ * a tree; otherwise each lane picks its planes by its signs and the NaN-aware chain is used. */
+static ALWAYS_INLINE uint32_t packet_box_hit(const struct wide_node *node, int lane,
+                                             const struct packet_pre *pp, struct f8 t_max,
+                                             struct f8 *t_entry, const bool coherent)
 {
+    if (coherent) {
+        struct f8 tn[3];
+        struct f8 tf[3];
+        for (int a = 0; a < 3; a++) {
+            struct f8 near = f8_set1(node->bounds[pp->near_row[a]][lane]);
+            struct f8 far = f8_set1(node->bounds[pp->far_row[a]][lane]);
+            tn[a] = f8_fmsub(near, pp->inv_d[a], pp->c_near[a]);
+            tf[a] = f8_fmsub(far, pp->inv_d_far[a], pp->c_far[a]);
+        }
+        struct f8 t0 = f8_max_num(f8_max_num(pp->t_min, tn[2]), f8_max_num(tn[1], tn[0]));
+        struct f8 t1 = f8_min_num(f8_min_num(t_max, tf[2]), f8_min_num(tf[1], tf[0]));
+        *t_entry = t0;
+        return m8_bits(f8_le(t0, t1));
+    }
     struct f8 t0 = pp->t_min;
     struct f8 t1 = t_max;
     for (int a = 0; a < 3; a++) {
@@ -2049,6 +2529,11 @@ static inline uint32_t packet_tri_hit(const struct bvh *bvh, uint32_t first, uin
     struct woop8_in in;
     struct f8 *dst[3] = {in.a, in.b, in.c};
     for (int k = 0; k < 3; k++) {
+        if (pp->uniform_k) { /* every lane permutes alike: broadcast the permuted coordinate */
+            for (int j = 0; j < 3; j++)
+                dst[k][j] = f8_sub(f8_set1(base[(size_t)(3 * k + pp->k[j]) * n + i]), pp->o_k[j]);
+            continue;
+        }
         struct f8 x = f8_set1(base[(size_t)(3 * k) * n + i]);
         struct f8 y = f8_set1(base[(size_t)(3 * k + 1) * n + i]);
         struct f8 z = f8_set1(base[(size_t)(3 * k + 2) * n + i]);
@@ -2069,35 +2554,16 @@ struct packet_entry {
     float t_entry; /* smallest entry distance among them */
 }; /* 12 bytes */
 
-uint32_t bvh_intersect_packet(const struct bvh *bvh, const struct bvh_packet *packet,
-                              uint32_t active, struct bvh_packet_hit *hit)
+/* The closest-hit packet loop; `coherent` selects packet_box_hit's form (a constant at each
+ * call, so there are two specialised copies). */
+static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh,
+                                             const struct bvh_packet *packet, uint32_t active,
+                                             struct packet_pre *pp, float t_hit[8],
+                                             struct bvh_packet_hit *hit, const bool coherent)
 {
-    active &= (1u << BVH_PACKET_SIZE) - 1u;
-    if (!(bvh->layouts & BVH_LAYOUT_WIDE) || bvh->n_wide == 0) {
-        uint32_t hits = 0;
-        for (uint32_t bits = active; bits; bits &= bits - 1) {
-            int lane = lowest_bit(bits);
-            struct ray r = {{packet->o[0][lane], packet->o[1][lane], packet->o[2][lane]},
-                            packet->t_min[lane],
-                            {packet->d[0][lane], packet->d[1][lane], packet->d[2][lane]},
-                            packet->t_max[lane]};
-            struct bvh_hit h;
-            if (bvh_intersect(bvh, &r, &h)) {
-                hits |= 1u << lane;
-                hit->t[lane] = h.t;
-                hit->u[lane] = h.u;
-                hit->v[lane] = h.v;
-                hit->prim_idx[lane] = h.prim_idx;
-            }
-        }
-        return hits;
-    }
-    struct packet_pre pp;
-    float t_hit[8];
     float u_hit[8];
     float v_hit[8];
     uint32_t tri_hit_idx[8];
-    packet_setup(packet, active, &pp, t_hit);
     for (int lane = 0; lane < 8; lane++) {
         tri_hit_idx[lane] = UINT32_MAX;
         u_hit[lane] = 0.0f;
@@ -2115,9 +2581,12 @@ uint32_t bvh_intersect_packet(const struct bvh *bvh, const struct bvh_packet *pa
             for (uint32_t bits = cur.mask; bits; bits &= bits - 1) {
                 int lane = lowest_bit(bits);
                 struct wide_ray wr;
-                wide_ray_setup(&pp.rp[lane], packet->t_min[lane], &wr);
+                wide_ray_setup(&pp->rp[lane], packet->t_min[lane], &wr);
                 struct wide_hit h = {t_hit[lane], u_hit[lane], v_hit[lane], tri_hit_idx[lane]};
-                wide_closest(bvh, cur.ref, &wr, &h);
+                if (wr.fast)
+                    wide_closest_fast(bvh, cur.ref, &wr, &h);
+                else
+                    wide_closest_safe(bvh, cur.ref, &wr, &h);
                 t_hit[lane] = h.t;
                 u_hit[lane] = h.u;
                 v_hit[lane] = h.v;
@@ -2129,7 +2598,8 @@ uint32_t bvh_intersect_packet(const struct bvh *bvh, const struct bvh_packet *pa
             const uint32_t base = n_stack;
             for (uint32_t c = 0; c < node->n_children; c++) {
                 struct f8 t_entry;
-                uint32_t mask = packet_box_hit(node, (int)c, &pp, t_hit8, &t_entry) & cur.mask;
+                uint32_t mask =
+                    packet_box_hit(node, (int)c, pp, t_hit8, &t_entry, coherent) & cur.mask;
                 if (!mask)
                     continue;
                 struct f8 t_in = f8_select(m8_from_bits(mask), t_entry, f8_set1(INFINITY));
@@ -2147,7 +2617,7 @@ uint32_t bvh_intersect_packet(const struct bvh *bvh, const struct bvh_packet *pa
             uint32_t n = (cur.ref & 7u) + 1;
             for (uint32_t i = 0; i < n; i++) {
                 struct woop8_out out;
-                uint32_t hits = packet_tri_hit(bvh, first, n, i, &pp, t_hit8, cur.mask, &out);
+                uint32_t hits = packet_tri_hit(bvh, first, n, i, pp, t_hit8, cur.mask, &out);
                 if (!hits)
                     continue;
                 /* a lane's later triangle is tested against the t_hit its earlier one set, as
@@ -2193,6 +2663,109 @@ done:
     return hits;
 }
 
+static uint32_t packet_closest_coherent(const struct bvh *bvh, const struct bvh_packet *packet,
+                                        uint32_t active, struct packet_pre *pp, float t_hit[8],
+                                        struct bvh_packet_hit *hit)
+{
+    return packet_closest(bvh, packet, active, pp, t_hit, hit, true);
+}
+
+static uint32_t packet_closest_general(const struct bvh *bvh, const struct bvh_packet *packet,
+                                       uint32_t active, struct packet_pre *pp, float t_hit[8],
+                                       struct bvh_packet_hit *hit)
+{
+    return packet_closest(bvh, packet, active, pp, t_hit, hit, false);
+}
+
+uint32_t bvh_intersect_packet(const struct bvh *bvh, const struct bvh_packet *packet,
+                              uint32_t active, struct bvh_packet_hit *hit)
+{
+    active &= (1u << BVH_PACKET_SIZE) - 1u;
+    if (!(bvh->layouts & BVH_LAYOUT_WIDE) || bvh->n_wide == 0) {
+        uint32_t hits = 0;
+        for (uint32_t bits = active; bits; bits &= bits - 1) {
+            int lane = lowest_bit(bits);
+            struct ray r = {{packet->o[0][lane], packet->o[1][lane], packet->o[2][lane]},
+                            packet->t_min[lane],
+                            {packet->d[0][lane], packet->d[1][lane], packet->d[2][lane]},
+                            packet->t_max[lane]};
+            struct bvh_hit h;
+            if (bvh_intersect(bvh, &r, &h)) {
+                hits |= 1u << lane;
+                hit->t[lane] = h.t;
+                hit->u[lane] = h.u;
+                hit->v[lane] = h.v;
+                hit->prim_idx[lane] = h.prim_idx;
+            }
+        }
+        return hits;
+    }
+    struct packet_pre pp;
+    float t_hit[8];
+    packet_setup(packet, active, &pp, t_hit);
+    return pp.coherent ? packet_closest_coherent(bvh, packet, active, &pp, t_hit, hit)
+                       : packet_closest_general(bvh, packet, active, &pp, t_hit, hit);
+}
+
+/* The any-hit packet loop: children in stored order, a lane leaves the packet when occluded. */
+static ALWAYS_INLINE uint32_t packet_any(const struct bvh *bvh, const struct bvh_packet *packet,
+                                         uint32_t active, struct packet_pre *pp,
+                                         const float t_max[8], const bool coherent)
+{
+    const struct f8 t_max8 = f8_loadu(t_max);
+    uint32_t occluded = 0;
+    struct packet_entry stack[WIDE_STACK_SIZE];
+    uint32_t n_stack = 0;
+    struct packet_entry cur = {0, active, -INFINITY};
+    for (;;) {
+        cur.mask &= ~occluded;
+        if (!cur.mask) {
+            /* nothing left to do here */
+        } else if (__builtin_popcount(cur.mask) < BVH_PACKET_MIN_ACTIVE) {
+            for (uint32_t bits = cur.mask; bits; bits &= bits - 1) {
+                int lane = lowest_bit(bits);
+                struct wide_ray wr;
+                wide_ray_setup(&pp->rp[lane], packet->t_min[lane], &wr);
+                if (wr.fast ? wide_any_fast(bvh, cur.ref, &wr, packet->t_max[lane])
+                            : wide_any_safe(bvh, cur.ref, &wr, packet->t_max[lane]))
+                    occluded |= 1u << lane;
+            }
+        } else if (!(cur.ref & WIDE_LEAF)) {
+            const struct wide_node *node = &bvh->wide[cur.ref];
+            for (uint32_t c = 0; c < node->n_children; c++) {
+                struct f8 t_entry;
+                uint32_t mask =
+                    packet_box_hit(node, (int)c, pp, t_max8, &t_entry, coherent) & cur.mask;
+                if (mask)
+                    stack[n_stack++] = (struct packet_entry){node->child[c], mask, 0.0f};
+            }
+        } else {
+            uint32_t first = (cur.ref & ~WIDE_LEAF) >> 3;
+            uint32_t n = (cur.ref & 7u) + 1;
+            for (uint32_t i = 0; i < n && (cur.mask & ~occluded); i++) {
+                struct woop8_out out;
+                occluded |= packet_tri_hit(bvh, first, n, i, pp, t_max8, cur.mask & ~occluded,
+                                           &out);
+            }
+        }
+        if (occluded == active || n_stack == 0)
+            return occluded;
+        cur = stack[--n_stack];
+    }
+}
+
+static uint32_t packet_any_coherent(const struct bvh *bvh, const struct bvh_packet *packet,
+                                    uint32_t active, struct packet_pre *pp, const float t_max[8])
+{
+    return packet_any(bvh, packet, active, pp, t_max, true);
+}
+
+static uint32_t packet_any_general(const struct bvh *bvh, const struct bvh_packet *packet,
+                                   uint32_t active, struct packet_pre *pp, const float t_max[8])
+{
+    return packet_any(bvh, packet, active, pp, t_max, false);
+}
+
 uint32_t bvh_occluded_packet(const struct bvh *bvh, const struct bvh_packet *packet,
                              uint32_t active)
 {
@@ -2213,44 +2786,8 @@ uint32_t bvh_occluded_packet(const struct bvh *bvh, const struct bvh_packet *pac
     struct packet_pre pp;
     float t_max[8];
     packet_setup(packet, active, &pp, t_max);
-    const struct f8 t_max8 = f8_loadu(t_max);
-    uint32_t occluded = 0;
-    struct packet_entry stack[WIDE_STACK_SIZE];
-    uint32_t n_stack = 0;
-    struct packet_entry cur = {0, active, -INFINITY};
-    for (;;) {
-        cur.mask &= ~occluded;
-        if (!cur.mask) {
-            /* nothing left to do here */
-        } else if (__builtin_popcount(cur.mask) < BVH_PACKET_MIN_ACTIVE) {
-            for (uint32_t bits = cur.mask; bits; bits &= bits - 1) {
-                int lane = lowest_bit(bits);
-                struct wide_ray wr;
-                wide_ray_setup(&pp.rp[lane], packet->t_min[lane], &wr);
-                if (wide_any(bvh, cur.ref, &wr, packet->t_max[lane]))
-                    occluded |= 1u << lane;
-            }
-        } else if (!(cur.ref & WIDE_LEAF)) {
-            const struct wide_node *node = &bvh->wide[cur.ref];
-            for (uint32_t c = 0; c < node->n_children; c++) {
-                struct f8 t_entry;
-                uint32_t mask = packet_box_hit(node, (int)c, &pp, t_max8, &t_entry) & cur.mask;
-                if (mask)
-                    stack[n_stack++] = (struct packet_entry){node->child[c], mask, 0.0f};
-            }
-        } else {
-            uint32_t first = (cur.ref & ~WIDE_LEAF) >> 3;
-            uint32_t n = (cur.ref & 7u) + 1;
-            for (uint32_t i = 0; i < n && (cur.mask & ~occluded); i++) {
-                struct woop8_out out;
-                occluded |= packet_tri_hit(bvh, first, n, i, &pp, t_max8, cur.mask & ~occluded,
-                                           &out);
-            }
-        }
-        if (occluded == active || n_stack == 0)
-            return occluded;
-        cur = stack[--n_stack];
-    }
+    return pp.coherent ? packet_any_coherent(bvh, packet, active, &pp, t_max)
+                       : packet_any_general(bvh, packet, active, &pp, t_max);
 }
 
 void bvh_packet_set(struct bvh_packet *packet, int lane, const struct ray *ray)

@@ -252,7 +252,7 @@ void bench_rays_free(struct bench_rays *rays)
     *rays = (struct bench_rays){0};
 }
 
-/* ---- the standard ray sets (BENCHMARKS.md) ---------------------------------------------------- */
+/* ---- the standard ray sets (BENCHMARKS.md) --------------------------------------------------- */
 
 static void mesh_bounds(const struct bench_mesh *mesh, vec3 *lo, vec3 *hi)
 {
@@ -366,7 +366,7 @@ fail:
     return false;
 }
 
-/* ---- tracing through mcpt ------------------------------------------------------------------------ */
+/* ---- tracing through mcpt -------------------------------------------------------------------- */
 
 void bench_trace_range(void *trace, uint64_t begin, uint64_t end)
 {
@@ -429,7 +429,7 @@ struct bench_checksum bench_checksum_of(const struct bench_rays *rays, uint64_t 
     return c;
 }
 
-/* ---- timing, machine, threads ------------------------------------------------------------------ */
+/* ---- timing, machine, threads ---------------------------------------------------------------- */
 
 static double thread_cpu_ms(void)
 {

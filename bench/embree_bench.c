@@ -20,7 +20,7 @@ static const char usage[] =
     "  --threads N  threads of the all-threads figures and builds (default: all CPUs)\n"
     "  --robust  build Embree's scene with RTC_SCENE_FLAG_ROBUST (its watertight mode)\n";
 
-/* ---- Embree: scene, memory, tracing ------------------------------------------------------------ */
+/* ---- Embree: scene, memory, tracing ---------------------------------------------------------- */
 
 static atomic_llong embree_bytes; /* bytes Embree holds, from its memory monitor */
 
@@ -190,7 +190,7 @@ static void embree_trace_range(void *arg, uint64_t begin, uint64_t end)
     }
 }
 
-/* ---- interleaved measurement ------------------------------------------------------------------- */
+/* ---- interleaved measurement ----------------------------------------------------------------- */
 
 /* One tracer: its run function and context, results and collected timings. */
 struct tracer {

@@ -13,7 +13,7 @@ static const char usage[] =
     "usage: raybench MODEL RAYS.bin... [options]   trace ray files (one JSON line each)\n"
     "       raybench MODEL --gen SET -o RAYS.bin    write a standard ray set\n"
     "       raybench MODEL --gen all -o PREFIX      write PREFIX-primary.bin, -diffuse, -shadow\n"
-    "       raybench MODEL --sets [options]          generate and trace all three sets\n"
+    "       raybench MODEL --sets [--set SET] [options]  generate and trace the three sets\n"
     "MODEL is an OBJ file or torus:N, a generated bumpy torus of N triangles (N may end in k =\n"
     "2^10 or M = 2^20: torus:1M has exactly 2^20).  SET is primary, diffuse or shadow.\n"
     "options:\n"
@@ -23,7 +23,8 @@ static const char usage[] =
     "  --packets          also trace in packets of 8 rays (mrays_1t_packet)\n"
     "  --layout L         wide (default) or binary: the traversal to time\n"
     "  --no-bvh           brute force on a subset of the rays, against the BVH on the same rays\n"
-    "  --subset K         rays of the --no-bvh subset, evenly strided (default 1000)\n";
+    "  --subset K         rays of the --no-bvh subset, evenly strided (default 1000)\n"
+    "  --set SET          with --sets: only this set\n";
 
 struct options {
     const char *model;
@@ -32,6 +33,7 @@ struct options {
     const char *gen_set;
     const char *out_path;
     bool sets;
+    int only_set; /* --set, or -1 */
     int threads;
     int runs;
     int build_runs;
@@ -168,14 +170,23 @@ static bool run_set(const struct options *opt, const struct bench_mesh *mesh,
             return false;
         for (uint64_t i = 0; i < k; i++)
             sub.rays[i] = rays->rays[i * (rays->n / (k ? k : 1))];
+        /* brute force once (it is slow; no warm-up needed), the BVH as usual */
         struct figures naive;
         struct figures fast;
-        if (!measure(bvh, &sub, BENCH_BRUTE, 1, 0, &naive) ||
-            !measure(bvh, &sub, BENCH_SINGLE, opt->runs, 0, &fast)) {
+        uint32_t *prim = malloc(k * sizeof *prim + 1);
+        float *t = malloc(k * sizeof *t + 1);
+        if (!prim || !t || !measure(bvh, &sub, BENCH_SINGLE, opt->runs, 0, &fast)) {
+            free(prim);
+            free(t);
             free(sub.rays);
             return false;
         }
-        double naive_s = (double)k / (naive.mrays_1t * 1e6);
+        struct bench_trace tr = {bvh, &sub, BENCH_BRUTE, prim, t};
+        struct bench_time bt = bench_time_1t(bench_trace_range, &tr, k);
+        naive.sum = bench_checksum_of(&sub, k, prim, t);
+        free(prim);
+        free(t);
+        double naive_s = bt.cpu_ms * 1e-3;
         double bvh_s = (double)k / (fast.mrays_1t * 1e6);
         printf("no-bvh: %llu rays: brute force %.3f s, BVH %.6f s (%.0fx); hits %llu vs %llu\n",
                (unsigned long long)k, naive_s, bvh_s, naive_s / bvh_s,
@@ -202,17 +213,6 @@ static bool run_set(const struct options *opt, const struct bench_mesh *mesh,
         printf("checksum: occluded %llu\n", (unsigned long long)single.sum.hits);
     printf("single thread: %.3f Mrays/s (CPU time; %.3f by wall clock)\n", single.mrays_1t,
            single.mrays_1t_wall);
-#ifdef BVH_COUNT
-    {
-        extern _Thread_local unsigned long long bvh_n_nodes_visited, bvh_n_leaves_visited,
-            bvh_n_children_hit, bvh_n_tris_tested;
-        double k = (double)(opt->runs + 1) * (double)rays->n;
-        printf("per ray: %.2f nodes, %.2f children hit, %.2f leaves, %.2f tris\n",
-               bvh_n_nodes_visited / k, bvh_n_children_hit / k, bvh_n_leaves_visited / k,
-               bvh_n_tris_tested / k);
-        bvh_n_nodes_visited = bvh_n_leaves_visited = bvh_n_children_hit = bvh_n_tris_tested = 0;
-    }
-#endif
     if (opt->packets) {
         printf("packets of %d: %.3f Mrays/s (CPU time; %.3f by wall clock)%s\n", BVH_PACKET_SIZE,
                packet.mrays_1t, packet.mrays_1t_wall,
@@ -262,7 +262,7 @@ static int parse_int(const char *arg, const char *what, int lo)
 
 int main(int argc, char **argv)
 {
-    struct options opt = {.threads = bench_n_cpus(), .runs = 5, .build_runs = -1,
+    struct options opt = {.threads = bench_n_cpus(), .runs = 5, .build_runs = -1, .only_set = -1,
                           .layout = BVH_LAYOUT_WIDE, .subset = 1000};
     static const struct option long_opts[] = {
         {"gen", required_argument, NULL, 'g'},      {"sets", no_argument, NULL, 'S'},
@@ -270,6 +270,7 @@ int main(int argc, char **argv)
         {"build-runs", required_argument, NULL, 'b'}, {"packets", no_argument, NULL, 'p'},
         {"layout", required_argument, NULL, 'l'},   {"no-bvh", no_argument, NULL, 'n'},
         {"subset", required_argument, NULL, 'k'},   {"help", no_argument, NULL, 'h'},
+        {"set", required_argument, NULL, 's'},
         {NULL, 0, NULL, 0}};
     int c;
     while ((c = getopt_long(argc, argv, "o:h", long_opts, NULL)) != -1) {
@@ -283,6 +284,13 @@ int main(int argc, char **argv)
         case 'p': opt.packets = true; break;
         case 'n': opt.no_bvh = true; break;
         case 'k': opt.subset = (uint64_t)parse_int(optarg, "--subset", 1); break;
+        case 's':
+            if ((opt.only_set = parse_set(optarg)) < 0) {
+                fprintf(stderr, "raybench: expected --set primary, diffuse or shadow, got '%s'\n",
+                        optarg);
+                return 2;
+            }
+            break;
         case 'l':
             if (strcmp(optarg, "wide") == 0) {
                 opt.layout = BVH_LAYOUT_WIDE;
@@ -403,7 +411,8 @@ int main(int argc, char **argv)
         goto done;
     }
     for (int s = 0; s < BENCH_N_SETS; s++)
-        if (!run_set(&opt, &mesh, bvh, build_ms_1t, build_ms_mt, bench_set_names[s], &sets[s]))
+        if ((opt.only_set < 0 || opt.only_set == s) &&
+            !run_set(&opt, &mesh, bvh, build_ms_1t, build_ms_mt, bench_set_names[s], &sets[s]))
             goto done;
     printf("{\"model\":\"%s\",\"triangles\":%u,\"build_ms\":%.3f,\"build_ms_mt\":%.3f,"
            "\"bytes_per_tri\":%.2f,\"sah_cost\":%.4f,\"peak_rss_mib\":%.1f}\n",
