@@ -1,13 +1,13 @@
 /* bvh.c - BVH over triangles.  The scalar reference: 32-byte binary nodes in one flat array,
  * triangles permuted into BVH order, a binned-SAH build (Wald 2007, "On fast Construction of
- * SAH-based Bounding Volume Hierarchies"), run on several threads for large meshes, ordered
+ * SAH-based Bounding Volume Hierarchies") on several threads for large meshes, ordered
  * traversal with a conservative slab test (PBRT 4e, ch. 6, "Conservative Ray-Bounds
- * Intersections") and the watertight ray-triangle test of Woop, Benthin, Wald 2013,
- * "Watertight Ray/Triangle Intersection" (JCGT 2(1)).  The fast layout is converted from it:
- * 8-wide nodes with SoA child boxes (Wald et al. 2008, "Getting Rid of Packets"; Ernst, Greiner
- * 2008, "Multi Bounding Volume Hierarchies"), SoA leaves tested 8 at a time with the same
- * watertight test, single rays and 8-ray packets.  Reading order: layouts, build, conversion,
- * reference traversal, the triangle test, the SIMD lanes, wide traversal, packets, stats. */
+ * Intersections") and the watertight test of Woop, Benthin, Wald 2013, "Watertight Ray/Triangle
+ * Intersection".  The fast layout is converted from it by the SAH-optimal collapse of Ylitie,
+ * Karras, Laine 2017: 8-wide nodes with SoA child boxes (Wald et al. 2008, "Getting Rid of
+ * Packets"), SoA leaves tested 8 at a time with the same watertight test, single rays and 8-ray
+ * packets.  Reading order: layouts, build, conversion, reference traversal, the triangle test,
+ * the SIMD lanes, wide traversal, packets, brute force, stats.  Measurements: docs/bvh.md. */
 #include "bvh.h"
 
 #include <assert.h>
@@ -51,15 +51,16 @@ struct bvh_tri {
 }; /* 36 bytes */
 
 /* ---- The 8-wide layout --------------------------------------------------------------------------
- * Converted from the binary tree (convert_wide): each wide node takes a binary node's children
- * and keeps opening the one of largest surface area until it has BVH_WIDTH (the collapse of
- * Wald et al. 2008).  The child boxes are stored SoA, bounds[2 a][lane] = min along axis a and
+ * Converted from the binary tree (convert_wide, "Conversion" below): each wide node gathers up
+ * to BVH_WIDTH binary descendants as children, and small subtrees become single leaves, as the
+ * SAH decides.  The child boxes are stored SoA, bounds[2 a][lane] = min along axis a and
  * bounds[2 a + 1][lane] = max, so one ray meets all eight boxes in one SIMD slab test.
  * A child reference is a wide node index, or WIDE_LEAF | first << 3 | (n - 1) for a leaf of
  * n in 1..8 triangles starting at wide triangle `first`.  An unused lane has the empty box
  * (min +inf, max -inf), which no ray hits, whatever the signs of its direction.
- * Leaves are the binary tree's leaves minus their degenerate triangles (a binary leaf of more
- * than 8, which only the depth cap makes, becomes a small wide subtree).  A leaf's triangles
+ * A leaf holds the triangles of one binary subtree (at most 8) minus the degenerate ones (a
+ * binary leaf of more than 8, which only the depth cap makes, becomes a small wide subtree of
+ * 8-triangle leaves).  A leaf's triangles
  * are SoA: leaf_tris[9 first + (3 k + a) n + i] is coordinate a of vertex k of its triangle i
  * (the same three vertices as struct bvh_tri, so the test stays watertight), and
  * wide_prim_idx[first + i] is the caller's index.  The array has 8 floats of padding at its end
@@ -1753,6 +1754,11 @@ static inline struct m8 m8_and(struct m8 a, struct m8 b)
 {
     return (struct m8){_mm256_and_ps(a.v, b.v)};
 }
+/* a and not b */
+static inline struct m8 m8_andnot(struct m8 a, struct m8 b)
+{
+    return (struct m8){_mm256_andnot_ps(b.v, a.v)};
+}
 static inline uint32_t m8_bits(struct m8 m) { return (uint32_t)_mm256_movemask_ps(m.v); }
 /* lane i set when bit i of bits is */
 static inline struct m8 m8_from_bits(uint32_t bits)
@@ -1825,6 +1831,7 @@ static inline struct m8 f8_gt(struct f8 a, struct f8 b) { M8_MAP(a.v[i] > b.v[i]
 static inline struct m8 f8_eq(struct f8 a, struct f8 b) { M8_MAP(a.v[i] == b.v[i]); }
 static inline struct m8 m8_or(struct m8 a, struct m8 b) { M8_MAP(a.v[i] | b.v[i]); }
 static inline struct m8 m8_and(struct m8 a, struct m8 b) { M8_MAP(a.v[i] & b.v[i]); }
+static inline struct m8 m8_andnot(struct m8 a, struct m8 b) { M8_MAP(a.v[i] & ~b.v[i]); }
 static inline uint32_t m8_bits(struct m8 m)
 {
     uint32_t bits = 0;
@@ -1976,7 +1983,10 @@ static inline uint32_t woop8(const struct woop8_in *in, uint32_t valid, struct w
  * nearest first: one hit child is taken directly, two are ordered by one comparison, more are
  * pushed and insertion-sorted on the stack (nearest on top) (Wald et al. 2008, sec. 4).
  * A stack entry keeps its entry distance, and an entry beyond the closest hit is dropped when
- * popped.  A leaf's triangles are tested by woop8, eight lanes at once. */
+ * popped.  A leaf's triangles are tested by woop8, eight lanes at once.  Rays with finite
+ * constants use the fused slab form (one FMA per plane, wide_ray_setup); the traversal loops
+ * are compiled once for each form. */
+
 /* Per-ray constants of the wide traversal, scalars; the traversal broadcasts them into
  * registers (struct wide_ray8).  The slab axes are in slab order (see slab_order). */
 struct wide_ray {
@@ -1992,22 +2002,23 @@ struct wide_ray {
     struct ray_pre *rp; /* for Woop's constants, computed at the first leaf */
 }; /* 104 bytes */
 
+/* struct wide_ray broadcast to eight lanes, a local of the traversal loop. */
 struct wide_ray8 {
-    struct f8 o[3];
-    struct f8 inv_d[3];
-    struct f8 inv_d_far[3];
-    struct f8 c_near[3];
+    struct f8 o[3];               /* origin, slab order */
+    struct f8 inv_d[3];           /* 1 / d */
+    struct f8 inv_d_far[3];       /* the conservative far-plane factor */
+    struct f8 c_near[3];          /* fused form constants */
     struct f8 c_far[3];
     struct f8 t_min;
-    struct f8 o_k[3]; /* Woop: o[kx], o[ky], o[kz] */
-    struct f8 sx;
+    struct f8 o_k[3];             /* Woop: o[kx], o[ky], o[kz] (set at the first leaf) */
+    struct f8 sx;                 /* Woop's shear constants */
     struct f8 sy;
     struct f8 sz;
-    int k[3];             /* kx, ky, kz */
-    size_t near_off[3];   /* byte offsets of the near and far bounds rows in a node */
+    int k[3];                     /* kx, ky, kz */
+    size_t near_off[3];           /* byte offsets of the near and far bounds rows in a node */
     size_t far_off[3];
     const struct wide_node *wide; /* the node array */
-};
+}; /* 640 bytes with AVX2 */
 
 /* The slab test takes max(max(t_0, t_1), max(t_2, t_min)) as a tree, which shortens the chain
  * of dependent instructions per node.  A slab distance is NaN only where inv_d is infinite
@@ -2378,8 +2389,11 @@ bool bvh_occluded_layout(const struct bvh *bvh, enum bvh_layout layout, const st
  * woop8, each lane with its own permutation (kx, ky, kz) and shear.  When few rays remain
  * active in a node (BVH_PACKET_MIN_ACTIVE), they continue one by one through the single-ray
  * traversal from that node (Benthin et al. 2012, "Combining Single and Packet-Ray Tracing for
- * Arbitrary Ray Distributions on the Intel MIC Architecture").  Every lane sees exactly the
- * box and triangle tests of the single-ray traversal. */
+ * Arbitrary Ray Distributions on the Intel MIC Architecture").  A packet whose rays share
+ * their direction signs takes the coherent form (broadcast planes, fused slabs), and one whose
+ * rays share Woop's permutation broadcasts the triangles' coordinates.  A lane's triangle tests
+ * give the single-ray t, u, v to the bit (same constants, same woop8), and its box tests are
+ * conservative in the same way, so it reports what bvh_intersect reports (up to exact ties). */
 #define BVH_PACKET_MIN_ACTIVE 3 /* fewer active rays in a node: finish them one by one */
 
 struct packet_pre {
@@ -2400,81 +2414,101 @@ struct packet_pre {
     int far_row[3];
     bool uniform_k;  /* every lane has the same (kx, ky, kz) */
     int k[3];        /* when uniform_k */
-    struct ray_pre rp[BVH_PACKET_SIZE]; /* per lane, for the single-ray fallback */
 };
 
-/* Per-lane constants.  An inactive lane (whose fields may be uninitialised) gets a copy of the
- * first active ray with an empty interval, t_max[lane] = -inf, so that it never hits and never
- * spoils the packet's coherence. */
+/* m ? x : (n ? y : z) per lane */
+static inline struct f8 select3(struct m8 m, struct m8 n, struct f8 x, struct f8 y, struct f8 z)
+{
+    return f8_select(m, x, f8_select(n, y, z));
+}
+
+/* Per-lane constants, computed on all eight lanes at once: the operations of ray_setup and
+ * wide_ray_setup lane by lane, so every value equals the single-ray one to the bit.  An
+ * inactive lane (whose fields may be uninitialised) gets the first active ray with an empty
+ * interval, t_max[lane] = -inf, so that it never hits and never spoils the packet's coherence. */
 static void packet_setup(const struct bvh_packet *p, uint32_t active, struct packet_pre *pp,
                          float t_max[BVH_PACKET_SIZE])
 {
-    float o[3][8], t_min[8], inv_d[3][8], inv_d_far[3][8], c_near[3][8], c_far[3][8];
-    float is_neg[3][8], k_is[3][2][8], o_k[3][8], s[3][8];
+    const struct f8 zero = f8_set1(0.0f);
     const float far_scale = 1.0f + 4.0f * mcpt_gamma(3);
     int first = active ? lowest_bit(active) : 0;
-    bool coherent = true;
-    bool uniform_k = true;
-    for (int lane = 0; lane < BVH_PACKET_SIZE; lane++) {
-        int src = active >> lane & 1u ? lane : first;
-        struct ray r = {{p->o[0][src], p->o[1][src], p->o[2][src]}, p->t_min[src],
-                        {p->d[0][src], p->d[1][src], p->d[2][src]}, p->t_max[src]};
-        if (!active) /* nothing to trace: any finite ray */
-            r = (struct ray){{0.0f, 0.0f, 0.0f}, 0.0f, {0.0f, 0.0f, 1.0f}, -INFINITY};
-        o[0][lane] = r.o.x;
-        o[1][lane] = r.o.y;
-        o[2][lane] = r.o.z;
-        t_min[lane] = r.t_min;
-        t_max[lane] = src == lane ? r.t_max : -INFINITY;
-        struct ray_pre *rp = &pp->rp[lane];
-        ray_setup(&r, rp);
-        int k[3] = {rp->kx, rp->ky, rp->kz};
-        float magnitude = 0.0f; /* as in wide_ray_setup: finite fused constants */
-        for (int a = 0; a < 3; a++) {
-            inv_d[a][lane] = rp->inv_d[a];
-            inv_d_far[a][lane] = rp->inv_d[a] * far_scale;
-            float on = rp->o[a] * inv_d[a][lane];
-            float of = rp->o[a] * inv_d_far[a][lane];
-            c_near[a][lane] = on + (SLAB_BIAS * fabsf(on) + FLT_MIN);
-            c_far[a][lane] = of - (SLAB_BIAS * fabsf(of) + FLT_MIN);
-            magnitude += fabsf(inv_d[a][lane]) + fabsf(inv_d_far[a][lane]) +
-                         fabsf(c_near[a][lane]) + fabsf(c_far[a][lane]);
-            is_neg[a][lane] = rp->is_neg[a] ? 1.0f : 0.0f;
-            k_is[a][0][lane] = k[a] == 0 ? 1.0f : 0.0f;
-            k_is[a][1][lane] = k[a] == 1 ? 1.0f : 0.0f;
-            o_k[a][lane] = rp->o[k[a]];
-            coherent = coherent && rp->is_neg[a] == pp->rp[0].is_neg[a];
-        }
-        coherent = coherent && magnitude <= FLT_MAX;
-        uniform_k = uniform_k && rp->kx == pp->rp[0].kx && rp->ky == pp->rp[0].ky &&
-                    rp->kz == pp->rp[0].kz;
-        s[0][lane] = rp->sx;
-        s[1][lane] = rp->sy;
-        s[2][lane] = rp->sz;
-    }
-    const struct f8 one = f8_set1(1.0f);
+    struct m8 on = m8_from_bits(active);
+    struct f8 d[3];
     for (int a = 0; a < 3; a++) {
-        pp->o[a] = f8_loadu(o[a]);
-        pp->inv_d[a] = f8_loadu(inv_d[a]);
-        pp->inv_d_far[a] = f8_loadu(inv_d_far[a]);
-        pp->c_near[a] = f8_loadu(c_near[a]);
-        pp->c_far[a] = f8_loadu(c_far[a]);
-        pp->is_neg[a] = f8_eq(f8_loadu(is_neg[a]), one);
-        pp->k_is[a][0] = f8_eq(f8_loadu(k_is[a][0]), one);
-        pp->k_is[a][1] = f8_eq(f8_loadu(k_is[a][1]), one);
-        pp->o_k[a] = f8_loadu(o_k[a]);
-        pp->near_row[a] = 2 * a + pp->rp[0].is_neg[a];
-        pp->far_row[a] = 2 * a + 1 - pp->rp[0].is_neg[a];
+        pp->o[a] = f8_select(on, f8_loadu(p->o[a]), f8_set1(active ? p->o[a][first] : 0.0f));
+        d[a] = f8_select(on, f8_loadu(p->d[a]), f8_set1(active ? p->d[a][first] : 1.0f));
     }
-    pp->k[0] = pp->rp[0].kx;
-    pp->k[1] = pp->rp[0].ky;
-    pp->k[2] = pp->rp[0].kz;
+    pp->t_min = f8_select(on, f8_loadu(p->t_min), f8_set1(active ? p->t_min[first] : 0.0f));
+    f8_store(t_max, f8_select(on, f8_loadu(p->t_max), f8_set1(-INFINITY)));
+    /* slabs (ray_setup_box, wide_ray_setup) */
+    uint32_t all = (1u << BVH_PACKET_SIZE) - 1u;
+    bool coherent = true;
+    struct f8 magnitude = zero;
+    for (int a = 0; a < 3; a++) {
+        pp->inv_d[a] = f8_div(f8_set1(1.0f), d[a]);
+        pp->inv_d_far[a] = f8_mul(pp->inv_d[a], f8_set1(far_scale));
+        pp->is_neg[a] = f8_lt(pp->inv_d[a], zero);
+        struct f8 o_inv = f8_mul(pp->o[a], pp->inv_d[a]);
+        struct f8 o_inv_far = f8_mul(pp->o[a], pp->inv_d_far[a]);
+        pp->c_near[a] = f8_add(o_inv, f8_add(f8_mul(f8_set1(SLAB_BIAS), f8_abs(o_inv)),
+                                             f8_set1(FLT_MIN)));
+        pp->c_far[a] = f8_sub(o_inv_far, f8_add(f8_mul(f8_set1(SLAB_BIAS), f8_abs(o_inv_far)),
+                                                f8_set1(FLT_MIN)));
+        magnitude = f8_add(magnitude, f8_add(f8_add(f8_abs(pp->inv_d[a]), f8_abs(pp->inv_d_far[a])),
+                                             f8_add(f8_abs(pp->c_near[a]), f8_abs(pp->c_far[a]))));
+        uint32_t neg = m8_bits(pp->is_neg[a]);
+        coherent = coherent && (neg == 0 || neg == all);
+        pp->near_row[a] = 2 * a + (neg ? 1 : 0);
+        pp->far_row[a] = 2 * a + 1 - (neg ? 1 : 0);
+    }
+    coherent = coherent && m8_bits(f8_le(magnitude, f8_set1(FLT_MAX))) == all;
     pp->coherent = BVH_FUSED_SLABS && coherent;
-    pp->uniform_k = uniform_k;
-    pp->sx = f8_loadu(s[0]);
-    pp->sy = f8_loadu(s[1]);
-    pp->sz = f8_loadu(s[2]);
-    pp->t_min = f8_loadu(t_min);
+    /* Woop's permutation (ray_setup_woop): kz = argmax |d|, kx, ky the next two, swapped when
+     * d[kz] < 0 */
+    struct f8 ad0 = f8_abs(d[0]);
+    struct f8 ad1 = f8_abs(d[1]);
+    struct f8 ad2 = f8_abs(d[2]);
+    struct m8 ge01 = m8_or(f8_gt(ad0, ad1), f8_eq(ad0, ad1));
+    struct m8 ge02 = m8_or(f8_gt(ad0, ad2), f8_eq(ad0, ad2));
+    struct m8 ge12 = m8_or(f8_gt(ad1, ad2), f8_eq(ad1, ad2));
+    struct m8 kz0 = m8_and(ge01, ge02);
+    struct m8 kz1 = m8_andnot(ge12, ge01);
+    struct f8 d_kz = select3(kz0, kz1, d[0], d[1], d[2]);
+    struct m8 swap = f8_lt(d_kz, zero);
+    struct m8 kz2 = m8_andnot(m8_andnot(f8_eq(zero, zero), kz0), kz1);
+    /* unswapped (kx, ky) = (1, 2) for kz 0, (2, 0) for kz 1, (0, 1) for kz 2 */
+    pp->k_is[0][0] = m8_or(m8_andnot(kz2, swap), m8_and(kz1, swap));
+    pp->k_is[0][1] = m8_or(m8_andnot(kz0, swap), m8_and(kz2, swap));
+    pp->k_is[1][0] = m8_or(m8_andnot(kz1, swap), m8_and(kz2, swap));
+    pp->k_is[1][1] = m8_or(m8_andnot(kz2, swap), m8_and(kz0, swap));
+    pp->k_is[2][0] = kz0;
+    pp->k_is[2][1] = kz1;
+    struct f8 d_k[3];
+    for (int j = 0; j < 3; j++) {
+        d_k[j] = select3(pp->k_is[j][0], pp->k_is[j][1], d[0], d[1], d[2]);
+        pp->o_k[j] = select3(pp->k_is[j][0], pp->k_is[j][1], pp->o[0], pp->o[1], pp->o[2]);
+    }
+    pp->sx = f8_div(d_k[0], d_k[2]);
+    pp->sy = f8_div(d_k[1], d_k[2]);
+    pp->sz = f8_div(f8_set1(1.0f), d_k[2]);
+    uint32_t b0 = m8_bits(kz0);
+    uint32_t b1 = m8_bits(kz1);
+    uint32_t bs = m8_bits(swap);
+    pp->uniform_k = (b0 == 0 || b0 == all) && (b1 == 0 || b1 == all) && (bs == 0 || bs == all);
+    int kz = b0 ? 0 : b1 ? 1 : 2;
+    int kx = kz == 2 ? 0 : kz + 1;
+    int ky = kx == 2 ? 0 : kx + 1;
+    pp->k[0] = bs ? ky : kx;
+    pp->k[1] = bs ? kx : ky;
+    pp->k[2] = kz;
+}
+
+/* The single-ray constants of lane `lane`, for the rays that leave the packet. */
+static void packet_lane_ray(const struct bvh_packet *p, int lane, struct ray_pre *rp)
+{
+    struct ray r = {{p->o[0][lane], p->o[1][lane], p->o[2][lane]}, p->t_min[lane],
+                    {p->d[0][lane], p->d[1][lane], p->d[2][lane]}, p->t_max[lane]};
+    ray_setup_box(&r, rp);
 }
 
 /* Slab test of child `lane` of node against every ray; returns the mask of rays hitting it.
@@ -2580,8 +2614,10 @@ static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh,
             f8_store(t_hit, t_hit8);
             for (uint32_t bits = cur.mask; bits; bits &= bits - 1) {
                 int lane = lowest_bit(bits);
+                struct ray_pre rp;
+                packet_lane_ray(packet, lane, &rp);
                 struct wide_ray wr;
-                wide_ray_setup(&pp->rp[lane], packet->t_min[lane], &wr);
+                wide_ray_setup(&rp, packet->t_min[lane], &wr);
                 struct wide_hit h = {t_hit[lane], u_hit[lane], v_hit[lane], tri_hit_idx[lane]};
                 if (wr.fast)
                     wide_closest_fast(bvh, cur.ref, &wr, &h);
@@ -2724,8 +2760,10 @@ static ALWAYS_INLINE uint32_t packet_any(const struct bvh *bvh, const struct bvh
         } else if (__builtin_popcount(cur.mask) < BVH_PACKET_MIN_ACTIVE) {
             for (uint32_t bits = cur.mask; bits; bits &= bits - 1) {
                 int lane = lowest_bit(bits);
+                struct ray_pre rp;
+                packet_lane_ray(packet, lane, &rp);
                 struct wide_ray wr;
-                wide_ray_setup(&pp->rp[lane], packet->t_min[lane], &wr);
+                wide_ray_setup(&rp, packet->t_min[lane], &wr);
                 if (wr.fast ? wide_any_fast(bvh, cur.ref, &wr, packet->t_max[lane])
                             : wide_any_safe(bvh, cur.ref, &wr, packet->t_max[lane]))
                     occluded |= 1u << lane;

@@ -14,11 +14,12 @@
 #include "bvh.h"
 
 static const char usage[] =
-    "usage: embree_bench MODEL RAYS.bin... [--runs R] [--threads N] [--robust]\n"
+    "usage: embree_bench MODEL RAYS.bin... [--runs R] [--threads N] [--robust] [--quality Q]\n"
     "  MODEL     an OBJ file or torus:N (see raybench)\n"
     "  --runs R  timed runs of each tracer after one warm-up, interleaved (default 5)\n"
     "  --threads N  threads of the all-threads figures and builds (default: all CPUs)\n"
-    "  --robust  build Embree's scene with RTC_SCENE_FLAG_ROBUST (its watertight mode)\n";
+    "  --robust  build Embree's scene with RTC_SCENE_FLAG_ROBUST (its watertight mode)\n"
+    "  --quality Q  Embree's build quality: high (default; spatial splits), medium or low\n";
 
 /* ---- Embree: scene, memory, tracing ---------------------------------------------------------- */
 
@@ -42,7 +43,7 @@ struct embree {
 };
 
 static bool embree_build(const struct bench_mesh *mesh, int n_threads, bool robust,
-                         struct embree *e)
+                         enum RTCBuildQuality quality, struct embree *e)
 {
     char config[64];
     snprintf(config, sizeof config, "threads=%d", n_threads);
@@ -61,11 +62,11 @@ static bool embree_build(const struct bench_mesh *mesh, int n_threads, bool robu
     long long bytes_before = atomic_load(&embree_bytes);
     double t0 = bench_now_ms();
     e->scene = rtcNewScene(e->device);
-    rtcSetSceneBuildQuality(e->scene, RTC_BUILD_QUALITY_HIGH);
+    rtcSetSceneBuildQuality(e->scene, quality);
     if (robust)
         rtcSetSceneFlags(e->scene, RTC_SCENE_FLAG_ROBUST);
     RTCGeometry g = rtcNewGeometry(e->device, RTC_GEOMETRY_TYPE_TRIANGLE);
-    rtcSetGeometryBuildQuality(g, RTC_BUILD_QUALITY_HIGH);
+    rtcSetGeometryBuildQuality(g, quality);
     rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, e->vertices, 0,
                                3 * sizeof(float), mesh->n_positions);
     rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, e->indices, 0,
@@ -242,7 +243,9 @@ int main(int argc, char **argv)
     int runs = 5;
     int n_threads = bench_n_cpus();
     bool robust = false;
-    static const struct option long_opts[] = {{"runs", required_argument, NULL, 'r'},
+    enum RTCBuildQuality quality = RTC_BUILD_QUALITY_HIGH;
+    static const struct option long_opts[] = {{"quality", required_argument, NULL, 'q'},
+                                              {"runs", required_argument, NULL, 'r'},
                                               {"threads", required_argument, NULL, 't'},
                                               {"robust", no_argument, NULL, 'R'},
                                               {"help", no_argument, NULL, 'h'},
@@ -253,6 +256,19 @@ int main(int argc, char **argv)
         case 'r': runs = atoi(optarg); break;
         case 't': n_threads = atoi(optarg); break;
         case 'R': robust = true; break;
+        case 'q':
+            if (strcmp(optarg, "high") == 0) {
+                quality = RTC_BUILD_QUALITY_HIGH;
+            } else if (strcmp(optarg, "medium") == 0) {
+                quality = RTC_BUILD_QUALITY_MEDIUM;
+            } else if (strcmp(optarg, "low") == 0) {
+                quality = RTC_BUILD_QUALITY_LOW;
+            } else {
+                fprintf(stderr, "embree_bench: expected --quality high, medium or low, got '%s'\n",
+                        optarg);
+                return 2;
+            }
+            break;
         case 'h': fputs(usage, stdout); return 0;
         default: fputs(usage, stderr); return 2;
         }
@@ -281,8 +297,8 @@ int main(int argc, char **argv)
         }
     }
     printf("model: %s: %u triangles; load average %.2f on %d CPUs; mcpt kernels %s; Embree %s%s\n",
-           model, mesh.n_tris, bench_loadavg(), bench_n_cpus(), bvh_simd_name(), RTC_VERSION_STRING,
-           robust ? " (robust)" : "");
+           model, mesh.n_tris, bench_loadavg(), bench_n_cpus(), bvh_simd_name(),
+           RTC_VERSION_STRING, robust ? " (robust)" : "");
     /* builds, interleaved: mcpt 1 thread, Embree 1 thread, mcpt all, Embree all */
     double b_mcpt[2][64];
     double b_embree[2][64];
@@ -295,7 +311,7 @@ int main(int argc, char **argv)
             bvh_free(bvh);
             bvh = bvh_build(mesh.positions, mesh.indices, mesh.n_tris, threads);
             embree_free(&emb);
-            if (!bvh || !embree_build(&mesh, threads, robust, &emb)) {
+            if (!bvh || !embree_build(&mesh, threads, robust, quality, &emb)) {
                 fprintf(stderr, "embree_bench: build failed\n");
                 return 1;
             }
@@ -311,9 +327,12 @@ int main(int argc, char **argv)
     struct bvh_stats st = bvh_get_stats(bvh);
     double mcpt_bpt = (double)st.bytes / (double)mesh.n_tris;
     double embree_bpt = (double)embree_scene_bytes / (double)mesh.n_tris;
-    printf("build 1 thread: mcpt %.1f ms, Embree high quality %.1f ms: ratio %.2f (< 1: mcpt "
+    const char *quality_name = quality == RTC_BUILD_QUALITY_HIGH     ? "high"
+                               : quality == RTC_BUILD_QUALITY_MEDIUM ? "medium"
+                                                                     : "low";
+    printf("build 1 thread: mcpt %.1f ms, Embree %s quality %.1f ms: ratio %.2f (< 1: mcpt "
            "faster)\n",
-           mcpt_build[0], embree_build_ms[0], mcpt_build[0] / embree_build_ms[0]);
+           mcpt_build[0], quality_name, embree_build_ms[0], mcpt_build[0] / embree_build_ms[0]);
     printf("build %d threads: mcpt %.1f ms, Embree %.1f ms: ratio %.2f\n", n_threads,
            mcpt_build[1], embree_build_ms[1], mcpt_build[1] / embree_build_ms[1]);
     printf("memory: mcpt %.1f bytes/triangle, Embree %.1f; mcpt SAH cost %.2f\n", mcpt_bpt,
@@ -385,7 +404,7 @@ int main(int argc, char **argv)
                "\"mrays_1t\":%.4f,\"mrays_1t_embree\":%.4f,\"mrays_1t_packet\":%.4f,"
                "\"mrays_1t_packet_embree\":%.4f,\"mrays_mt\":%.4f,\"mrays_mt_embree\":%.4f,"
                "\"ratio_1t\":%.4f,\"ratio_packet\":%.4f,\"ratio_mt\":%.4f,\"threads\":%d,"
-               "\"runs\":%d,\"load_avg\":%.2f,\"robust\":%s}\n",
+               "\"runs\":%d,\"load_avg\":%.2f,\"robust\":%s,\"embree_quality\":\"%s\"}\n",
                model, argv[f], mesh.n_tris, occlusion ? "occlusion" : "closest",
                (unsigned long long)rays.n, mcpt_build[0], embree_build_ms[0], mcpt_build[1],
                embree_build_ms[1], mcpt_bpt, embree_bpt, st.sah_cost,
@@ -393,7 +412,7 @@ int main(int argc, char **argv)
                tr[0].sum.t_sum, tr[1].sum.t_sum, (unsigned long long)tr[0].sum.prim_sum,
                (unsigned long long)tr[1].sum.prim_sum, tr[0].mrays_1t, tr[1].mrays_1t,
                tr[2].mrays_1t, tr[3].mrays_1t, tr[0].mrays_mt, tr[1].mrays_mt, r1, r8, r_mt,
-               n_threads, runs, bench_loadavg(), robust ? "true" : "false");
+               n_threads, runs, bench_loadavg(), robust ? "true" : "false", quality_name);
         fflush(stdout);
         for (int k = 0; k < 4; k++) {
             free(prim[k]);
