@@ -34,26 +34,52 @@ struct ray {
     float t_max; /* largest accepted hit parameter; +INFINITY for an unbounded ray */
 }; /* 32 bytes */
 
-/* Parsers report user-input errors here; main prints "file:line:col: error: msg".
- * line == 0 means the error has no line (e.g. the file cannot be opened); col == 0 no column. */
+/* Every failure is reported here; main prints "file:line:col: error: msg" and exits with the
+ * status its kind names.  line == 0 means the error has no line (e.g. the file cannot be
+ * opened); col == 0 no column. */
+enum mcpt_error_kind {
+    MCPT_ERROR_INPUT = 0,   /* bad usage or input the user can fix: exit status 2 */
+    MCPT_ERROR_RUNTIME = 1, /* out of memory, I/O or thread failure: exit status 1 */
+};
+
 struct mcpt_error {
     char file[256];
     int line;
     int col;
     char msg[256];
+    enum mcpt_error_kind kind;
 };
 
-static inline void mcpt_error_set(struct mcpt_error *err, const char *file, int line, int col,
-                                  const char *fmt, ...)
+static inline void mcpt_error_setv(struct mcpt_error *err, enum mcpt_error_kind kind,
+                                   const char *file, int line, int col, const char *fmt,
+                                   va_list ap)
 {
     if (!err)
         return;
     snprintf(err->file, sizeof err->file, "%s", file ? file : "");
     err->line = line;
     err->col = col;
+    err->kind = kind;
+    vsnprintf(err->msg, sizeof err->msg, fmt, ap);
+}
+
+/* A bad-input error (exit status 2): what the user gave, at file:line:col. */
+static inline void mcpt_error_set(struct mcpt_error *err, const char *file, int line, int col,
+                                  const char *fmt, ...)
+{
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(err->msg, sizeof err->msg, fmt, ap);
+    mcpt_error_setv(err, MCPT_ERROR_INPUT, file, line, col, fmt, ap);
+    va_end(ap);
+}
+
+/* A runtime error (exit status 1): out of memory, I/O, threads; file may be NULL or a path. */
+static inline void mcpt_error_runtime(struct mcpt_error *err, const char *file, const char *fmt,
+                                      ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    mcpt_error_setv(err, MCPT_ERROR_RUNTIME, file, 0, 0, fmt, ap);
     va_end(ap);
 }
 
