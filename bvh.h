@@ -1,8 +1,8 @@
 /* bvh.h - bounding volume hierarchy over triangles: binned SAH build (Wald 2007), flattened
  * nodes, triangles stored in BVH order, watertight ray-triangle test (Woop, Benthin, Wald 2013).
- * Two traversal layouts: the scalar binary reference, and an 8-wide layout (SoA child boxes,
- * SoA leaves, SIMD) converted from it, which the renderer uses.  Analytic shapes (spheres,
- * quads, planes) are not in the BVH; trace.c tests them directly. */
+ * Two traversal layouts: the scalar binary reference (bvh.c), and an 8-wide layout (SoA child
+ * boxes, SoA leaves, SIMD; bvh_wide.c) converted from it, which the renderer uses.  Analytic
+ * shapes (spheres, quads, planes) are not in the BVH; trace.c tests them directly. */
 #ifndef MCPT_BVH_H
 #define MCPT_BVH_H
 
@@ -125,7 +125,7 @@ void bvh_packet_set(struct bvh_packet *packet, int lane, const struct ray *ray);
 
 struct bvh_stats bvh_get_stats(const struct bvh *bvh);
 
-/* "avx2" or "scalar": the kernels bvh.c was compiled with. */
+/* "avx2" or "scalar": the kernels bvh_wide.c was compiled with. */
 const char *bvh_simd_name(void);
 
 void bvh_free(struct bvh *bvh);
