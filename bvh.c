@@ -62,6 +62,7 @@
 #define BVH_COST_INTERSECT 0.5f /* C_isect: one triangle test, in units of C_trav */
 #define BVH_N_BINS 16           /* bins per axis */
 #define BVH_MAX_LEAF_TRIS 8     /* a larger node is split even when the SAH prefers a leaf */
+/* BVH_MAX_DEPTH (64, deepest node) is in bvh_internal.h: the wide layout's stacks depend on it */
 #define BVH_PARALLEL_MIN_TRIS 65536 /* fewer: build on one thread (the threads cost more) */
 #define BVH_PARALLEL_BIN_MIN 16384  /* top nodes with more refs share their binning */
 #define BVH_SUBTREES_PER_THREAD 4   /* subtrees handed to the threads, per thread */
