@@ -1,6 +1,7 @@
 # mcpt - a plain Makefile.  `make` builds ./mcpt; `make test` builds and runs the test suite;
 # `make check-sanitize` runs it under ASan + UBSan.  PORTABLE=1 builds without -march=native;
 # WERROR=1 turns warnings into errors (CI).  Objects go to build/ (build-san/ for sanitizers).
+# `make sobol-table` and `make ggx-table` regenerate the two checked-in tables.
 # Each build folder keeps the compiler and flags it was built with in flags.stamp; every object
 # depends on it, so changing CC, OPT_FLAGS, PORTABLE, WERROR or EXTRA_CFLAGS rebuilds all.
 
@@ -34,7 +35,7 @@ TEST_SRCS := $(wildcard tests/*_test.c)
 LIB_OBJS := $(LIB_SRCS:%.c=$(BUILD)/%.o)
 TEST_OBJS := $(TEST_SRCS:%.c=$(BUILD)/%.o)
 
-.PHONY: all test check-sanitize check-valgrind fuzz clean sobol-table gallery install \
+.PHONY: all test check-sanitize check-valgrind fuzz clean sobol-table ggx-table gallery install \
         uninstall bench bench-embree
 all: mcpt
 
@@ -122,6 +123,18 @@ SOBOL_DIRECTIONS ?= ../shared/data/new-joe-kuo-6.21201
 sobol-table:
 	python3 scripts/gen_sobol_table.py $(SOBOL_DIRECTIONS) 16 > sobol_matrices.h.tmp
 	mv sobol_matrices.h.tmp sobol_matrices.h
+
+# Regenerates the checked-in material_ggx_table.inc, the GGX coat albedo table of material.c,
+# with tests/data/trace/ggx_albedo_gen.c (nested adaptive Simpson over material.c's own VNDF
+# warp, G1 and G2; takes minutes).  Only when those functions change.  Fixed flags, not
+# OPT_FLAGS: the generated file must not depend on the machine that ran it.
+GGX_GEN_CFLAGS = -std=c11 -D_DEFAULT_SOURCE -O2 -I.
+ggx-table:
+	@mkdir -p $(BUILD)
+	$(CC) $(GGX_GEN_CFLAGS) -o $(BUILD)/ggx_albedo_gen tests/data/trace/ggx_albedo_gen.c \
+	    material.c sample.c -lm
+	./$(BUILD)/ggx_albedo_gen > material_ggx_table.inc.tmp
+	mv material_ggx_table.inc.tmp material_ggx_table.inc
 
 # The gallery: renders every scene at its default spp (GALLERY_THREADS threads, default 2) and
 # writes docs/gallery.md with docs/gallery/*.png and each render's time (scripts/gallery.sh).
