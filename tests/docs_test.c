@@ -166,8 +166,8 @@ static void scan_file(struct code_index *ix, const char *path, bool is_productio
             const char *q = p;
             while (*q == ' ' || *q == '\t' || *q == '\n')
                 q++;
-            bool is_member = (t > src && t[-1] == '.') || (t > src + 1 && t[-1] == '>' &&
-                                                            t[-2] == '-');
+            bool is_member = (t > src && t[-1] == '.') ||
+                             (t > src + 1 && t[-1] == '>' && t[-2] == '-');
             if (in_directive && !in_define)
                 continue;
             int k = name_idx(ix, t, len);
@@ -382,7 +382,8 @@ Test(docs, theory_names_functions_the_renderer_calls)
             } else if (!d && ix.occurrences[k] == 0) {
                 n_bad++;
                 cr_log_error("%s:%d: '%s' is neither a function nor a name in the production "
-                             "code", DOC_PATH, doc[i].doc_line, name);
+                             "code",
+                             DOC_PATH, doc[i].doc_line, name);
             }
             if (!is_pattern)
                 break;
