@@ -501,10 +501,10 @@ Test(trace, regression_against_reference_image, .timeout = 120)
     const uint32_t spp = 512;
     render(s.ts, &s.film, spp, 2, 1234);
     int n_pixels = s.film.width * s.film.height, n_fail = 0;
-    const double alpha_0 = 0.001;                    /* per channel, two-sided */
-    double z_crit = two_sided_z(alpha_0);            /* 3.29 */
-    double p_pixel = 1.0 - pow(1.0 - alpha_0, 3.0);  /* Sidak's inequality, three channels */
-    int k_max = 0;                                   /* failing pixels allowed */
+    const double alpha_0 = 0.001;                   /* per channel, two-sided */
+    double z_crit = two_sided_z(alpha_0);           /* 3.29 */
+    double p_pixel = 1.0 - pow(1.0 - alpha_0, 3.0); /* Sidak's inequality, three channels */
+    int k_max = 0;                                  /* failing pixels allowed */
     while (binomial_upper_tail(n_pixels, p_pixel, k_max) > 0.001)
         k_max++;
     double z_worst = 0.0;
