@@ -1,6 +1,9 @@
 # mcpt - a plain Makefile.  `make` builds ./mcpt; `make test` builds and runs the test suite;
 # `make check-sanitize` runs it under ASan + UBSan.  PORTABLE=1 builds without -march=native;
 # WERROR=1 turns warnings into errors (CI).  Objects go to build/ (build-san/ for sanitizers).
+# `make sobol-table` and `make ggx-table` regenerate the two checked-in tables.
+# Each build folder keeps the compiler and flags it was built with in flags.stamp; every object
+# depends on it, so changing CC, OPT_FLAGS, PORTABLE, WERROR or EXTRA_CFLAGS rebuilds all.
 
 CC ?= cc
 PKG_CONFIG ?= pkg-config
@@ -32,9 +35,25 @@ TEST_SRCS := $(wildcard tests/*_test.c)
 LIB_OBJS := $(LIB_SRCS:%.c=$(BUILD)/%.o)
 TEST_OBJS := $(TEST_SRCS:%.c=$(BUILD)/%.o)
 
-.PHONY: all test check-sanitize check-valgrind fuzz clean sobol-table gallery install uninstall \
-        bench bench-embree
+.PHONY: all test check-sanitize check-valgrind fuzz clean sobol-table ggx-table gallery install \
+        uninstall bench bench-embree
 all: mcpt
+
+# The flags stamp: $(BUILD)/flags.stamp holds the command objects were compiled with, and every
+# object depends on it.  Where the file is missing or holds another command, the stamp depends
+# on FORCE and is rewritten, so every object is out of date; otherwise it is an ordinary
+# up-to-date file, and a second `make` (or `make -n`) does nothing.
+# $(call stamp_deps,FILE,TEXT): FORCE unless FILE holds TEXT; $(call stamp_write,FILE,TEXT).
+str_eq = $(and $(findstring $(1),$(2)),$(findstring $(2),$(1)))
+stamp_deps = $(if $(call str_eq,$(file <$(1)),$(2)),,FORCE)
+stamp_write = mkdir -p $(dir $(1)) && printf '%s\n' '$(subst ','\'',$(2))' > $(1)
+FLAGS_NOW = $(CC) $(CFLAGS_ALL) $(LDLIBS_ALL)
+FLAGS_STAMP := $(BUILD)/flags.stamp
+
+$(FLAGS_STAMP): $(call stamp_deps,$(FLAGS_STAMP),$(FLAGS_NOW))
+	@$(call stamp_write,$@,$(FLAGS_NOW))
+
+FORCE:
 
 mcpt: $(BUILD)/main.o $(LIB_OBJS)
 	$(CC) $(CFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
@@ -42,7 +61,7 @@ mcpt: $(BUILD)/main.o $(LIB_OBJS)
 $(BUILD)/mcpt: $(BUILD)/main.o $(LIB_OBJS)
 	$(CC) $(CFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
 
-$(BUILD)/%.o: %.c
+$(BUILD)/%.o: %.c $(FLAGS_STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS_ALL) -c $< -o $@
 
@@ -81,12 +100,18 @@ FUZZ_BUILD := build-fuzz
 FUZZ_CFLAGS = -std=c11 -D_DEFAULT_SOURCE -g -O1 -fno-omit-frame-pointer -I. $(EXR_CFLAGS) \
               $(PNG_CFLAGS) -fsanitize=address,undefined -fno-sanitize-recover=undefined -MMD -MP
 FUZZ_LIB_OBJS := $(LIB_SRCS:%.c=$(FUZZ_BUILD)/%.o)
+FUZZ_STAMP := $(FUZZ_BUILD)/flags.stamp
 
-$(FUZZ_BUILD)/%.o: %.c
+FUZZ_FLAGS_NOW = $(FUZZ_CC) $(FUZZ_CFLAGS)
+
+$(FUZZ_STAMP): $(call stamp_deps,$(FUZZ_STAMP),$(FUZZ_FLAGS_NOW))
+	@$(call stamp_write,$@,$(FUZZ_FLAGS_NOW))
+
+$(FUZZ_BUILD)/%.o: %.c $(FUZZ_STAMP)
 	@mkdir -p $(dir $@)
 	$(FUZZ_CC) $(FUZZ_CFLAGS) -fsanitize=fuzzer-no-link -c $< -o $@
 
-$(FUZZ_BUILD)/fuzz_%: fuzz/fuzz_%.c $(FUZZ_LIB_OBJS)
+$(FUZZ_BUILD)/fuzz_%: fuzz/fuzz_%.c $(FUZZ_LIB_OBJS) $(FUZZ_STAMP)
 	$(FUZZ_CC) $(FUZZ_CFLAGS) -fsanitize=fuzzer -o $@ $(filter %.c %.o,$^) $(LDLIBS_ALL)
 
 fuzz: $(FUZZ_BUILD)/fuzz_scene $(FUZZ_BUILD)/fuzz_obj
@@ -98,6 +123,18 @@ SOBOL_DIRECTIONS ?= ../shared/data/new-joe-kuo-6.21201
 sobol-table:
 	python3 scripts/gen_sobol_table.py $(SOBOL_DIRECTIONS) 16 > sobol_matrices.h.tmp
 	mv sobol_matrices.h.tmp sobol_matrices.h
+
+# Regenerates the checked-in material_ggx_table.inc, the GGX coat albedo table of material.c,
+# with tests/data/trace/ggx_albedo_gen.c (nested adaptive Simpson over material.c's own VNDF
+# warp, G1 and G2; takes minutes).  Only when those functions change.  Fixed flags, not
+# OPT_FLAGS: the generated file must not depend on the machine that ran it.
+GGX_GEN_CFLAGS = -std=c11 -D_DEFAULT_SOURCE -O2 -I.
+ggx-table:
+	@mkdir -p $(BUILD)
+	$(CC) $(GGX_GEN_CFLAGS) -o $(BUILD)/ggx_albedo_gen tests/data/trace/ggx_albedo_gen.c \
+	    material.c sample.c -lm
+	./$(BUILD)/ggx_albedo_gen > material_ggx_table.inc.tmp
+	mv material_ggx_table.inc.tmp material_ggx_table.inc
 
 # The gallery: renders every scene at its default spp (GALLERY_THREADS threads, default 2) and
 # writes docs/gallery.md with docs/gallery/*.png and each render's time (scripts/gallery.sh).
@@ -134,10 +171,10 @@ EMBREE_CFLAGS := $(shell $(PKG_CONFIG) --cflags embree3 2>/dev/null)
 EMBREE_LIBS := $(shell $(PKG_CONFIG) --libs embree3 2>/dev/null || echo -lembree3)
 BENCH_CFLAGS = $(filter-out -MMD -MP,$(CFLAGS_ALL))
 
-bench/raybench: bench/raybench.c bench/bench.c bench/bench.h $(BENCH_OBJS)
+bench/raybench: bench/raybench.c bench/bench.c bench/bench.h $(BENCH_OBJS) $(FLAGS_STAMP)
 	$(CC) $(BENCH_CFLAGS) -o $@ bench/raybench.c bench/bench.c $(BENCH_OBJS) -lpthread -lm
 
-bench/embree_bench: bench/embree_bench.c bench/bench.c bench/bench.h $(BENCH_OBJS)
+bench/embree_bench: bench/embree_bench.c bench/bench.c bench/bench.h $(BENCH_OBJS) $(FLAGS_STAMP)
 	$(CC) $(BENCH_CFLAGS) $(EMBREE_CFLAGS) -o $@ bench/embree_bench.c bench/bench.c $(BENCH_OBJS) \
 	    $(EMBREE_LIBS) -lpthread -lm
 

@@ -81,7 +81,7 @@ struct film_checkpoint_info {
     uint64_t scene_hash;    /* FNV-1a 64 of the scene file's bytes */
     uint64_t seed;          /* render seed */
     uint32_t spp;           /* target samples per pixel */
-    uint32_t max_depth;     /* path segments, TRACE_DEPTH_INFINITE allowed */
+    uint32_t max_depth;     /* bounces (0: emission seen directly), TRACE_DEPTH_INFINITE allowed */
     uint32_t sampler;       /* enum sampler_kind */
     uint32_t sample_offset; /* sample index of a pixel's first film sample */
     char scene_path[FILM_CHECKPOINT_PATH_BYTES]; /* as given on the command line */

@@ -456,11 +456,30 @@ static double two_sided_z(double alpha)
     return 0.5 * (lo + hi);
 }
 
+/* P(X > k) for X ~ Binomial(n, p), summed from the top (lgamma), for the test below. */
+static double binomial_upper_tail(int n, double p, int k)
+{
+    double tail = 0.0;
+    for (int j = n; j > k; j--)
+        tail += exp(lgamma(n + 1.0) - lgamma(j + 1.0) - lgamma(n - j + 1.0) + j * log(p) +
+                    (n - j) * log1p(-p));
+    return tail;
+}
+
 /* tests/data/trace/regression.txt at 512 spp against regression-ref.exr (65536 spp, its
  * header gives the command): per pixel and channel z = (m - m_ref) / sqrt(s^2 / n + v_ref),
  * with s^2 the reference's per-sample variance (v_ref n_ref) and v_ref its variance of the
- * mean; each test at the Sidak-corrected level 1 - (1 - 0.01)^(1 / tests), and at least 99.75%
- * of them must pass.  This catches local errors that image means average away. */
+ * mean.  One rule, a count of failing pixels (this catches local errors that image means
+ * average away):
+ * - a pixel fails when any channel has |z| > z_0, z_0 = 3.29 (two-sided alpha_0 = 0.001).  Its
+ *   three channels are correlated; by Sidak's inequality for correlated normals a pixel fails
+ *   with probability at most p = 1 - (1 - alpha_0)^3 = 0.0030.  Pixels are independent (their
+ *   samples are), so the failures are at most Binomial(1024, p) (mean 3.07);
+ * - the test allows k failing pixels, the least k with P(Binomial > k) <= 0.001: k = 10.
+ * Why not a Sidak max-test (no |z| beyond the family-wise 1% level, 4.65): a 512-sample mean
+ * of a skewed pixel (glass, lamp hits by BSDF sampling) is not normal that far out.  Over 300
+ * seeds the worst |z| reached 13 and such a test failed on 10.7% of seeds, while at 3.29 the
+ * normal bound holds: 2.03 failing pixels per image on average (at most 6), this seed 5. */
 Test(trace, regression_against_reference_image, .timeout = 120)
 {
     struct setup s;
@@ -481,11 +500,16 @@ Test(trace, regression_against_reference_image, .timeout = 120)
     cr_assert(ch_n >= 0);
     const uint32_t spp = 512;
     render(s.ts, &s.film, spp, 2, 1234);
-    int n_pixels = s.film.width * s.film.height, n_tests = 3 * n_pixels, n_fail = 0;
-    double alpha = 1.0 - pow(1.0 - 0.01, 1.0 / n_tests); /* Sidak */
-    double z_crit = two_sided_z(alpha);
+    int n_pixels = s.film.width * s.film.height, n_fail = 0;
+    const double alpha_0 = 0.001;                   /* per channel, two-sided */
+    double z_crit = two_sided_z(alpha_0);           /* 3.29 */
+    double p_pixel = 1.0 - pow(1.0 - alpha_0, 3.0); /* Sidak's inequality, three channels */
+    int k_max = 0;                                  /* failing pixels allowed */
+    while (binomial_upper_tail(n_pixels, p_pixel, k_max) > 0.001)
+        k_max++;
     double z_worst = 0.0;
-    for (int i = 0; i < n_pixels; i++)
+    for (int i = 0; i < n_pixels; i++) {
+        double z_pixel = 0.0;
         for (int c = 0; c < 3; c++) {
             double m = film_mean(&s.film.pixels[i], c);
             double m_ref = ref.data[ch_mean[c]][i], v_ref = ref.data[ch_var[c]][i];
@@ -493,13 +517,15 @@ Test(trace, regression_against_reference_image, .timeout = 120)
             double var = v_ref * n_ref / spp + v_ref;
             double z = var > 0.0 ? fabs(m - m_ref) / sqrt(var)
                                  : (fabs(m - m_ref) <= 1e-5 * (1.0 + fabs(m_ref)) ? 0.0 : INFINITY);
-            z_worst = fmax(z_worst, z);
-            n_fail += z > z_crit;
+            z_pixel = fmax(z_pixel, z);
         }
-    cr_log_info("regression: %d of %d pixel channels beyond |z| = %.2f (worst %.2f)", n_fail,
-                n_tests, z_crit, z_worst);
-    cr_assert(n_fail <= (int)(0.0025 * n_tests), "%d of %d pixel channels beyond |z| = %.2f "
-              "(worst %.2f)", n_fail, n_tests, z_crit, z_worst);
+        z_worst = fmax(z_worst, z_pixel);
+        n_fail += z_pixel > z_crit;
+    }
+    cr_log_info("regression: %d of %d pixels beyond |z| = %.2f, %d allowed (worst %.2f)", n_fail,
+                n_pixels, z_crit, k_max, z_worst);
+    cr_assert(n_fail <= k_max, "%d of %d pixels beyond |z| = %.2f, %d allowed (worst %.2f)",
+              n_fail, n_pixels, z_crit, k_max, z_worst);
     image_free(&ref);
     setup_free(&s);
 }
