@@ -9,6 +9,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "checkpoint.h"
 #include "film.h"
 #include "image.h"
 #include "partial.h"
@@ -123,7 +124,7 @@ struct options {
     bool has_range;              /* --sample-range A:B given */
     struct partial_range range;  /* its sample indices */
     uint32_t args_bytes;         /* bytes used in args */
-    char args[FILM_CHECKPOINT_ARGS_BYTES]; /* every option but --resume as "--name[=value]",
+    char args[CHECKPOINT_ARGS_BYTES]; /* every option but --resume as "--name[=value]",
                                               NUL-ended: what a checkpoint stores */
 };
 
@@ -245,7 +246,7 @@ static int parse_args(int argc, char **argv, struct options *o)
         const char *name = argv[optind - 1];
         if (c != OPT_RESUME && !record_option(o, long_opts, c, optarg))
             return usage_error("expected options of at most %d bytes in all, got more",
-                               FILM_CHECKPOINT_ARGS_BYTES);
+                               CHECKPOINT_ARGS_BYTES);
         switch (c) {
         case 'o':
             if (!*optarg)
@@ -617,37 +618,14 @@ static void catch_signals(void)
     sigaction(SIGTERM, &sa, NULL);
 }
 
-/* FNV-1a 64 of the file's bytes (Fowler, Noll, Vo): what a checkpoint stores to recognise the
- * scene it was made from. */
-static bool hash_file(const char *path, uint64_t *hash, struct mcpt_error *err)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        mcpt_error_set(err, path, 0, 0, "expected a readable file, got '%s'", strerror(errno));
-        return false;
-    }
-    uint64_t h = 0xcbf29ce484222325ull; /* FNV-1a 64 offset basis */
-    unsigned char buf[65536];
-    size_t n;
-    while ((n = fread(buf, 1, sizeof buf, f)) > 0)
-        for (size_t i = 0; i < n; i++)
-            h = (h ^ buf[i]) * 0x100000001b3ull; /* FNV-1a 64 prime */
-    bool ok = !ferror(f);
-    fclose(f);
-    if (!ok)
-        mcpt_error_set(err, path, 0, 0, "expected a readable file, got a read error");
-    *hash = h;
-    return ok;
-}
-
 /* --resume: loads the checkpoint's film and settings, then parses its stored options followed
  * by this command line (later words win), so the run goes on as the interrupted one did unless
  * told otherwise.  ck must outlive *o.  Returns -1 to go on, else the exit status. */
 static int resume_options(int argc, char **argv, struct options *o, struct film *film,
-                          struct film_checkpoint_info *ck)
+                          struct checkpoint_info *ck)
 {
     struct mcpt_error err = {0};
-    if (!film_load_checkpoint(o->resume_path, film, ck, &err)) {
+    if (!checkpoint_load(o->resume_path, film, ck, &err)) {
         print_error(&err);
         return EXIT_USAGE;
     }
@@ -676,7 +654,7 @@ static int resume_options(int argc, char **argv, struct options *o, struct film 
 
 /* The resumed run must render exactly what the interrupted one would have: same scene bytes,
  * film, spp target, seed, sampler, depth and sample offset. */
-static bool resume_matches(const struct film_checkpoint_info *ck, uint64_t scene_hash,
+static bool resume_matches(const struct checkpoint_info *ck, uint64_t scene_hash,
                            const struct trace_options *topt, const struct film *film,
                            const struct scene *scene, const char *ckpt_path,
                            struct mcpt_error *err)
@@ -713,12 +691,12 @@ static bool resume_matches(const struct film_checkpoint_info *ck, uint64_t scene
     return !what;
 }
 
-/* Writes the checkpoint of an interrupted render (atomically, see film_save_checkpoint). */
+/* Writes the checkpoint of an interrupted render (atomically, see checkpoint_save). */
 static bool write_checkpoint(const struct options *o, const char *ckpt_path, uint64_t scene_hash,
                              const struct trace_options *topt, const struct film *film,
                              struct mcpt_error *err)
 {
-    struct film_checkpoint_info *ck = calloc(1, sizeof *ck);
+    struct checkpoint_info *ck = calloc(1, sizeof *ck);
     if (!ck) {
         mcpt_error_set(err, ckpt_path, 0, 0, "out of memory writing the checkpoint");
         return false;
@@ -732,7 +710,7 @@ static bool write_checkpoint(const struct options *o, const char *ckpt_path, uin
     snprintf(ck->scene_path, sizeof ck->scene_path, "%s", o->scene_path);
     memcpy(ck->args, o->args, o->args_bytes);
     ck->args_bytes = o->args_bytes;
-    bool ok = film_save_checkpoint(ckpt_path, film, ck, err);
+    bool ok = checkpoint_save(ckpt_path, film, ck, err);
     free(ck);
     return ok;
 }
@@ -1212,7 +1190,7 @@ int main(int argc, char **argv)
     if (status >= 0)
         return status;
     struct film film = {0};
-    struct film_checkpoint_info ck; /* --resume: the film and settings of the interrupted run */
+    struct checkpoint_info ck; /* --resume: the film and settings of the interrupted run */
     if (o.resume_path && (status = resume_options(argc, argv, &o, &film, &ck)) >= 0)
         return status;
 
@@ -1229,7 +1207,7 @@ int main(int argc, char **argv)
         return EXIT_USAGE;
     }
     uint64_t scene_hash = 0; /* recorded in a checkpoint, checked on --resume */
-    if (!hash_file(o.scene_path, &scene_hash, &err)) {
+    if (!checkpoint_hash_file(o.scene_path, &scene_hash, &err)) {
         print_error(&err);
         goto done;
     }
