@@ -13,6 +13,7 @@
 #include "film.h"
 #include "image.h"
 #include "partial.h"
+#include "plot.h"
 #include "scene.h"
 #include "stats.h"
 #include "trace.h"
@@ -725,6 +726,7 @@ struct convergence {
     bool has_ref;
     struct stats_curve curve;  /* one point per (seed, measured spp) */
     struct stats_summary summary;
+    struct plot_sheet sheet;   /* --snapshots: the contact sheet's thumbnails */
 };
 
 static bool is_pow2(uint32_t v) { return v && !(v & (v - 1)); }
@@ -824,8 +826,13 @@ static bool render_passes(const struct options *o, const struct trace_scene *ts,
             done_spp = next;
             bool snapshot = o->snapshots && k == 0;
             if (cv->measuring && (is_pow2(done_spp) || done_spp == spp_final)) {
+                struct stats_image img;
                 if (!stats_curve_add(&cv->curve, f, cv->has_ref ? &cv->ref : NULL, pass.seed,
-                                     done_spp, seconds, snapshot, o->exposure, err))
+                                     done_spp, seconds, &img, err))
+                    goto done;
+                const struct stats_point *p = &cv->curve.points[cv->curve.n_points - 1];
+                if (snapshot && !plot_sheet_add(&cv->sheet, &img, done_spp, p->psnr_db,
+                                                p->source, o->exposure, err))
                     goto done;
                 char suffix[64], snap_path[4200];
                 snprintf(suffix, sizeof suffix, "-spp%0*u.exr", digits, done_spp);
@@ -895,12 +902,12 @@ static bool write_convergence(const struct options *o, const char *exr_path,
         if (!stats_write_json(path, &cv->curve, &cv->summary, err))
             return false;
         path_with_suffix(o->curve_path, ".svg", path, sizeof path);
-        if (!stats_write_svg(path, &cv->curve, &cv->summary, err))
+        if (!plot_write_svg(path, &cv->curve, &cv->summary, err))
             return false;
     }
     path_with_suffix(exr_path, "-contact.png", path, sizeof path);
-    return !o->snapshots || !cv->curve.n_thumbs ||
-           stats_write_contact_sheet(path, &cv->curve, err);
+    return !o->snapshots || !cv->sheet.n_thumbs ||
+           plot_write_contact_sheet(path, &cv->sheet, err);
 }
 
 /* ---- mcpt compare A.exr REF.exr [--heatmap ERR.png] [--json] ---- */
@@ -967,7 +974,7 @@ static int cmd_compare(int argc, char **argv)
     else
         stats_print_metrics(stdout, &m, a_path, ref_path);
     status = EXIT_RUNTIME;
-    if (heatmap && !stats_write_heatmap(heatmap, &a, &ref, &err))
+    if (heatmap && !plot_write_error_heatmap(heatmap, &a, &ref, &err))
         goto fail;
     status = EXIT_OK;
     goto done;
@@ -1324,7 +1331,7 @@ int main(int argc, char **argv)
         snprintf(heatmap_path, sizeof heatmap_path, "%.*s.samples.png",
                  (int)strlen(png_path) - 4, png_path);
     }
-    if (heatmap_path[0] && !stats_write_count_heatmap(heatmap_path, &film, &err)) {
+    if (heatmap_path[0] && !plot_write_count_heatmap(heatmap_path, &film, &err)) {
         print_error(&err);
         goto done;
     }
@@ -1380,6 +1387,7 @@ int main(int argc, char **argv)
 done:
     stats_summary_free(&cv.summary);
     stats_curve_free(&cv.curve);
+    plot_sheet_free(&cv.sheet);
     image_free(&cv.ref_img);
     trace_free(ts);
     film_free(&film);
