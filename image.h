@@ -1,6 +1,8 @@
-/* image.h - OpenEXR (through OpenEXR's C API, OpenEXRCore) and PNG (libpng) reading and writing.
- * The only file that includes openexr.h or png.h.  Writes are atomic: a temporary file in the
- * same folder, then rename(2), so an interrupted write never leaves a truncated image. */
+/* image.h - OpenEXR (through OpenEXR's C API, OpenEXRCore) and PNG (libpng) reading and writing,
+ * and the sRGB encoding of the previews.  The only file that includes openexr.h or png.h.
+ * Writes are atomic (file.h), so an interrupted write never leaves a truncated image.  Errors:
+ * a file that cannot be read or is malformed is bad input; a failed write or an allocation
+ * failure is a runtime error (vec.h). */
 #ifndef MCPT_IMAGE_H
 #define MCPT_IMAGE_H
 
@@ -42,8 +44,17 @@ int image_find_channel(const struct image *img, const char *name);
 /* Finds a string attribute by name; returns its value (owned by img) or NULL. */
 const char *image_find_attr(const struct image *img, const char *name);
 
+/* The 8-bit sRGB encoding (IEC 61966-2-1) of a linear value, clamped to [0, 1] and rounded:
+ * image_srgb_init fills the table of the 256 thresholds once, then image_srgb8 encodes each
+ * value exactly with 8 comparisons (no pow per value).  NaN encodes as 0. */
+struct image_srgb {
+    double t[256]; /* t[k]: the least linear value whose byte is k; t[0] = -inf */
+};
+void image_srgb_init(struct image_srgb *s);
+uint8_t image_srgb8(const struct image_srgb *s, double v);
+
 /* Writes an 8-bit sRGB PNG of linear rgb (interleaved, 3 floats a pixel), multiplied by
- * 2^exposure, then the sRGB transfer function (IEC 61966-2-1), clamped to [0, 1], rounded. */
+ * 2^exposure, then encoded by image_srgb8. */
 bool image_write_png_srgb(const char *path, int width, int height, const float *rgb,
                           float exposure, struct mcpt_error *err);
 

@@ -159,7 +159,7 @@ bool partial_write_exr(const char *path, const struct film *film, const struct p
     bool ok = false;
     if (!img || n_pixels > SIZE_MAX / sizeof(float) / PART_N_CHANNELS ||
         !(planes = malloc(sizeof(float) * n_pixels * PART_N_CHANNELS))) {
-        mcpt_error_set(err, path, 0, 0, "out of memory writing the image");
+        mcpt_error_runtime(err, path, "out of memory writing the image");
         goto done;
     }
     img->width = film->width;
@@ -177,9 +177,9 @@ bool partial_write_exr(const char *path, const struct film *film, const struct p
         for (int k = 0; k < PART_N_VALUES; k++) {
             double x = pixel_value(&film->pixels[i], k);
             if (!(fabs(x) <= FLT_MAX)) {
-                mcpt_error_set(err, path, 0, 0, "expected per-pixel sums within float range "
-                               "(3.4e38) to store them, got %g in '%s' at pixel %zu,%zu", x,
-                               HI_NAMES[k], i % (size_t)film->width, i / (size_t)film->width);
+                mcpt_error_runtime(err, path, "expected per-pixel sums within float range "
+                                   "(3.4e38) to store them, got %g in '%s' at pixel %zu,%zu", x,
+                                   HI_NAMES[k], i % (size_t)film->width, i / (size_t)film->width);
                 goto done;
             }
             /* the double-float pair: hi carries 24 bits, lo the next 24 (Dekker 1971) */
@@ -210,7 +210,7 @@ bool partial_read_exr(const char *path, struct film *film, struct partial_info *
     memset(info, 0, sizeof *info);
     struct image *img = calloc(1, sizeof *img);
     if (!img) {
-        mcpt_error_set(err, path, 0, 0, "out of memory reading the image");
+        mcpt_error_runtime(err, path, "out of memory reading the image");
         return false;
     }
     if (!image_read_exr(path, img, err)) {
@@ -372,8 +372,10 @@ bool partial_merge_files(const char *const *paths, int n_paths, struct film *fil
     struct partial_info part_info;
     struct part_order *order = n_paths > 0 ? malloc(sizeof *order * (size_t)n_paths) : NULL;
     if (!order) {
-        mcpt_error_set(err, "", 0, 0, "%s", n_paths > 0 ? "out of memory"
-                                                        : "expected images to merge, got none");
+        if (n_paths > 0)
+            mcpt_error_runtime(err, NULL, "out of memory");
+        else
+            mcpt_error_set(err, "", 0, 0, "expected images to merge, got none");
         return false;
     }
     /* first pass: each part's first sample index (and every check on its own) */

@@ -37,15 +37,16 @@ uint64_t partial_n_samples(const struct partial_info *info);
  * plus each double of every pixel's film_pixel split into two float channels, hi = (float)x
  * and lo = (float)(x - hi) (sum.R/G/B and sum_lo.R/G/B, sum_sq.*, sum_sq_lo.*, sum_lum_sq.Y,
  * sum_lum_sq_lo.Y, samples_lo, dropped, dropped_lo), and info as the string attributes
- * PARTIAL_ATTR_RANGES and PARTIAL_ATTR_RENDER.  False with *err (file = path) when a sum lies
- * beyond float range (it cannot be stored), when out of memory, or on an I/O failure. */
+ * PARTIAL_ATTR_RANGES and PARTIAL_ATTR_RENDER.  False with *err (runtime; file = path) when a
+ * sum lies beyond float range (it cannot be stored), when out of memory, or on an I/O failure. */
 bool partial_write_exr(const char *path, const struct film *film, const struct partial_info *info,
                        struct mcpt_error *err);
 
 /* Reads an EXR written by partial_write_exr into a new film (free with film_free) and *info.
  * Every value is checked: channels and attributes present, ranges well formed, sums finite,
  * counts whole numbers, and every pixel's n + n_dropped equal to the ranges' sample count (an
- * interrupted render's image fails here).  On failure *film is zeroed and *err names path. */
+ * interrupted render's image fails here).  On failure *film is zeroed and *err names path (bad
+ * input; a runtime error when out of memory). */
 bool partial_read_exr(const char *path, struct film *film, struct partial_info *info,
                       struct mcpt_error *err);
 

@@ -800,3 +800,18 @@ Test(image, png_rgb8_round_trip)
     free(px);
     cr_assert_eq(count_entries(), 1);
 }
+
+/* image_srgb8 on doubles agrees with the reference encoding on a fine ramp over [0, 1] (and
+ * beyond: clamped), and sends NaN and negative values to 0. */
+Test(image, srgb8_matches_reference_on_doubles)
+{
+    struct image_srgb s;
+    image_srgb_init(&s);
+    for (int i = -100; i <= 110000; i++) {
+        double v = i * 1e-5;
+        cr_assert_eq(image_srgb8(&s, v), srgb_byte_ref(v), "v = %.17g", v);
+    }
+    cr_assert_eq(image_srgb8(&s, NAN), 0);
+    cr_assert_eq(image_srgb8(&s, -INFINITY), 0);
+    cr_assert_eq(image_srgb8(&s, INFINITY), 255);
+}

@@ -1,0 +1,151 @@
+/* output.c - the files a render writes and their names (see output.h): the image and its
+ * preview, snapshots, the sample-count map, the convergence curve with its plot and the
+ * contact sheet.  The pixels come from film.c, the pictures from plot.c, the numbers from
+ * stats.c; this file decides only what goes where. */
+#include "output.h"
+
+#include <stdlib.h>
+
+#include "image.h"
+
+/* Copies src to out (out_bytes); false with *err (bad input) when it does not fit. */
+static bool copy_path(char *out, size_t out_bytes, const char *src, struct mcpt_error *err)
+{
+    int len = snprintf(out, out_bytes, "%s", src);
+    if (len < 0 || (size_t)len >= out_bytes) {
+        mcpt_error_set(err, src, 0, 0, "expected a file name of at most %zu bytes, got %d",
+                       out_bytes - 1, len);
+        return false;
+    }
+    return true;
+}
+
+/* "x/out.exr" -> "x/out" + suffix: the extension (a dot after the last slash, not leading the
+ * name) replaced by suffix, or suffix appended where there is none. */
+static bool with_suffix(const char *path, const char *suffix, char *out, size_t out_bytes,
+                        struct mcpt_error *err)
+{
+    const char *slash = strrchr(path, '/');
+    const char *dot = strrchr(path, '.');
+    int len = dot && (!slash || dot > slash + 1) ? (int)(dot - path) : (int)strlen(path);
+    char name[FILE_PATH_BYTES + 64];
+    snprintf(name, sizeof name, "%.*s%s", len, path, suffix);
+    return copy_path(out, out_bytes, name, err);
+}
+
+bool output_paths_init(struct output_paths *p, const char *scene_path, const char *output,
+                       const char *checkpoint_path, const char *heatmap_path, bool is_adaptive,
+                       struct mcpt_error *err)
+{
+    memset(p, 0, sizeof *p);
+    if (output) {
+        if (!copy_path(p->exr, sizeof p->exr, output, err))
+            return false;
+    } else { /* "dir/name.txt" -> "name.exr", here */
+        const char *base = strrchr(scene_path, '/');
+        base = base ? base + 1 : scene_path;
+        const char *dot = strrchr(base, '.');
+        int len = dot && dot != base ? (int)(dot - base) : (int)strlen(base);
+        snprintf(p->exr, sizeof p->exr, "%.*s.exr", len, base);
+    }
+    if (!with_suffix(p->exr, ".png", p->png, sizeof p->png, err))
+        return false;
+    char name[FILE_PATH_BYTES + 8];
+    snprintf(name, sizeof name, "%s.ckpt", p->exr);
+    if (!copy_path(p->checkpoint, sizeof p->checkpoint, checkpoint_path ? checkpoint_path : name,
+                   err))
+        return false;
+    if (heatmap_path)
+        return copy_path(p->heatmap, sizeof p->heatmap, heatmap_path, err);
+    return !is_adaptive || with_suffix(p->exr, ".samples.png", p->heatmap, sizeof p->heatmap, err);
+}
+
+/* The preview of film at png_path: its means, 2^exposure, sRGB. */
+static bool write_png(const struct film *film, const char *png_path, float exposure,
+                      struct mcpt_error *err)
+{
+    size_t n_pixels = (size_t)film->width * (size_t)film->height;
+    float *rgb = malloc(sizeof(float) * 3 * n_pixels);
+    if (!rgb) {
+        mcpt_error_runtime(err, png_path, "out of memory writing the preview");
+        return false;
+    }
+    for (size_t i = 0; i < n_pixels; i++)
+        for (int c = 0; c < 3; c++)
+            rgb[3 * i + c] = (float)film_mean(&film->pixels[i], c);
+    bool ok = image_write_png_srgb(png_path, film->width, film->height, rgb, exposure, err);
+    free(rgb);
+    return ok;
+}
+
+/* The EXR of every render: R, G, B, variance of the mean per channel, sample count. */
+static bool write_exr(const struct film *film, const char *exr_path, struct mcpt_error *err)
+{
+    static const char *names[7] = {"R", "G", "B", "variance.R", "variance.G", "variance.B",
+                                   "samples"};
+    size_t n_pixels = (size_t)film->width * (size_t)film->height;
+    struct image img = {.width = film->width, .height = film->height, .n_channels = 7};
+    float *planes = malloc(sizeof(float) * n_pixels * 7);
+    if (!planes) {
+        mcpt_error_runtime(err, exr_path, "out of memory writing the image");
+        return false;
+    }
+    for (int c = 0; c < 7; c++) {
+        snprintf(img.names[c], sizeof img.names[c], "%s", names[c]);
+        img.data[c] = planes + (size_t)c * n_pixels;
+    }
+    film_resolve(film, img.data, img.data + 3, img.data[6]);
+    bool ok = image_write_exr(exr_path, &img, err);
+    free(planes);
+    return ok;
+}
+
+bool output_write_image(const struct output_paths *p, const struct film *film,
+                        const struct partial_info *part, float exposure, struct mcpt_error *err)
+{
+    bool ok = part ? partial_write_exr(p->exr, film, part, err) : write_exr(film, p->exr, err);
+    return ok && write_png(film, p->png, exposure, err);
+}
+
+bool output_write_preview(const struct output_paths *p, const struct film *film, float exposure,
+                          struct mcpt_error *err)
+{
+    return write_png(film, p->png, exposure, err);
+}
+
+bool output_write_snapshot(const struct output_paths *p, const struct film *film, uint32_t spp,
+                           uint32_t spp_final, float exposure, struct mcpt_error *err)
+{
+    char suffix[64], exr_path[FILE_PATH_BYTES], png_path[FILE_PATH_BYTES];
+    int digits = snprintf(NULL, 0, "%u", spp_final);
+    snprintf(suffix, sizeof suffix, "-spp%0*u.exr", digits, spp);
+    if (!with_suffix(p->exr, suffix, exr_path, sizeof exr_path, err) ||
+        !with_suffix(exr_path, ".png", png_path, sizeof png_path, err))
+        return false;
+    return write_exr(film, exr_path, err) && write_png(film, png_path, exposure, err);
+}
+
+bool output_write_heatmap(const struct output_paths *p, const struct film *film,
+                          struct mcpt_error *err)
+{
+    return !p->heatmap[0] || plot_write_count_heatmap(p->heatmap, film, err);
+}
+
+bool output_write_convergence(const struct output_paths *p, const char *curve_path,
+                              const struct stats_curve *c, const struct stats_summary *s,
+                              const struct plot_sheet *sheet, struct mcpt_error *err)
+{
+    char path[FILE_PATH_BYTES];
+    if (curve_path) {
+        if (!stats_write_csv(curve_path, c, err) ||
+            !with_suffix(curve_path, ".json", path, sizeof path, err) ||
+            !stats_write_json(path, c, s, err) ||
+            !with_suffix(curve_path, ".svg", path, sizeof path, err) ||
+            !plot_write_svg(path, c, s, err))
+            return false;
+    }
+    if (!sheet->n_thumbs)
+        return true;
+    return with_suffix(p->exr, "-contact.png", path, sizeof path, err) &&
+           plot_write_contact_sheet(path, sheet, err);
+}

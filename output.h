@@ -1,0 +1,58 @@
+/* output.h - the files a render writes, and their names.  From the image's path OUT.exr (-o, or
+ * the scene's name) follow the PNG preview OUT.png, the snapshots OUT-sppN.exr/.png, the contact
+ * sheet OUT-contact.png, the sample-count map OUT.samples.png and the checkpoint OUT.exr.ckpt;
+ * from --curve CSV its .json and .svg.  Every file is written atomically (file.h).  All the
+ * names are fixed here before a render starts, so that they can be checked before it. */
+#ifndef MCPT_OUTPUT_H
+#define MCPT_OUTPUT_H
+
+#include "file.h"
+#include "film.h"
+#include "partial.h"
+#include "plot.h"
+#include "stats.h"
+
+/* The names of a render's files; "" where there is none. */
+struct output_paths {
+    char exr[FILE_PATH_BYTES];        /* the image: R, G, B, variance.R/G/B, samples */
+    char png[FILE_PATH_BYTES];        /* its sRGB preview */
+    char checkpoint[FILE_PATH_BYTES]; /* where an interrupted render saves its state */
+    char heatmap[FILE_PATH_BYTES];    /* the sample-count map, or "" */
+};
+
+/* Names the files: exr = output, else the scene's base name with .exr in the current folder
+ * ("dir/name.txt" -> "name.exr"); png = exr with its extension replaced by .png (appended when
+ * it has none); checkpoint = checkpoint_path, else exr + ".ckpt"; heatmap = heatmap_path, else
+ * OUT.samples.png for an adaptive render, else none.  False with *err (bad input, file =
+ * the path) when a name would not fit in FILE_PATH_BYTES. */
+bool output_paths_init(struct output_paths *p, const char *scene_path, const char *output,
+                       const char *checkpoint_path, const char *heatmap_path, bool is_adaptive,
+                       struct mcpt_error *err);
+
+/* Writes the film as p->exr and p->png: with part NULL the EXR of every render (R, G, B,
+ * variance of the mean per channel, sample count), else the partial render's EXR with its
+ * sums and ranges (partial_write_exr); the PNG is the preview at exposure (stops).  False with
+ * *err (runtime) on failure. */
+bool output_write_image(const struct output_paths *p, const struct film *film,
+                        const struct partial_info *part, float exposure, struct mcpt_error *err);
+
+/* Rewrites only the preview p->png from the film as it stands. */
+bool output_write_preview(const struct output_paths *p, const struct film *film, float exposure,
+                          struct mcpt_error *err);
+
+/* Writes the snapshot of a render at spp of spp_final samples per pixel: OUT-sppN.exr and
+ * OUT-sppN.png, N zero-padded to the digits of spp_final. */
+bool output_write_snapshot(const struct output_paths *p, const struct film *film, uint32_t spp,
+                           uint32_t spp_final, float exposure, struct mcpt_error *err);
+
+/* Writes the sample-count map p->heatmap (plot_write_count_heatmap); true when there is none. */
+bool output_write_heatmap(const struct output_paths *p, const struct film *film,
+                          struct mcpt_error *err);
+
+/* The convergence files: with curve_path, the CSV there and its .json and .svg beside it; with
+ * a non-empty sheet, the contact sheet OUT-contact.png. */
+bool output_write_convergence(const struct output_paths *p, const char *curve_path,
+                              const struct stats_curve *c, const struct stats_summary *s,
+                              const struct plot_sheet *sheet, struct mcpt_error *err);
+
+#endif
