@@ -487,12 +487,8 @@ static bool light_is_delta(const struct trace_scene *ts, uint32_t light_idx)
 static float sphere_cone_pdf(const struct sphere *s, vec3 ref_p)
 {
     float dist2 = v3_dot(v3_sub(ref_p, s->center), v3_sub(ref_p, s->center));
-    float sin2_theta_max = s->radius * s->radius / dist2;
-    float cos_theta_max = sqrtf(fmaxf(0.0f, 1.0f - sin2_theta_max));
-    float one_minus_cos = 1.0f - cos_theta_max;
-    if (sin2_theta_max < 0.00068523f) /* sin^2(1.5 deg): Taylor expansion keeps precision */
-        one_minus_cos = sin2_theta_max / 2.0f;
-    return 1.0f / (2.0f * MCPT_PI * one_minus_cos);
+    struct sample_cone cone = sample_cone_from_sin2(s->radius * s->radius / dist2);
+    return pdf_uniform_cone(&cone);
 }
 
 static vec3 sphere_ref_origin(const struct sphere *s, const struct surface *ref)
@@ -591,13 +587,9 @@ bool trace_sample_light(const struct trace_scene *ts, uint32_t light_idx,
             /* cone sampling, PBRT 4e, ch. 6, "Spheres" */
             float sin2_theta_max = s->radius * s->radius / dist2;
             float sin_theta_max = sqrtf(sin2_theta_max);
-            float cos_theta_max = sqrtf(fmaxf(0.0f, 1.0f - sin2_theta_max));
-            float cos_theta = (cos_theta_max - 1.0f) * u.x + 1.0f;
-            float sin2_theta = 1.0f - cos_theta * cos_theta;
-            if (sin2_theta_max < 0.00068523f) { /* sin^2(1.5 deg): Taylor expansion */
-                sin2_theta = sin2_theta_max * u.x;
-                cos_theta = sqrtf(1.0f - sin2_theta);
-            }
+            struct sample_cone cone = sample_cone_from_sin2(sin2_theta_max);
+            float cos_theta, sin2_theta;
+            sample_uniform_cone_theta(u.x, &cone, &cos_theta, &sin2_theta);
             /* angle alpha from the centre to the sampled point, seen from the sphere centre */
             float cos_alpha = sin2_theta / sin_theta_max +
                               cos_theta * sqrtf(fmaxf(0.0f, 1.0f - sin2_theta / sin2_theta_max));
