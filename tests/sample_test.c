@@ -1,6 +1,7 @@
 /* tests/sample_test.c - sample.c: PCG32 against O'Neill's reference output, stream jumps,
  * the seeding rule (values depend on seed, pixel, sample and dimension only), warps' moments,
- * chi-square fits (tests/chi2.h) and inverses, the power heuristic (Veach 1997, sec. 9.2.4);
+ * chi-square fits (tests/chi2.h) and inverses, narrow cones (PBRT 4e, ch. 6, "Spheres"), the
+ * alias method (Walker 1977; Vose 1991), the power heuristic (Veach 1997, sec. 9.2.4);
  * the samplers: Sobol' closed forms against Joe & Kuo's matrices, (0,m,2)-nets and 1D strata
  * of power-of-two prefixes kept by Owen scrambling (Burley 2020), multi-jittered sets (Kensler
  * 2013), decorrelated padding; and, through trace.c, the adaptive stopping rule on synthetic
@@ -554,6 +555,55 @@ Test(sample, narrow_cone_keeps_precision)
     struct sample_cone wide_cos = sample_cone_from_cos(sqrtf(1.0f - 0.001f));
     cr_assert(!wide_sin2.is_narrow);
     cr_assert_eq(pdf_uniform_cone(&wide_sin2), pdf_uniform_cone(&wide_cos));
+}
+
+/* ---- discrete distributions: the alias method ---- */
+
+/* The alias table (Walker 1977; Vose 1991) picks index i with probability w_i / sum w: over a
+ * uniform grid of M values of u the frequencies match the pmfs to within n / M (the picks are
+ * unions of intervals of u), zero weights are never picked, and random u pass a chi-square
+ * test; all-zero weights give the uniform distribution. */
+Test(sample, alias_table_frequencies)
+{
+    const double w[7] = {1.0, 0.0, 3.0, 0.5, 2.5, 0.0, 1e-3};
+    const uint32_t n = 7;
+    struct sample_alias_bin bins[7];
+    cr_assert(sample_alias_build(w, n, bins));
+    const uint32_t M = 1u << 20;
+    uint64_t count[7] = {0};
+    for (uint32_t k = 0; k < M; k++) {
+        float pmf;
+        uint32_t i = sample_alias_pick(bins, n, ((float)k + 0.5f) / (float)M, &pmf);
+        cr_assert(i < n);
+        cr_assert_eq(pmf, bins[i].pmf);
+        count[i]++;
+    }
+    double total = 7.001;
+    for (uint32_t i = 0; i < n; i++) {
+        cr_assert_float_eq(bins[i].pmf, w[i] / total, 1e-7);
+        cr_assert(fabs((double)count[i] / M - w[i] / total) <= (double)n / M + 1e-6,
+                  "bin %u: frequency %f, pmf %f", i, (double)count[i] / M, w[i] / total);
+        if (w[i] == 0.0)
+            cr_assert_eq(count[i], 0u);
+    }
+    struct pcg32 rng;
+    sample_pcg32_seed(&rng, 17, 4);
+    uint64_t observed[7] = {0};
+    double expected[7];
+    const int draws = 1000000;
+    for (int k = 0; k < draws; k++)
+        observed[sample_alias_pick(bins, n, sample_pcg32_float(&rng), NULL)]++;
+    for (uint32_t i = 0; i < n; i++)
+        expected[i] = draws * w[i] / total;
+    struct chi2_result r;
+    chi2_counts(expected, observed, n, &r);
+    cr_assert(chi2_accept(&r, 1), "%s", r.msg);
+    const double zeros[3] = {0.0, 0.0, 0.0};
+    cr_assert(sample_alias_build(zeros, 3, bins));
+    for (int i = 0; i < 3; i++)
+        cr_assert_float_eq(bins[i].pmf, 1.0f / 3.0f, 1e-7f);
+    const double negative[2] = {1.0, -1.0};
+    cr_assert(!sample_alias_build(negative, 2, bins), "negative weights are refused");
 }
 
 /* ---- adaptive sampling: the stopping rule ---- */
