@@ -7,7 +7,8 @@
  *   L += beta (1/N) sum_j f |cos theta_i| Le / (pmf pdf_light) w_light   (N light samples)
  *   beta *= f |cos theta_i| / pdf_bsdf                    (the next direction)
  * with the power heuristic over the sample counts (Veach 1997, sec. 9.2.4, eq. 9.13)
- *   w_light = (N pmf pdf_light)^2 / ((N pmf pdf_light)^2 + pdf_bsdf^2), w_bsdf = 1 - w_light;
+ *   w_light = (N pmf pdf_light)^2 / ((N pmf pdf_light)^2 + pdf_bsdf^2),
+ *   w_bsdf = pdf_bsdf^2 / (pdf_bsdf^2 + (N pmf pdf_light)^2)  (both densities at one direction);
  * the teaching estimators (--direct) drop one strategy or sample directions independently of
  * the BSDF.  Russian roulette on the throughput or with a fixed probability (PBRT 4e, ch. 13,
  * "A Better Path Tracer").  Bounces: 0 = emission seen directly, 1 = direct light, ...
