@@ -141,13 +141,34 @@ vec2 sample_invert_uniform_hemisphere(vec3 w);
 vec3 sample_uniform_sphere(vec2 u);
 float pdf_uniform_sphere(void); /* 1 / (4 pi), per steradian */
 vec2 sample_invert_uniform_sphere(vec3 w);
-/* Uniform directions in the cone about +z of half-angle theta_max (cos_theta_max in [-1, 1)):
- * the directions to a sphere seen from outside it, PBRT 4e, ch. 6, "Spheres". */
-vec3 sample_uniform_cone(vec2 u, float cos_theta_max);
-float pdf_uniform_cone(float cos_theta_max); /* 1 / (2 pi (1 - cos_theta_max)), per sr */
-vec2 sample_invert_uniform_cone(vec3 w, float cos_theta_max);
-/* Uniform barycentrics (b0, b1) on a triangle, square-root warp, PBRT 4e, ch. 6, "Triangles"
- * (b2 = 1 - b0 - b1); pdf = 1 / area per unit area. */
+/* A cone of directions about +z with half-angle theta_max.  For a narrow cone 1 - cos theta_max
+ * cancels in float, so a cone made from sin^2 theta_max below sin^2(1.5 deg) uses the Taylor
+ * expansions 1 - cos theta_max = sin^2 theta_max / 2 and sin^2 theta = u0 sin^2 theta_max, as
+ * PBRT 4e samples spheres (ch. 6, "Spheres"). */
+struct sample_cone {
+    float cos_theta_max;     /* cos theta_max, in [-1, 1) */
+    float sin2_theta_max;    /* sin^2 theta_max */
+    float one_minus_cos_max; /* 1 - cos theta_max; sin^2 theta_max / 2 for a narrow cone */
+    bool is_narrow;          /* made from sin^2 theta_max < sin^2(1.5 deg): Taylor expansions */
+}; /* 16 bytes */
+/* The cone of any half-angle, from cos_theta_max in [-1, 1). */
+struct sample_cone sample_cone_from_cos(float cos_theta_max);
+/* The cone of half-angle theta_max <= 90 deg from sin2_theta_max in (0, 1]: seen from a point at
+ * distance d > r, a sphere of radius r fills the cone with sin^2 theta_max = r^2 / d^2. */
+struct sample_cone sample_cone_from_sin2(float sin2_theta_max);
+/* Uniform directions in the cone: cos theta uniform in [cos theta_max, 1] (solid angle is
+ * linear in cos theta), phi = 2 pi u1; PBRT 4e, ch. A.5, "Sampling Multidimensional Functions".
+ * sample_uniform_cone_theta is its polar part alone: cos theta and sin^2 theta from u0, for the
+ * sphere sampler (shape.c), which turns theta into a point on the sphere. */
+void sample_uniform_cone_theta(float u0, const struct sample_cone *cone, float *cos_theta,
+                               float *sin2_theta);
+vec3 sample_uniform_cone(vec2 u, const struct sample_cone *cone);
+float pdf_uniform_cone(const struct sample_cone *cone); /* 1 / (2 pi (1 - cos theta_max)), per sr */
+vec2 sample_invert_uniform_cone(vec3 w, const struct sample_cone *cone);
+/* Uniform barycentrics (b0, b1) on a triangle by the square-root warp b0 = 1 - sqrt(u0),
+ * b1 = u1 sqrt(u0) (b2 = 1 - b0 - b1): PBRT 3e, ch. 13, "Sampling a Triangle" (PBRT 4e's
+ * SampleUniformTriangle, ch. 6, "Triangles", uses another map, which shifts points along the
+ * diagonal); pdf = 1 / area per unit area. */
 vec2 sample_uniform_triangle(vec2 u);
 vec2 sample_invert_uniform_triangle(vec2 b);
 

@@ -1,6 +1,7 @@
 /* trace.h - the path-tracing integrator and the tile-scheduled render loop.
- * trace_prepare turns a loaded scene into what rendering needs (BVH, camera, light table);
- * trace_render adds samples to a film; trace_radiance estimates the radiance along one ray. */
+ * trace_prepare turns a loaded scene into what rendering needs (BVH, camera, light table of
+ * light.h); trace_render adds samples to a film; trace_radiance estimates the radiance along one
+ * ray.  Depths count bounces (scattering events): 0 = emission seen directly, 1 = direct light. */
 #ifndef MCPT_TRACE_H
 #define MCPT_TRACE_H
 
@@ -15,10 +16,11 @@
 #define TRACE_DEPTH_CAP 1024u /* hard cap on bounces, whatever max_depth says */
 #define TRACE_TILE_SIZE 16    /* tile edge in pixels */
 
-struct trace_scene; /* opaque: scene + BVH + camera + light-selection table */
+struct trace_scene; /* opaque: scene + BVH + camera + light table */
 
 /* Builds the BVH (with n_threads) and the light table for scene, which must outlive the result.
- * Returns NULL and fills *err on failure (bad camera, out of memory). */
+ * Returns NULL and fills *err on failure: a bad-input error for a bad camera or a light of
+ * non-finite power (light_table_build), a runtime error when memory runs out. */
 struct trace_scene *trace_prepare(const struct scene *scene, int n_threads,
                                   struct mcpt_error *err);
 void trace_free(struct trace_scene *ts);
@@ -88,44 +90,15 @@ struct trace_result {
 bool trace_render(const struct trace_scene *ts, const struct trace_options *opt, struct film *film,
                   struct trace_result *result, struct mcpt_error *err);
 
-/* Radiance estimate along the camera ray of (pixel px, py; sample sampler), Kajiya 1986 eq. 1
- * solved by path tracing with the estimator opt->direct (NEE and MIS by default), keeping the
- * bounces opt->split asks for.  n_rays is incremented by rays traced. */
+/* Radiance estimate along ray (a camera ray), Kajiya 1986 eq. 1 solved by path tracing with the
+ * estimator opt->direct (NEE and MIS by default), up to opt->max_depth bounces, keeping the
+ * bounces opt->split asks for.  sampler is the camera sample's, past its pixel and lens
+ * dimensions; the path reads its bounce dimensions from it (sample.h).  *n_rays is incremented
+ * by the rays traced. */
 vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *opt,
                     struct ray ray, struct sampler *sampler, uint64_t *n_rays);
 
 /* The camera ray of film position (px, py) for this sample's lens dimensions. */
 struct ray trace_camera_ray(const struct trace_scene *ts, float px, float py, vec2 u_lens);
-
-/* ---- lights (exposed for tests: chi-square of light sampling, pmfs) ----
- * The light table holds the scene's lights (scene->lights, in order) followed by the sky when
- * it is not black; next-event estimation picks one by power with an alias table. */
-
-/* Number of entries in the light table; the sky, if present, is the last. */
-uint32_t trace_n_lights(const struct trace_scene *ts);
-/* Probability with which next-event estimation picks light light_idx. */
-float trace_light_pmf(const struct trace_scene *ts, uint32_t light_idx);
-
-/* A light sample seen from a reference point. */
-struct trace_light_sample {
-    vec3 wi;           /* unit direction from the reference point to the light point */
-    vec3 Le;           /* radiance arriving along -wi (intensity / dist^2 for point lights) */
-    float pdf_sa;      /* solid-angle density of wi; 0 for a delta (point) light */
-    bool is_delta;     /* point light: no MIS */
-    struct ray shadow; /* from the offset reference point to the offset light point */
-};
-
-/* Samples light light_idx from the surface point ref with uniforms u: area lights uniformly by
- * area (triangles, quads, and spheres seen from inside), spheres seen from outside by their
- * cone of directions, the sky cosine-weighted about n_sky (the shading normal turned to the side
- * being lit).  False when the sample carries no light (back of a one-sided emitter, degenerate
- * geometry). */
-bool trace_sample_light(const struct trace_scene *ts, uint32_t light_idx,
-                        const struct surface *ref, vec3 n_sky, vec2 u,
-                        struct trace_light_sample *ls);
-/* The solid-angle density with which trace_sample_light picks direction wi (unit) from ref;
- * 0 where light light_idx does not lie along wi, and for point lights. */
-float trace_light_pdf(const struct trace_scene *ts, uint32_t light_idx,
-                      const struct surface *ref, vec3 n_sky, vec3 wi);
 
 #endif

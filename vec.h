@@ -142,6 +142,11 @@ static inline vec3 v3_from_local(vec3 l, vec3 t, vec3 b, vec3 n)
 {
     return v3_add(v3_add(v3_scale(t, l.x), v3_scale(b, l.y)), v3_scale(n, l.z));
 }
+/* World-space vector to the local frame (t, b, n): the inverse of v3_from_local. */
+static inline vec3 v3_to_local(vec3 w, vec3 t, vec3 b, vec3 n)
+{
+    return (vec3){v3_dot(w, t), v3_dot(w, b), v3_dot(w, n)};
+}
 
 /* Floating-point error bounds, PBRT 4e, ch. 6, "Managing Rounding Error":
  * gamma(n) = n eps / (1 - n eps), eps = 2^-24 (half an ulp of 1). */

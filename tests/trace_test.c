@@ -11,8 +11,6 @@
  *   = full; shading normals never leak light through a surface.
  * - The same scene at scale 1e-4 and 1e4 gives the same image (robust ray offsets, PBRT 4e,
  *   ch. 6, "Robust Spawned Ray Origins").
- * - Light sampling (triangle, quad, sphere cone and inside, sky) by chi-square against
- *   trace_light_pdf; light selection by power (Walker/Vose alias table, sample.c).
  * - Per-pixel Z-test with Sidak correction against a stored 65536-spp reference (as Mitsuba's
  *   render tests do): at least 99.75% of the pixel channels pass.
  * - Images are bit-identical for 1 and 2 threads and for any split of the samples into calls. */
@@ -20,7 +18,6 @@
 
 #include <stdlib.h>
 
-#include "chi2.h"
 #include "film.h"
 #include "image.h"
 #include "scene.h"
@@ -528,172 +525,6 @@ Test(trace, regression_against_reference_image, .timeout = 120)
               n_fail, n_pixels, z_crit, k_max, z_worst);
     image_free(&ref);
     setup_free(&s);
-}
-
-/* ---- lights ---- */
-
-/* A light scene built in code: a two-sided emissive triangle, quad, sphere (seen from outside)
- * and sphere enclosing the reference point, and a gradient sky. */
-static vec3 lt_positions[3] = {{-1.0f, -1.0f, 1.0f}, {2.0f, -1.0f, 1.5f}, {-1.0f, 2.0f, 1.0f}};
-static struct scene_tri lt_tris[1] = {{.v = {0, 1, 2}, .vn = {-1, -1, -1}, .vt = {-1, -1, -1}}};
-static struct material lt_materials[2];
-static struct sphere lt_spheres[2];
-static struct quad lt_quads[1];
-static struct light lt_lights[4];
-
-static struct scene light_scene(void)
-{
-    lt_materials[0] = (struct material){.kind = MAT_DIFFUSE, .Le = v3(1.0f, 2.0f, 3.0f),
-                                        .two_sided_emission = true};
-    lt_materials[1] = (struct material){.kind = MAT_DIFFUSE, .Le = v3(0.5f, 0.5f, 0.5f),
-                                        .two_sided_emission = true};
-    lt_spheres[0] = (struct sphere){.center = v3(0.5f, 0.3f, 2.5f), .radius = 0.7f};
-    lt_spheres[1] = (struct sphere){.center = v3(0.1f, -0.2f, 0.2f), .radius = 1.0f,
-                                    .mat_idx = 1};
-    lt_quads[0] = (struct quad){.corner = v3(-0.5f, -2.0f, 0.3f), .e1 = v3(1.0f, 0.0f, 0.2f),
-                                .e2 = v3(0.0f, 0.3f, 1.0f)};
-    lt_lights[0] = (struct light){.kind = LIGHT_TRIANGLE, .prim_idx = 0};
-    lt_lights[1] = (struct light){.kind = LIGHT_QUAD, .prim_idx = 0};
-    lt_lights[2] = (struct light){.kind = LIGHT_SPHERE, .prim_idx = 0};
-    lt_lights[3] = (struct light){.kind = LIGHT_SPHERE, .prim_idx = 1};
-    struct scene s = {
-        .camera = {.eye = v3(0, 0, 5), .look_at = v3(0, 0, 0), .up = v3(0, 1, 0),
-                   .fov_deg = 40.0f},
-        .width = 4, .height = 4,
-        .materials = lt_materials, .n_materials = 2,
-        .positions = lt_positions, .n_positions = 3,
-        .tris = lt_tris, .n_tris = 1,
-        .spheres = lt_spheres, .n_spheres = 2,
-        .quads = lt_quads, .n_quads = 1,
-        .lights = lt_lights, .n_lights = 4,
-        .sky = {.kind = SKY_GRADIENT, .horizon = v3(1, 1, 1), .zenith = v3(0.2f, 0.3f, 1.0f)},
-    };
-    return s;
-}
-
-struct light_ctx {
-    const struct trace_scene *ts;
-    uint32_t light_idx;
-    struct surface ref;
-    vec3 n_sky;
-};
-
-static bool light_draw(void *ctx, const float u[3], vec3 *w)
-{
-    struct light_ctx *c = ctx;
-    struct trace_light_sample ls;
-    if (!trace_sample_light(c->ts, c->light_idx, &c->ref, c->n_sky, (vec2){u[0], u[1]}, &ls))
-        return false;
-    *w = ls.wi;
-    return true;
-}
-
-static double light_density(void *ctx, vec3 w)
-{
-    struct light_ctx *c = ctx;
-    return trace_light_pdf(c->ts, c->light_idx, &c->ref, c->n_sky, w);
-}
-
-/* Chi-square (tests/chi2.h) of the directions trace_sample_light draws against
- * trace_light_pdf, for a triangle and a quad (uniform area, converted to solid angle), a sphere
- * seen from outside (cone sampling) and from inside (uniform area), and the sky (cosine about
- * n_sky); each pdf integrates to 1 (Bonferroni over the 5 tests). */
-Test(trace, chi2_light_sampling, .timeout = 60)
-{
-    struct scene s = light_scene();
-    struct mcpt_error err;
-    struct trace_scene *ts = trace_prepare(&s, 1, &err);
-    cr_assert(ts, "%s", err.msg);
-    cr_assert_eq(trace_n_lights(ts), 5u, "four lights and the sky");
-    struct surface ref = {.p = v3(0, 0, 0), .p_error = v3(0, 0, 0), .ng = v3(0, 0, 1),
-                          .ns = v3(0, 0, 1)};
-    vec3 n_sky = v3_normalize(v3(0.3f, 0.2f, 1.0f));
-    for (uint32_t k = 0; k < 5; k++) {
-        struct light_ctx c = {ts, k, ref, n_sky};
-        struct chi2_spec spec = chi2_sphere(light_draw, light_density, &c);
-        spec.n_samples = 500000;
-        struct chi2_result r;
-        chi2_run(&spec, &r);
-        cr_assert(chi2_accept(&r, 5), "light %u: %s", k, r.msg);
-        cr_assert(fabs(r.pdf_integral - 1.0) < 2e-3, "light %u: pdf integrates to %f", k,
-                  r.pdf_integral);
-    }
-    trace_free(ts);
-}
-
-/* Light selection is proportional to power: pmf_i / pmf_j = Phi_i / Phi_j with Phi = pi A Le
- * per side for the area lights (luminance of Le), and the pmfs sum to 1. */
-Test(trace, light_pmf_proportional_to_power)
-{
-    struct scene s = light_scene();
-    s.sky.kind = SKY_NONE;
-    struct mcpt_error err;
-    struct trace_scene *ts = trace_prepare(&s, 1, &err);
-    cr_assert(ts);
-    cr_assert_eq(trace_n_lights(ts), 4u);
-    vec3 e1 = v3_sub(lt_positions[1], lt_positions[0]);
-    vec3 e2 = v3_sub(lt_positions[2], lt_positions[0]);
-    double lum0 = v3_luminance(lt_materials[0].Le), lum1 = v3_luminance(lt_materials[1].Le);
-    double phi[4] = {
-        2.0 * MCPT_PI * 0.5 * v3_length(v3_cross(e1, e2)) * lum0,
-        2.0 * MCPT_PI * v3_length(v3_cross(lt_quads[0].e1, lt_quads[0].e2)) * lum0,
-        2.0 * MCPT_PI * 4.0 * MCPT_PI * 0.7 * 0.7 * lum0,
-        2.0 * MCPT_PI * 4.0 * MCPT_PI * 1.0 * lum1,
-    };
-    double total = phi[0] + phi[1] + phi[2] + phi[3], pmf_sum = 0.0;
-    for (uint32_t k = 0; k < 4; k++) {
-        cr_assert_float_eq(trace_light_pmf(ts, k), phi[k] / total, 1e-5);
-        pmf_sum += trace_light_pmf(ts, k);
-    }
-    cr_assert_float_eq(pmf_sum, 1.0, 1e-5);
-    trace_free(ts);
-}
-
-/* The alias table (Walker 1977; Vose 1991) picks index i with probability w_i / sum w: over a
- * uniform grid of M values of u the frequencies match the pmfs to within n / M (the picks are
- * unions of intervals of u), zero weights are never picked, and random u pass a chi-square
- * test; all-zero weights give the uniform distribution. */
-Test(trace, alias_table_frequencies)
-{
-    const double w[7] = {1.0, 0.0, 3.0, 0.5, 2.5, 0.0, 1e-3};
-    const uint32_t n = 7;
-    struct sample_alias_bin bins[7];
-    cr_assert(sample_alias_build(w, n, bins));
-    const uint32_t M = 1u << 20;
-    uint64_t count[7] = {0};
-    for (uint32_t k = 0; k < M; k++) {
-        float pmf;
-        uint32_t i = sample_alias_pick(bins, n, ((float)k + 0.5f) / (float)M, &pmf);
-        cr_assert(i < n);
-        cr_assert_eq(pmf, bins[i].pmf);
-        count[i]++;
-    }
-    double total = 7.001;
-    for (uint32_t i = 0; i < n; i++) {
-        cr_assert_float_eq(bins[i].pmf, w[i] / total, 1e-7);
-        cr_assert(fabs((double)count[i] / M - w[i] / total) <= (double)n / M + 1e-6,
-                  "bin %u: frequency %f, pmf %f", i, (double)count[i] / M, w[i] / total);
-        if (w[i] == 0.0)
-            cr_assert_eq(count[i], 0u);
-    }
-    struct pcg32 rng;
-    sample_pcg32_seed(&rng, 17, 4);
-    uint64_t observed[7] = {0};
-    double expected[7];
-    const int draws = 1000000;
-    for (int k = 0; k < draws; k++)
-        observed[sample_alias_pick(bins, n, sample_pcg32_float(&rng), NULL)]++;
-    for (uint32_t i = 0; i < n; i++)
-        expected[i] = draws * w[i] / total;
-    struct chi2_result r;
-    chi2_counts(expected, observed, n, &r);
-    cr_assert(chi2_accept(&r, 1), "%s", r.msg);
-    const double zeros[3] = {0.0, 0.0, 0.0};
-    cr_assert(sample_alias_build(zeros, 3, bins));
-    for (int i = 0; i < 3; i++)
-        cr_assert_float_eq(bins[i].pmf, 1.0f / 3.0f, 1e-7f);
-    const double negative[2] = {1.0, -1.0};
-    cr_assert(!sample_alias_build(negative, 2, bins), "negative weights are refused");
 }
 
 /* ---- the render loop ---- */
