@@ -767,19 +767,6 @@ static bool measure(struct run *run, const struct film *f, uint64_t seed, uint32
            output_write_snapshot(&run->out, f, spp, run->topt.spp, run->o.exposure, err);
 }
 
-/* Adds one trace_render call's counts to the run's; the first dropped sample is kept. */
-static void add_result(struct trace_result *res, const struct trace_result *r)
-{
-    if (r->n_nonfinite && !res->n_nonfinite) {
-        res->first_bad_x = r->first_bad_x;
-        res->first_bad_y = r->first_bad_y;
-        res->first_bad_sample = r->first_bad_sample;
-    }
-    res->n_samples += r->n_samples;
-    res->n_rays += r->n_rays;
-    res->n_nonfinite += r->n_nonfinite;
-    res->cancelled |= r->cancelled;
-}
 
 /* Renders seed number k of the run (seed topt.seed + k) into f, in passes: each trace_render
  * call continues every pixel from its count, so the final film is bit-identical to one call.
@@ -811,7 +798,7 @@ static bool render_seed(struct run *run, struct film *f, uint32_t k, struct mcpt
         seconds += dt;
         seconds_per_spp = dt / (double)(next - done_spp);
         run->prog.base += r.n_samples;
-        add_result(&run->res, &r);
+        trace_result_add(&run->res, &r);
         if (r.cancelled)
             return true;
         done_spp = next;

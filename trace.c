@@ -307,6 +307,19 @@ static void *render_worker(void *arg)
     return NULL;
 }
 
+void trace_result_add(struct trace_result *sum, const struct trace_result *r)
+{
+    if (r->n_nonfinite && !sum->n_nonfinite) {
+        sum->first_bad_x = r->first_bad_x;
+        sum->first_bad_y = r->first_bad_y;
+        sum->first_bad_sample = r->first_bad_sample;
+    }
+    sum->n_samples += r->n_samples;
+    sum->n_rays += r->n_rays;
+    sum->n_nonfinite += r->n_nonfinite;
+    sum->cancelled |= r->cancelled;
+}
+
 bool trace_render(const struct trace_scene *ts, const struct trace_options *opt, struct film *film,
                   struct trace_result *result, struct mcpt_error *err)
 {
@@ -361,16 +374,7 @@ bool trace_render(const struct trace_scene *ts, const struct trace_options *opt,
     }
     for (int i = 0; i < started; i++) {
         pthread_join(workers[i].thread, NULL);
-        const struct trace_result *r = &workers[i].result;
-        if (r->n_nonfinite && !result->n_nonfinite) {
-            result->first_bad_x = r->first_bad_x;
-            result->first_bad_y = r->first_bad_y;
-            result->first_bad_sample = r->first_bad_sample;
-        }
-        result->n_samples += r->n_samples;
-        result->n_rays += r->n_rays;
-        result->n_nonfinite += r->n_nonfinite;
-        result->cancelled |= r->cancelled;
+        trace_result_add(result, &workers[i].result);
     }
     if (opt->progress)
         opt->progress(opt->progress_user, atomic_load(&job.samples_done), total);

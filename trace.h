@@ -81,6 +81,9 @@ struct trace_result {
     bool cancelled;
 };
 
+/* Adds the counts of r to sum; sum keeps its first dropped sample, else takes r's. */
+void trace_result_add(struct trace_result *sum, const struct trace_result *r);
+
 /* Renders each pixel from its current count film->pixels[i].n up to opt->spp samples (sample
  * indices sample_offset + n), tiles handed out to opt->n_threads threads.  With opt->adaptive a
  * pixel also stops when trace_adaptive_stop holds at a test point, i.e. when n + n_dropped is

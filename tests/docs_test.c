@@ -330,6 +330,16 @@ static const struct func_def *find_def(const struct code_index *ix, const char *
 }
 
 /* docs/theory.md names only functions the renderer calls (see the file comment). */
+/* True when name is among names[0 .. n_names): each name is listed and counted once, whether
+ * the page names it directly, through a wildcard, or both. */
+static bool name_listed(const char *const *names, int n_names, const char *name)
+{
+    for (int j = 0; j < n_names; j++)
+        if (strcmp(names[j], name) == 0)
+            return true;
+    return false;
+}
+
 Test(docs, theory_names_functions_the_renderer_calls)
 {
     static struct doc_name doc[MAX_NAMES];
@@ -345,14 +355,13 @@ Test(docs, theory_names_functions_the_renderer_calls)
     int n_names = 0;
     for (int i = 0; i < n_doc; i++) {
         if (!strchr(doc[i].name, '*')) {
-            names[n_names++] = doc[i].name;
+            if (!name_listed(names, n_names, doc[i].name))
+                names[n_names++] = doc[i].name;
             continue;
         }
         for (int d = 0; d < ix.n_defs; d++) {
-            bool dup = false;
-            for (int j = 0; j < n_names && !dup; j++)
-                dup = strcmp(names[j], ix.defs[d].name) == 0;
-            if (!dup && fnmatch(doc[i].name, ix.defs[d].name, 0) == 0) {
+            if (!name_listed(names, n_names, ix.defs[d].name) &&
+                fnmatch(doc[i].name, ix.defs[d].name, 0) == 0) {
                 cr_assert(n_names < MAX_NAMES * 4);
                 snprintf(expanded[n_names], NAME_BYTES, "%s", ix.defs[d].name);
                 names[n_names] = expanded[n_names];
