@@ -18,7 +18,7 @@
  *   | u64 FNV-1a 64 of every byte before it. */
 
 static const char CKPT_MAGIC[8] = {'M', 'C', 'P', 'T', 'C', 'K', 'P', 'T'};
-#define CKPT_BYTE_ORDER 0x01020304u /* reads back as 0x04030201 on the other byte order */
+#define CKPT_BYTE_ORDER 0x01020304u      /* reads back as 0x04030201 on the other byte order */
 #define FNV_OFFSET 0xcbf29ce484222325ull /* FNV-1a 64 (Fowler, Noll, Vo): offset basis */
 #define FNV_PRIME 0x100000001b3ull       /* FNV-1a 64 prime */
 
@@ -137,8 +137,9 @@ static bool read_header(struct ckpt_file *cf, const char *path, uint64_t size_by
 {
     char magic[sizeof CKPT_MAGIC];
     if (!get(cf, magic, sizeof magic) || memcmp(magic, CKPT_MAGIC, sizeof magic) != 0) {
-        mcpt_error_set(err, path, 0, 0, "expected an mcpt checkpoint (starting 'MCPTCKPT'), got "
-                                        "other data");
+        mcpt_error_set(err, path, 0, 0,
+                       "expected an mcpt checkpoint (starting 'MCPTCKPT'), got "
+                       "other data");
         return false;
     }
     uint32_t version = get_u32(cf);
@@ -164,8 +165,9 @@ static bool read_header(struct ckpt_file *cf, const char *path, uint64_t size_by
         return false;
     }
     if (byte_order != CKPT_BYTE_ORDER) {
-        mcpt_error_set(err, path, 0, 0, "expected a checkpoint in this machine's byte order, got "
-                                        "the other");
+        mcpt_error_set(err, path, 0, 0,
+                       "expected a checkpoint in this machine's byte order, got "
+                       "the other");
         return false;
     }
     if (pixel_bytes != sizeof(struct film_pixel)) {
@@ -235,17 +237,19 @@ bool checkpoint_load(const char *path, struct film *film, struct checkpoint_info
     uint64_t expect_hash = cf.hash;
     uint64_t hash = get_u64(&cf);
     if (!cf.ok || hash != expect_hash) {
-        mcpt_error_set(err, path, 0, 0, "expected checksum %016llx, got %016llx (the file is "
-                                        "corrupt)", (unsigned long long)expect_hash,
-                       (unsigned long long)hash);
+        mcpt_error_set(err, path, 0, 0,
+                       "expected checksum %016llx, got %016llx (the file is "
+                       "corrupt)",
+                       (unsigned long long)expect_hash, (unsigned long long)hash);
         goto fail;
     }
     for (uint64_t i = 0; i < n_pixels; i++) {
         const struct film_pixel *p = &film->pixels[i];
         if ((uint64_t)p->n + p->n_dropped > info->spp) {
-            mcpt_error_set(err, path, 0, 0, "expected at most %u samples in a pixel (the spp), "
-                                            "got %llu at pixel %llu,%llu", info->spp,
-                           (unsigned long long)p->n + p->n_dropped,
+            mcpt_error_set(err, path, 0, 0,
+                           "expected at most %u samples in a pixel (the spp), "
+                           "got %llu at pixel %llu,%llu",
+                           info->spp, (unsigned long long)p->n + p->n_dropped,
                            (unsigned long long)(i % width), (unsigned long long)(i / width));
             goto fail;
         }
@@ -266,7 +270,8 @@ bool checkpoint_matches(const char *path, const struct checkpoint_info *saved,
     const char *what = NULL;
     unsigned long long want = 0, got = 0;
     if (saved->scene_hash != run->scene_hash) {
-        mcpt_error_set(err, path, 0, 0, "expected the scene the checkpoint was made from "
+        mcpt_error_set(err, path, 0, 0,
+                       "expected the scene the checkpoint was made from "
                        "('%.200s', FNV-1a %016llx), got a file with hash %016llx",
                        saved->scene_path, (unsigned long long)saved->scene_hash,
                        (unsigned long long)run->scene_hash);
@@ -286,7 +291,7 @@ bool checkpoint_matches(const char *path, const struct checkpoint_info *saved,
     } else if (saved->sample_offset != run->sample_offset)
         what = "the sample offset", want = saved->sample_offset, got = run->sample_offset;
     if (what)
-        mcpt_error_set(err, path, 0, 0, "expected %s %llu as in the checkpoint, got %llu",
-                       what, want, got);
+        mcpt_error_set(err, path, 0, 0, "expected %s %llu as in the checkpoint, got %llu", what,
+                       want, got);
     return !what;
 }

@@ -21,8 +21,8 @@ struct checkpoint_info {
     uint32_t sampler;       /* enum sampler_kind */
     uint32_t sample_offset; /* sample index of a pixel's first film sample */
     char scene_path[CHECKPOINT_PATH_BYTES]; /* as given on the command line */
-    uint32_t args_bytes;                     /* bytes of args in use */
-    char args[CHECKPOINT_ARGS_BYTES];        /* options of the run, each word NUL-ended */
+    uint32_t args_bytes;                    /* bytes of args in use */
+    char args[CHECKPOINT_ARGS_BYTES];       /* options of the run, each word NUL-ended */
 };
 
 /* FNV-1a 64 (Fowler, Noll, Vo) of the bytes of the file at path: how a checkpoint recognises

@@ -166,8 +166,8 @@ struct integrate_options {
     enum stats_integrand only; /* one function, or STATS_FN_COUNT for all */
     uint64_t spp_max;          /* a power of two */
     uint64_t n_seeds;
-    uint64_t seed;             /* the first */
-    bool is_help;              /* --help: printed, nothing to run */
+    uint64_t seed; /* the first */
+    bool is_help;  /* --help: printed, nothing to run */
 };
 
 /* --sampler: "all", or a comma-separated list of sampler names. */
@@ -183,8 +183,10 @@ static bool parse_samplers(const char *arg, bool use[SAMPLER_COUNT], struct mcpt
     for (char *save, *name = strtok_r(list, ",", &save); name; name = strtok_r(NULL, ",", &save)) {
         enum sampler_kind kind;
         if (!sample_sampler_parse(name, &kind))
-            return cmd_usage_error(err, "expected --sampler independent, stratified, sobol or all, "
-                                   "got '%s'", name);
+            return cmd_usage_error(err,
+                                   "expected --sampler independent, stratified, sobol or all, "
+                                   "got '%s'",
+                                   name);
         use[kind] = true;
     }
     return true;
@@ -215,20 +217,25 @@ static bool parse_integrate(int argc, char **argv, struct integrate_options *o,
                 return false;
             break;
         case OPT_SPP:
-            if (!cmd_parse_u64(optarg, 1, 1u << 24, &o->spp_max) ||
-                (o->spp_max & (o->spp_max - 1)))
-                return cmd_usage_error(err, "expected --spp to be a power of two in 1..16777216, "
-                                       "got '%s'", optarg);
+            if (!cmd_parse_u64(optarg, 1, 1u << 24, &o->spp_max) || (o->spp_max & (o->spp_max - 1)))
+                return cmd_usage_error(err,
+                                       "expected --spp to be a power of two in 1..16777216, "
+                                       "got '%s'",
+                                       optarg);
             break;
         case OPT_SEEDS:
             if (!cmd_parse_u64(optarg, 1, 1000000, &o->n_seeds))
-                return cmd_usage_error(err, "expected --seeds to be an integer in 1..1000000, got "
-                                       "'%s'", optarg);
+                return cmd_usage_error(err,
+                                       "expected --seeds to be an integer in 1..1000000, got "
+                                       "'%s'",
+                                       optarg);
             break;
         case OPT_SEED:
             if (!cmd_parse_u64(optarg, 0, UINT64_MAX, &o->seed))
-                return cmd_usage_error(err, "expected --seed to be an integer in 0..2^64-1, got "
-                                       "'%s'", optarg);
+                return cmd_usage_error(err,
+                                       "expected --seed to be an integer in 0..2^64-1, got "
+                                       "'%s'",
+                                       optarg);
             break;
         case 'h':
             fputs(INTEGRATE_USAGE, stdout);
@@ -239,11 +246,15 @@ static bool parse_integrate(int argc, char **argv, struct integrate_options *o,
         }
     }
     if (argc - optind != 1)
-        return cmd_usage_error(err, "expected one FUNCTION (step, disk, checkerboard, gaussian, "
-                               "polynomial or all), got %d", argc - optind);
+        return cmd_usage_error(err,
+                               "expected one FUNCTION (step, disk, checkerboard, gaussian, "
+                               "polynomial or all), got %d",
+                               argc - optind);
     if (strcmp(argv[optind], "all") != 0 && !stats_integrand_parse(argv[optind], &o->only))
-        return cmd_usage_error(err, "expected FUNCTION step, disk, checkerboard, gaussian, "
-                               "polynomial or all, got '%s'", argv[optind]);
+        return cmd_usage_error(err,
+                               "expected FUNCTION step, disk, checkerboard, gaussian, "
+                               "polynomial or all, got '%s'",
+                               argv[optind]);
     return true;
 }
 
@@ -252,21 +263,22 @@ static void integrate_one(enum stats_integrand fn, enum sampler_kind kind,
                           const struct integrate_options *o)
 {
     struct stats_integrate_row rows[25];
-    size_t n = stats_integrate(fn, kind, (uint32_t)o->spp_max, (uint32_t)o->n_seeds, o->seed,
-                               rows);
+    size_t n = stats_integrate(fn, kind, (uint32_t)o->spp_max, (uint32_t)o->n_seeds, o->seed, rows);
     double x[25], y[25];
     for (size_t i = 0; i < n; i++) {
         printf("%s,%s,%u,%llu,%.9g,%.9g,%.9g\n", stats_integrand_name(fn),
-               sample_sampler_name(kind), rows[i].spp, (unsigned long long)o->n_seeds,
-               rows[i].mse, rows[i].mse_se, sqrt(rows[i].mse));
+               sample_sampler_name(kind), rows[i].spp, (unsigned long long)o->n_seeds, rows[i].mse,
+               rows[i].mse_se, sqrt(rows[i].mse));
         x[i] = log((double)rows[i].spp);
         y[i] = rows[i].mse > 0.0 ? log(rows[i].mse) : NAN;
     }
     struct stats_fit fit;
     if (stats_fit_line(x, y, n, &fit) && fit.n >= 3)
-        fprintf(stderr, "mcpt integrate: %-12s %-11s MSE ~ spp^%+.3f  95%% CI [%+.3f, %+.3f]  "
-                "R^2 %.4f\n", stats_integrand_name(fn), sample_sampler_name(kind), fit.slope,
-                fit.ci_lo, fit.ci_hi, fit.r2);
+        fprintf(stderr,
+                "mcpt integrate: %-12s %-11s MSE ~ spp^%+.3f  95%% CI [%+.3f, %+.3f]  "
+                "R^2 %.4f\n",
+                stats_integrand_name(fn), sample_sampler_name(kind), fit.slope, fit.ci_lo,
+                fit.ci_hi, fit.r2);
 }
 
 static int run_integrate(int argc, char **argv)
@@ -367,8 +379,8 @@ static int run_merge(int argc, char **argv)
     struct partial_info info;
     bool ok = out && optind < argc &&
               output_paths_init(&paths, NULL, out, NULL, NULL, false, &err) &&
-              partial_merge_files((const char *const *)argv + optind, argc - optind, &film,
-                                  &info, &err) &&
+              partial_merge_files((const char *const *)argv + optind, argc - optind, &film, &info,
+                                  &err) &&
               output_write_image(&paths, &film, &info, exposure, &err);
     if (ok && !quiet)
         print_merge(argc - optind, &film, &info, out);

@@ -11,7 +11,7 @@
 
 #include "vec.h"
 
-#define FILE_PATH_BYTES 4096 /* longest destination path, including the NUL (PATH_MAX) */
+#define FILE_PATH_BYTES 4096   /* longest destination path, including the NUL (PATH_MAX) */
 #define FILE_TMP_INFIX ".tmp." /* the temporary is path FILE_TMP_INFIX "<pid>.<n>" */
 
 /* A file being written: its destination and its temporary. */

@@ -13,12 +13,12 @@
 #include "vec.h"
 
 struct film_pixel {
-    double sum[3];     /* sum of sample RGB */
-    double sum_sq[3];  /* sum of squared sample RGB, per channel */
-    double sum_lum_sq; /* sum of squared sample luminance (Rec. 709) */
-    uint32_t n;        /* samples accumulated */
+    double sum[3];      /* sum of sample RGB */
+    double sum_sq[3];   /* sum of squared sample RGB, per channel */
+    double sum_lum_sq;  /* sum of squared sample luminance (Rec. 709) */
+    uint32_t n;         /* samples accumulated */
     uint32_t n_dropped; /* samples taken but not added: NaN or infinite (counted, reported) */
-}; /* 64 bytes */
+};                      /* 64 bytes */
 
 struct film {
     int width;

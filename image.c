@@ -108,8 +108,7 @@ static int64_t exr_stream_size(exr_const_context_t ctxt, void *user)
 }
 
 static int64_t exr_stream_write(exr_const_context_t ctxt, void *user, const void *buffer,
-                                uint64_t sz, uint64_t offset,
-                                exr_stream_error_func_ptr_t error_cb)
+                                uint64_t sz, uint64_t offset, exr_stream_error_func_ptr_t error_cb)
 {
     struct exr_stream *s = user;
     if (!pwrite_all(s->fd, buffer, (size_t)sz, (off_t)offset)) {
@@ -156,8 +155,10 @@ static bool image_is_writable(const char *path, const struct image *img, struct 
     for (int c = 0; c < img->n_channels; c++) {
         size_t len = strnlen(img->names[c], sizeof img->names[c]);
         if (len == 0 || len == sizeof img->names[c] || !img->data[c]) {
-            mcpt_error_runtime(err, path, "expected channel %d to have a name of 1 to 31 "
-                               "characters and data", c);
+            mcpt_error_runtime(err, path,
+                               "expected channel %d to have a name of 1 to 31 "
+                               "characters and data",
+                               c);
             return false;
         }
         for (int k = 0; k < c; k++) {
@@ -177,8 +178,10 @@ static bool image_is_writable(const char *path, const struct image *img, struct 
         size_t len = strnlen(img->attr_names[a], sizeof img->attr_names[a]);
         if (len == 0 || len == sizeof img->attr_names[a] ||
             strnlen(img->attr_values[a], IMAGE_ATTR_BYTES) == IMAGE_ATTR_BYTES) {
-            mcpt_error_runtime(err, path, "expected attribute %d to have a name of 1 to 31 "
-                               "characters and a NUL-terminated value", a);
+            mcpt_error_runtime(err, path,
+                               "expected attribute %d to have a name of 1 to 31 "
+                               "characters and a NUL-terminated value",
+                               a);
             return false;
         }
     }
@@ -330,8 +333,7 @@ static exr_result_t decode_part(exr_context_t ctxt, exr_storage_t storage,
         rv = exr_get_scanlines_per_chunk(ctxt, 0, &lines_per_chunk);
         if (rv == EXR_ERR_SUCCESS && lines_per_chunk < 1)
             rv = EXR_ERR_INVALID_ATTR;
-        for (int64_t y = dw->min.y; y <= dw->max.y && rv == EXR_ERR_SUCCESS;
-             y += lines_per_chunk) {
+        for (int64_t y = dw->min.y; y <= dw->max.y && rv == EXR_ERR_SUCCESS; y += lines_per_chunk) {
             rv = exr_read_scanline_chunk_info(ctxt, 0, (int)y, &chunk);
             if (rv == EXR_ERR_SUCCESS)
                 rv = decode_chunk(ctxt, &chunk, chunk.start_x - dw->min.x,
@@ -556,17 +558,14 @@ static void png_write_fn(png_structp png, png_bytep data, size_t n_bytes)
     }
 }
 
-static void png_flush_fn(png_structp png)
-{
-    (void)png;
-}
+static void png_flush_fn(png_structp png) { (void)png; }
 
 /* Encodes width x height interleaved RGB bytes to sink->fd; is_srgb adds an sRGB chunk. */
 static bool png_encode(struct png_sink *sink, int width, int height, const uint8_t *rgb8,
                        bool is_srgb)
 {
-    png_structp png =
-        png_create_write_struct(PNG_LIBPNG_VER_STRING, sink, png_error_fn, png_warning_fn);
+    png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, sink, png_error_fn,
+                                              png_warning_fn);
     if (!png) {
         snprintf(sink->msg, sizeof sink->msg, "%s", strerror(ENOMEM));
         return false;
@@ -663,8 +662,8 @@ uint8_t image_srgb8(const struct image_srgb *s, double v)
     return (uint8_t)k;
 }
 
-bool image_write_png_srgb(const char *path, int width, int height, const float *rgb,
-                          float exposure, struct mcpt_error *err)
+bool image_write_png_srgb(const char *path, int width, int height, const float *rgb, float exposure,
+                          struct mcpt_error *err)
 {
     if (!png_size_is_valid(path, width, height, err))
         return false;

@@ -9,8 +9,8 @@
 #include "vec.h"
 
 #define IMAGE_MAX_CHANNELS 32 /* mcpt's partial renders (partial.h) write 24 */
-#define IMAGE_MAX_ATTRS 8      /* string attributes kept per image */
-#define IMAGE_ATTR_BYTES 256   /* longest attribute value kept, including the NUL */
+#define IMAGE_MAX_ATTRS 8     /* string attributes kept per image */
+#define IMAGE_ATTR_BYTES 256  /* longest attribute value kept, including the NUL */
 
 /* A planar float image: channel c of pixel (x, y) is data[c][y * width + x]. */
 struct image {
@@ -55,8 +55,8 @@ uint8_t image_srgb8(const struct image_srgb *s, double v);
 
 /* Writes an 8-bit sRGB PNG of linear rgb (interleaved, 3 floats a pixel), multiplied by
  * 2^exposure, then encoded by image_srgb8. */
-bool image_write_png_srgb(const char *path, int width, int height, const float *rgb,
-                          float exposure, struct mcpt_error *err);
+bool image_write_png_srgb(const char *path, int width, int height, const float *rgb, float exposure,
+                          struct mcpt_error *err);
 
 /* Writes an 8-bit PNG of rgb8 (interleaved, 3 bytes a pixel) as is. */
 bool image_write_png_rgb8(const char *path, int width, int height, const uint8_t *rgb8,

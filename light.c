@@ -91,14 +91,14 @@ static double sky_power(const struct sky *sky, double radius)
 static double scene_radius(const struct scene *scene)
 {
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-#define GROW(P, R)                                                                                \
-    do {                                                                                          \
-        vec3 p_ = (P);                                                                            \
-        double r_ = (R);                                                                          \
-        for (int k_ = 0; k_ < 3; k_++) {                                                          \
-            lo[k_] = fmin(lo[k_], v3_get(p_, k_) - r_);                                           \
-            hi[k_] = fmax(hi[k_], v3_get(p_, k_) + r_);                                           \
-        }                                                                                         \
+#define GROW(P, R)                                                                                 \
+    do {                                                                                           \
+        vec3 p_ = (P);                                                                             \
+        double r_ = (R);                                                                           \
+        for (int k_ = 0; k_ < 3; k_++) {                                                           \
+            lo[k_] = fmin(lo[k_], v3_get(p_, k_) - r_);                                            \
+            hi[k_] = fmax(hi[k_], v3_get(p_, k_) + r_);                                            \
+        }                                                                                          \
     } while (0)
     for (uint32_t i = 0; i < scene->n_positions; i++)
         GROW(scene->positions[i], 0.0);

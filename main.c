@@ -60,8 +60,8 @@ static const char USAGE[] =
     "      --width W          film width in pixels (default: the scene's film)\n"
     "      --height H         film height in pixels (default: the scene's film)\n"
     "      --exposure E       PNG preview exposure in stops (default 0)\n"
-    "      --quiet            print errors only\n"
-    ; /* the help is two strings: C11 compilers need only accept 4095 bytes in one */
+    "      --quiet            print errors only\n";
+/* the help is two strings: C11 compilers need only accept 4095 bytes in one */
 static const char USAGE_MORE[] =
     "      --checkpoint CKPT  where an interrupted render saves its state (default OUT.exr.ckpt)\n"
     "      --resume CKPT      continue the interrupted render saved in CKPT to its target spp,\n"
@@ -106,8 +106,8 @@ struct options {
     uint32_t min_spp;
     uint32_t max_spp;
     const char *heatmap_path; /* NULL: OUT.samples.png when adaptive, else none */
-    int width;  /* 0: from the scene */
-    int height; /* 0: from the scene */
+    int width;                /* 0: from the scene */
+    int height;               /* 0: from the scene */
     float exposure;
     bool quiet;
     const char *checkpoint_path; /* NULL: OUT.exr.ckpt */
@@ -122,14 +122,14 @@ struct options {
     bool has_split;
     enum render_split split;
     bool has_rr;
-    float rr_prob;               /* 0: throughput-based */
-    uint32_t light_samples;      /* --light-samples N; 0: from the scene, else 1 */
-    uint32_t rr_depth;           /* --rr-depth D; 0: from the scene, else the default */
-    const char *resume_path;     /* --resume CKPT, or NULL */
-    bool has_range;              /* --sample-range A:B given */
-    struct partial_range range;  /* its sample indices */
-    bool is_done;                /* --help or --version answered: nothing to render */
-    uint32_t args_bytes;         /* bytes used in args */
+    float rr_prob;                    /* 0: throughput-based */
+    uint32_t light_samples;           /* --light-samples N; 0: from the scene, else 1 */
+    uint32_t rr_depth;                /* --rr-depth D; 0: from the scene, else the default */
+    const char *resume_path;          /* --resume CKPT, or NULL */
+    bool has_range;                   /* --sample-range A:B given */
+    struct partial_range range;       /* its sample indices */
+    bool is_done;                     /* --help or --version answered: nothing to render */
+    uint32_t args_bytes;              /* bytes used in args */
     char args[CHECKPOINT_ARGS_BYTES]; /* every option but --resume as "--name[=value]",
                                          NUL-ended: what a checkpoint stores */
 };
@@ -147,13 +147,13 @@ struct progress {
 /* The measuring state of a render (docs/convergence.md): the reference, the curve, its
  * summary and the snapshots' thumbnails. */
 struct convergence {
-    bool measuring;            /* measure at 1, 2, 4, ... spp (and the final spp) */
-    struct image ref_img;      /* --reference as read */
-    struct stats_image ref;    /* its R, G, B and variance channels */
+    bool measuring;         /* measure at 1, 2, 4, ... spp (and the final spp) */
+    struct image ref_img;   /* --reference as read */
+    struct stats_image ref; /* its R, G, B and variance channels */
     bool has_ref;
-    struct stats_curve curve;  /* one point per (seed, measured spp) */
+    struct stats_curve curve; /* one point per (seed, measured spp) */
     struct stats_summary summary;
-    struct plot_sheet sheet;   /* --snapshots: the contact sheet's thumbnails */
+    struct plot_sheet sheet; /* --snapshots: the contact sheet's thumbnails */
 };
 
 /* Everything one render holds, from parse to report; run_free releases it. */
@@ -161,19 +161,19 @@ struct run {
     struct options o;
     struct checkpoint_info saved; /* --resume: the interrupted run's settings and options */
     struct scene scene;
-    bool has_scene;               /* scene loaded (run_free frees it) */
-    uint64_t scene_hash;          /* FNV-1a 64 of the scene file: a checkpoint records it */
-    struct output_paths out;      /* the files it writes */
+    bool has_scene;          /* scene loaded (run_free frees it) */
+    uint64_t scene_hash;     /* FNV-1a 64 of the scene file: a checkpoint records it */
+    struct output_paths out; /* the files it writes */
     struct film film;
     struct trace_scene *ts;
-    struct trace_options topt;    /* the render's settings: options, else the scene's */
-    struct partial_info part;     /* --sample-range: what the EXR records */
+    struct trace_options topt; /* the render's settings: options, else the scene's */
+    struct partial_info part;  /* --sample-range: what the EXR records */
     struct convergence cv;
     struct progress prog;
     struct trace_result res;
-    double t_build_s;             /* trace_prepare: BVH, camera, light table */
+    double t_build_s; /* trace_prepare: BVH, camera, light table */
     double t_render_s;
-    int signal;                   /* SIGINT or SIGTERM, when it stopped the render */
+    int signal; /* SIGINT or SIGTERM, when it stopped the render */
 };
 
 static bool parse(int argc, char **argv, struct run *run, struct mcpt_error *err);
@@ -202,12 +202,36 @@ int main(int argc, char **argv)
 /* ---- parse ---- */
 
 enum {
-    OPT_SPP = 256, OPT_MAX_DEPTH, OPT_THREADS, OPT_SEED, OPT_WIDTH, OPT_HEIGHT, OPT_EXPOSURE,
-    OPT_QUIET, OPT_VERSION, OPT_CHECKPOINT, OPT_RESUME,
-    OPT_SAMPLER = 512, OPT_ADAPTIVE, OPT_TOLERANCE, OPT_ADAPTIVE_FLOOR, OPT_BATCH, OPT_MIN_SPP,
-    OPT_MAX_SPP, OPT_HEATMAP,
-    OPT_SNAPSHOTS = 768, OPT_REFERENCE, OPT_CURVE, OPT_SEEDS, OPT_TARGET_RMSE, OPT_PREVIEW_EVERY,
-    OPT_DIRECT = 1024, OPT_LIGHT_SAMPLES, OPT_SPLIT, OPT_RR, OPT_RR_DEPTH,
+    OPT_SPP = 256,
+    OPT_MAX_DEPTH,
+    OPT_THREADS,
+    OPT_SEED,
+    OPT_WIDTH,
+    OPT_HEIGHT,
+    OPT_EXPOSURE,
+    OPT_QUIET,
+    OPT_VERSION,
+    OPT_CHECKPOINT,
+    OPT_RESUME,
+    OPT_SAMPLER = 512,
+    OPT_ADAPTIVE,
+    OPT_TOLERANCE,
+    OPT_ADAPTIVE_FLOOR,
+    OPT_BATCH,
+    OPT_MIN_SPP,
+    OPT_MAX_SPP,
+    OPT_HEATMAP,
+    OPT_SNAPSHOTS = 768,
+    OPT_REFERENCE,
+    OPT_CURVE,
+    OPT_SEEDS,
+    OPT_TARGET_RMSE,
+    OPT_PREVIEW_EVERY,
+    OPT_DIRECT = 1024,
+    OPT_LIGHT_SAMPLES,
+    OPT_SPLIT,
+    OPT_RR,
+    OPT_RR_DEPTH,
     OPT_SAMPLE_RANGE = 1280,
 };
 
@@ -279,8 +303,10 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
         return *optarg || cmd_usage_error(err, "expected a file name after -o, got ''");
     case OPT_SPP:
         if (!cmd_parse_u64(optarg, 1, UINT32_MAX, &v))
-            return cmd_usage_error(err, "expected --spp to be an integer in 1..4294967295, got "
-                                   "'%s'", optarg);
+            return cmd_usage_error(err,
+                                   "expected --spp to be an integer in 1..4294967295, got "
+                                   "'%s'",
+                                   optarg);
         o->spp = (uint32_t)v;
         return true;
     case OPT_MAX_DEPTH:
@@ -290,14 +316,18 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
         else if (cmd_parse_u64(optarg, 0, TRACE_DEPTH_CAP, &v))
             o->max_depth = (uint32_t)v;
         else
-            return cmd_usage_error(err, "expected --max-depth to be an integer in 0..1024 or "
-                                   "'inf', got '%s'", optarg);
+            return cmd_usage_error(err,
+                                   "expected --max-depth to be an integer in 0..1024 or "
+                                   "'inf', got '%s'",
+                                   optarg);
         return true;
     case OPT_DIRECT:
         o->has_direct = true;
         return scene_direct_parse(optarg, &o->direct) ||
-               cmd_usage_error(err, "expected --direct to be mis, light, bsdf, cosine or "
-                               "hemisphere, got '%s'", optarg);
+               cmd_usage_error(err,
+                               "expected --direct to be mis, light, bsdf, cosine or "
+                               "hemisphere, got '%s'",
+                               optarg);
     case OPT_SPLIT:
         o->has_split = true;
         return scene_split_parse(optarg, &o->split) ||
@@ -308,8 +338,10 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
         o->rr_prob = 0.0f;
         if (strcmp(optarg, "throughput") != 0 &&
             !(cmd_parse_float(optarg, 0.0f, 1.0f, &o->rr_prob) && o->rr_prob > 0.0f))
-            return cmd_usage_error(err, "expected --rr to be 'throughput' or a probability in "
-                                   "(0, 1], got '%s'", optarg);
+            return cmd_usage_error(err,
+                                   "expected --rr to be 'throughput' or a probability in "
+                                   "(0, 1], got '%s'",
+                                   optarg);
         return true;
     case OPT_LIGHT_SAMPLES:
     case OPT_RR_DEPTH:
@@ -320,21 +352,27 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
         return true;
     case OPT_THREADS:
         if (!cmd_parse_u64(optarg, 1, 1024, &v))
-            return cmd_usage_error(err, "expected --threads to be an integer in 1..1024, got "
-                                   "'%s'", optarg);
+            return cmd_usage_error(err,
+                                   "expected --threads to be an integer in 1..1024, got "
+                                   "'%s'",
+                                   optarg);
         o->n_threads = (int)v;
         return true;
     case OPT_SEED:
         if (!cmd_parse_u64(optarg, 0, UINT64_MAX, &v))
-            return cmd_usage_error(err, "expected --seed to be an integer in 0..2^64-1, got "
-                                   "'%s'", optarg);
+            return cmd_usage_error(err,
+                                   "expected --seed to be an integer in 0..2^64-1, got "
+                                   "'%s'",
+                                   optarg);
         o->seed = v;
         return true;
     case OPT_SAMPLER:
         o->has_sampler = true;
         return sample_sampler_parse(optarg, &o->sampler) ||
-               cmd_usage_error(err, "expected --sampler to be independent, stratified or "
-                               "sobol, got '%s'", optarg);
+               cmd_usage_error(err,
+                               "expected --sampler to be independent, stratified or "
+                               "sobol, got '%s'",
+                               optarg);
     case OPT_ADAPTIVE:
         o->adaptive = true;
         return true;
@@ -348,14 +386,16 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
     case OPT_BATCH:
     case OPT_MIN_SPP:
     case OPT_MAX_SPP: {
-        const char *what = c == OPT_BATCH ? "--batch" : c == OPT_MIN_SPP ? "--min-spp"
-                                                                         : "--max-spp";
+        const char *what = c == OPT_BATCH     ? "--batch"
+                           : c == OPT_MIN_SPP ? "--min-spp"
+                                              : "--max-spp";
         uint64_t lo = c == OPT_MIN_SPP ? 2 : 1; /* one sample has no spread */
         if (!cmd_parse_u64(optarg, lo, UINT32_MAX, &v))
-            return cmd_usage_error(err, "expected %s to be an integer in %llu..4294967295, got "
-                                   "'%s'", what, (unsigned long long)lo, optarg);
-        *(c == OPT_BATCH ? &o->batch : c == OPT_MIN_SPP ? &o->min_spp : &o->max_spp) =
-            (uint32_t)v;
+            return cmd_usage_error(err,
+                                   "expected %s to be an integer in %llu..4294967295, got "
+                                   "'%s'",
+                                   what, (unsigned long long)lo, optarg);
+        *(c == OPT_BATCH ? &o->batch : c == OPT_MIN_SPP ? &o->min_spp : &o->max_spp) = (uint32_t)v;
         return true;
     }
     case OPT_HEATMAP:
@@ -391,8 +431,10 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
                                           c == OPT_REFERENCE ? "--reference" : "--curve");
     case OPT_SEEDS:
         if (!cmd_parse_u64(optarg, 1, 1000000, &v))
-            return cmd_usage_error(err, "expected --seeds to be an integer in 1..1000000, got "
-                                   "'%s'", optarg);
+            return cmd_usage_error(err,
+                                   "expected --seeds to be an integer in 1..1000000, got "
+                                   "'%s'",
+                                   optarg);
         o->n_seeds = (uint32_t)v;
         return true;
     case OPT_TARGET_RMSE:
@@ -408,8 +450,10 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
     case OPT_SAMPLE_RANGE:
         o->has_range = true;
         return partial_parse_range(optarg, &o->range) ||
-               cmd_usage_error(err, "expected --sample-range A:B with integers 0 <= A < B <= "
-                               "4294967295, got '%s'", optarg);
+               cmd_usage_error(err,
+                               "expected --sample-range A:B with integers 0 <= A < B <= "
+                               "4294967295, got '%s'",
+                               optarg);
     case 'h':
         fputs(USAGE, stdout);
         fputs(USAGE_MORE, stdout);
@@ -523,8 +567,8 @@ static bool load(struct run *run, struct mcpt_error *err)
         run->scene.width = o->width;
     if (o->height)
         run->scene.height = o->height;
-    if (!output_paths_init(&run->out, o->scene_path, o->output, o->checkpoint_path,
-                           o->heatmap_path, o->adaptive || run->scene.render.adaptive, err))
+    if (!output_paths_init(&run->out, o->scene_path, o->output, o->checkpoint_path, o->heatmap_path,
+                           o->adaptive || run->scene.render.adaptive, err))
         return false;
     if (!o->resume_path && !film_init(&run->film, run->scene.width, run->scene.height, err)) {
         snprintf(err->file, sizeof err->file, "%s", o->scene_path); /* its film statement */
@@ -533,7 +577,7 @@ static bool load(struct run *run, struct mcpt_error *err)
     cv->measuring = o->snapshots || o->curve_path || o->reference_path || o->n_seeds > 1;
     if (cv->measuring && o->resume_path) {
         fprintf(stderr, "mcpt: note: a resumed render is not measured (--snapshots, --curve, "
-                "--reference, --seeds ignored)\n");
+                        "--reference, --seeds ignored)\n");
         cv->measuring = false;
     }
     return !cv->measuring || !o->reference_path ||
@@ -568,24 +612,27 @@ static bool sampling_options(const struct options *o, const struct render_settin
     topt->adaptive = o->adaptive || r->adaptive;
     if (!topt->adaptive) {
         if (o->tolerance || o->adaptive_floor >= 0.0f || o->batch || o->min_spp || o->max_spp)
-            return cmd_usage_error(err, "expected --adaptive (or the scene's render "
+            return cmd_usage_error(err,
+                                   "expected --adaptive (or the scene's render "
                                    "adaptive=true) with --tolerance, --adaptive-floor, --batch, "
                                    "--min-spp or --max-spp, got none");
         return true;
     }
     topt->spp = o->max_spp ? o->max_spp : r->max_spp ? r->max_spp : topt->spp;
-    topt->tolerance = o->tolerance ? o->tolerance : r->tolerance ? r->tolerance
-                                                                 : TRACE_ADAPTIVE_TOLERANCE;
-    topt->adaptive_floor = o->adaptive_floor >= 0.0f ? o->adaptive_floor
+    topt->tolerance = o->tolerance   ? o->tolerance
+                      : r->tolerance ? r->tolerance
+                                     : TRACE_ADAPTIVE_TOLERANCE;
+    topt->adaptive_floor = o->adaptive_floor >= 0.0f   ? o->adaptive_floor
                            : r->adaptive_floor >= 0.0f ? r->adaptive_floor
                                                        : TRACE_ADAPTIVE_FLOOR;
     topt->batch = o->batch ? o->batch : r->batch ? r->batch : TRACE_ADAPTIVE_BATCH;
-    uint32_t min_default = TRACE_ADAPTIVE_MIN_SPP < topt->spp ? TRACE_ADAPTIVE_MIN_SPP
-                                                              : topt->spp;
+    uint32_t min_default = TRACE_ADAPTIVE_MIN_SPP < topt->spp ? TRACE_ADAPTIVE_MIN_SPP : topt->spp;
     topt->min_spp = o->min_spp ? o->min_spp : r->min_spp ? r->min_spp : min_default;
     if (topt->min_spp > topt->spp)
-        return cmd_usage_error(err, "expected --min-spp <= the most samples per pixel (%u), got "
-                               "%u", topt->spp, topt->min_spp);
+        return cmd_usage_error(err,
+                               "expected --min-spp <= the most samples per pixel (%u), got "
+                               "%u",
+                               topt->spp, topt->min_spp);
     return true;
 }
 
@@ -599,24 +646,26 @@ static bool sample_range_options(const struct options *o, bool measuring, uint64
 {
     if (topt->adaptive)
         return cmd_usage_error(err, "expected no adaptive sampling with --sample-range (where a "
-                               "pixel stops depends on all its samples), got it");
+                                    "pixel stops depends on all its samples), got it");
     if (measuring)
         return cmd_usage_error(err, "expected no --snapshots, --curve, --reference or --seeds "
-                               "with --sample-range, got one");
+                                    "with --sample-range, got one");
     if (o->range.end > topt->spp)
-        return cmd_usage_error(err, "expected --sample-range within the render's %u samples per "
-                               "pixel (--spp sets them), got %u:%u", topt->spp, o->range.begin,
-                               o->range.end);
+        return cmd_usage_error(err,
+                               "expected --sample-range within the render's %u samples per "
+                               "pixel (--spp sets them), got %u:%u",
+                               topt->spp, o->range.begin, o->range.end);
     memset(info, 0, sizeof *info);
     info->n_ranges = 1;
     info->ranges[0] = o->range;
     snprintf(info->render, sizeof info->render,
              "scene=%016llx film=%dx%d spp=%u seed=%llu sampler=%s max-depth=%u direct=%s "
-             "light-samples=%u split=%s rr=%.9g rr-depth=%u", (unsigned long long)scene_hash,
-             film->width, film->height, topt->spp, (unsigned long long)topt->seed,
-             sample_sampler_name(topt->sampler), topt->max_depth, scene_direct_name(topt->direct),
-             topt->light_samples ? topt->light_samples : 1u, scene_split_name(topt->split),
-             (double)topt->rr_prob, topt->rr_depth ? topt->rr_depth : TRACE_RR_DEPTH_DEFAULT);
+             "light-samples=%u split=%s rr=%.9g rr-depth=%u",
+             (unsigned long long)scene_hash, film->width, film->height, topt->spp,
+             (unsigned long long)topt->seed, sample_sampler_name(topt->sampler), topt->max_depth,
+             scene_direct_name(topt->direct), topt->light_samples ? topt->light_samples : 1u,
+             scene_split_name(topt->split), (double)topt->rr_prob,
+             topt->rr_depth ? topt->rr_depth : TRACE_RR_DEPTH_DEFAULT);
     topt->sampler_spp = topt->spp; /* the whole render's stratified sets */
     topt->sample_offset = o->range.begin;
     topt->spp = o->range.end - o->range.begin;
@@ -647,9 +696,10 @@ static bool resume_matches(const struct run *run, struct mcpt_error *err)
     if (!checkpoint_matches(run->o.resume_path, &run->saved, &now, err))
         return false;
     if (run->film.width != run->scene.width || run->film.height != run->scene.height) {
-        mcpt_error_set(err, run->o.resume_path, 0, 0, "expected a %dx%d film as in the "
-                       "checkpoint, got %dx%d", run->film.width, run->film.height,
-                       run->scene.width, run->scene.height);
+        mcpt_error_set(err, run->o.resume_path, 0, 0,
+                       "expected a %dx%d film as in the "
+                       "checkpoint, got %dx%d",
+                       run->film.width, run->film.height, run->scene.width, run->scene.height);
         return false;
     }
     return true;
@@ -767,7 +817,6 @@ static bool measure(struct run *run, const struct film *f, uint64_t seed, uint32
            output_write_snapshot(&run->out, f, spp, run->topt.spp, run->o.exposure, err);
 }
 
-
 /* Renders seed number k of the run (seed topt.seed + k) into f, in passes: each trace_render
  * call continues every pixel from its count, so the final film is bit-identical to one call.
  * Between passes the film is measured at 1, 2, 4, ... spp and, for the first seed, the preview
@@ -805,8 +854,7 @@ static bool render_seed(struct run *run, struct film *f, uint32_t k, struct mcpt
         if (run->cv.measuring && (is_pow2(done_spp) || done_spp == spp_final) &&
             !measure(run, f, pass.seed, done_spp, seconds, k == 0, err))
             return false;
-        if (is_previewed && done_spp < spp_final &&
-            now_seconds() - t_preview >= o->preview_every) {
+        if (is_previewed && done_spp < spp_final && now_seconds() - t_preview >= o->preview_every) {
             if (!output_write_preview(&run->out, f, o->exposure, err))
                 return false;
             t_preview = now_seconds();
@@ -836,8 +884,8 @@ static bool render_passes(struct run *run, struct mcpt_error *err)
             if (!scratch.pixels && !film_init(&scratch, run->film.width, run->film.height, err))
                 ok = false;
             else
-                memset(scratch.pixels, 0, sizeof *scratch.pixels * (size_t)scratch.width *
-                                              (size_t)scratch.height);
+                memset(scratch.pixels, 0,
+                       sizeof *scratch.pixels * (size_t)scratch.width * (size_t)scratch.height);
             f = &scratch;
         }
         ok = ok && render_seed(run, f, k, err);
@@ -856,7 +904,8 @@ static bool render(struct run *run, struct mcpt_error *err)
     const struct options *o = &run->o;
     if (!render_options(run, err))
         return false;
-    run->prog = (struct progress){.is_tty = isatty(STDERR_FILENO), .quiet = o->quiet,
+    run->prog = (struct progress){.is_tty = isatty(STDERR_FILENO),
+                                  .quiet = o->quiet,
                                   .t_start = now_seconds()};
     run->topt.progress = report_progress;
     run->topt.progress_user = &run->prog;
@@ -864,10 +913,13 @@ static bool render(struct run *run, struct mcpt_error *err)
     catch_signals();
     char integrator[64]; /* the CSV's name of the estimator: path-DIRECT[-SPLIT][-lsN] */
     integrator_name(&run->topt, integrator, sizeof integrator);
-    struct stats_run_info info = {
-        .scene = o->scene_path, .reference = o->reference_path,
-        .sampler = sample_sampler_name(run->topt.sampler), .integrator = integrator,
-        .max_depth = run->topt.max_depth, .width = run->film.width, .height = run->film.height};
+    struct stats_run_info info = {.scene = o->scene_path,
+                                  .reference = o->reference_path,
+                                  .sampler = sample_sampler_name(run->topt.sampler),
+                                  .integrator = integrator,
+                                  .max_depth = run->topt.max_depth,
+                                  .width = run->film.width,
+                                  .height = run->film.height};
     stats_curve_init(&run->cv.curve, &info);
     if (!render_passes(run, err))
         return false;
@@ -933,8 +985,8 @@ static void report_adaptive(const struct run *run)
         n_at_max += n >= topt->spp;
     }
     printf("mcpt: adaptive (T %g, floor %g, batch %u, %u..%u spp): mean %.1f spp, least %u, most "
-           "%u, %.1f%% of pixels at the maximum; sample map %s\n", topt->tolerance,
-           topt->adaptive_floor, topt->batch, topt->min_spp, topt->spp,
+           "%u, %.1f%% of pixels at the maximum; sample map %s\n",
+           topt->tolerance, topt->adaptive_floor, topt->batch, topt->min_spp, topt->spp,
            (double)total / (double)n_pixels, lo, hi, 100.0 * (double)n_at_max / (double)n_pixels,
            run->out.heatmap);
 }
@@ -952,14 +1004,17 @@ static int report(const struct run *run)
         return 128 + run->signal;
     }
     if (res->n_nonfinite)
-        fprintf(stderr, "mcpt: warning: %llu NaN or infinite samples dropped (first at pixel "
-                "%u,%u sample %u)\n", (unsigned long long)res->n_nonfinite, res->first_bad_x,
-                res->first_bad_y, res->first_bad_sample);
+        fprintf(stderr,
+                "mcpt: warning: %llu NaN or infinite samples dropped (first at pixel "
+                "%u,%u sample %u)\n",
+                (unsigned long long)res->n_nonfinite, res->first_bad_x, res->first_bad_y,
+                res->first_bad_sample);
     if (res->cancelled) {
-        fprintf(stderr, "mcpt: interrupted by %s: wrote the partial %s (its 'samples' channel "
+        fprintf(stderr,
+                "mcpt: interrupted by %s: wrote the partial %s (its 'samples' channel "
                 "counts each pixel's samples) and the checkpoint %s; continue with: mcpt %s "
-                "--resume %s\n", signal_name, run->out.exr, run->out.checkpoint, o->scene_path,
-                run->out.checkpoint);
+                "--resume %s\n",
+                signal_name, run->out.exr, run->out.checkpoint, o->scene_path, run->out.checkpoint);
         return 128 + run->signal;
     }
     if (o->quiet)
@@ -967,9 +1022,10 @@ static int report(const struct run *run)
     struct bvh_stats bs = trace_bvh_stats(run->ts);
     double t = run->t_render_s;
     printf("mcpt: %dx%d, %u spp, %d threads: render %.2f s, %.3f Msamples/s, %.2f Mrays/s; BVH "
-           "%u tris in %.1f ms; wrote %s\n", run->film.width, run->film.height, run->topt.spp,
-           o->n_threads, t, (double)res->n_samples / t * 1e-6, (double)res->n_rays / t * 1e-6,
-           bs.n_tris, run->t_build_s * 1e3, run->out.exr);
+           "%u tris in %.1f ms; wrote %s\n",
+           run->film.width, run->film.height, run->topt.spp, o->n_threads, t,
+           (double)res->n_samples / t * 1e-6, (double)res->n_rays / t * 1e-6, bs.n_tris,
+           run->t_build_s * 1e3, run->out.exr);
     if (run->cv.measuring)
         stats_print_summary(stdout, &run->cv.curve, &run->cv.summary);
     if (run->topt.adaptive)

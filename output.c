@@ -81,8 +81,8 @@ static bool write_png(const struct film *film, const char *png_path, float expos
 /* The EXR of every render: R, G, B, variance of the mean per channel, sample count. */
 static bool write_exr(const struct film *film, const char *exr_path, struct mcpt_error *err)
 {
-    static const char *names[7] = {"R", "G", "B", "variance.R", "variance.G", "variance.B",
-                                   "samples"};
+    static const char *names[7] = {"R",          "G",          "B",      "variance.R",
+                                   "variance.G", "variance.B", "samples"};
     size_t n_pixels = (size_t)film->width * (size_t)film->height;
     struct image img = {.width = film->width, .height = film->height, .n_channels = 7};
     float *planes = malloc(sizeof(float) * n_pixels * 7);

@@ -7,8 +7,8 @@
 
 #include "film.h"
 
-#define PARTIAL_MAX_RANGES 8      /* separate runs of sample indices one image may hold */
-#define PARTIAL_RENDER_BYTES 256  /* the render-settings string, including the NUL */
+#define PARTIAL_MAX_RANGES 8     /* separate runs of sample indices one image may hold */
+#define PARTIAL_RENDER_BYTES 256 /* the render-settings string, including the NUL */
 #define PARTIAL_ATTR_RANGES "mcpt.sample-ranges" /* EXR string attribute: "A:B[,A:B...]" */
 #define PARTIAL_ATTR_RENDER "mcpt.render"        /* EXR string attribute: the settings */
 
@@ -16,7 +16,7 @@
 struct partial_range {
     uint32_t begin; /* first sample index */
     uint32_t end;   /* one past the last; begin < end */
-}; /* 8 bytes */
+};                  /* 8 bytes */
 
 /* What a partial render holds: its runs of sample indices, sorted, disjoint and never adjacent
  * (adjacent runs are joined), and the settings that made it.  Only renders with the same

@@ -50,10 +50,14 @@ static void svg_text_escaped(FILE *f, const char *s)
 static void svg_axes(FILE *f, const struct panel *p, const double *xticks_log, size_t n_xticks,
                      const char *const *xtick_labels, const char *x_title, const char *y_title)
 {
-    fprintf(f, "<clipPath id=\"%s\"><rect x=\"%.1f\" y=\"%.1f\" width=\"%.1f\" height=\"%.1f\"/>"
-               "</clipPath>\n", p->clip_id, p->x0, p->y0, p->x1 - p->x0, p->y1 - p->y0);
-    fprintf(f, "<rect x=\"%.1f\" y=\"%.1f\" width=\"%.1f\" height=\"%.1f\" fill=\"white\" "
-               "stroke=\"#333\"/>\n", p->x0, p->y0, p->x1 - p->x0, p->y1 - p->y0);
+    fprintf(f,
+            "<clipPath id=\"%s\"><rect x=\"%.1f\" y=\"%.1f\" width=\"%.1f\" height=\"%.1f\"/>"
+            "</clipPath>\n",
+            p->clip_id, p->x0, p->y0, p->x1 - p->x0, p->y1 - p->y0);
+    fprintf(f,
+            "<rect x=\"%.1f\" y=\"%.1f\" width=\"%.1f\" height=\"%.1f\" fill=\"white\" "
+            "stroke=\"#333\"/>\n",
+            p->x0, p->y0, p->x1 - p->x0, p->y1 - p->y0);
     bool minor = p->yhi - p->ylo <= 4.0;
     for (int k = (int)floor(p->ylo); k <= (int)ceil(p->yhi); k++) {
         for (int m = 1; m <= (minor ? 9 : 1); m++) {
@@ -64,8 +68,9 @@ static void svg_axes(FILE *f, const struct panel *p, const double *xticks_log, s
             fprintf(f, "<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"%s\"/>\n",
                     p->x0, y, p->x1, y, m == 1 ? "#ccc" : "#eee");
             if (m == 1)
-                fprintf(f, "<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"end\" font-size=\"12\">10"
-                           "<tspan dy=\"-6\" font-size=\"9\">%d</tspan></text>\n",
+                fprintf(f,
+                        "<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"end\" font-size=\"12\">10"
+                        "<tspan dy=\"-6\" font-size=\"9\">%d</tspan></text>\n",
                         p->x0 - 6, y + 4, k);
         }
     }
@@ -73,49 +78,57 @@ static void svg_axes(FILE *f, const struct panel *p, const double *xticks_log, s
         double x = panel_x(p, xticks_log[i]);
         fprintf(f, "<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"#ccc\"/>\n", x,
                 p->y0, x, p->y1);
-        fprintf(f, "<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\" font-size=\"12\">%s"
-                   "</text>\n", x, p->y1 + 16, xtick_labels[i]);
+        fprintf(f,
+                "<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\" font-size=\"12\">%s"
+                "</text>\n",
+                x, p->y1 + 16, xtick_labels[i]);
     }
     fprintf(f, "<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\" font-size=\"13\">%s</text>\n",
             (p->x0 + p->x1) / 2, p->y1 + 36, x_title);
-    fprintf(f, "<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\" font-size=\"13\" "
-               "transform=\"rotate(-90 %.1f %.1f)\">%s</text>\n",
+    fprintf(f,
+            "<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\" font-size=\"13\" "
+            "transform=\"rotate(-90 %.1f %.1f)\">%s</text>\n",
             p->x0 - 48, (p->y0 + p->y1) / 2, p->x0 - 48, (p->y0 + p->y1) / 2, y_title);
 }
 
 /* A polyline through the points with finite log10 coordinates; markers as circles if r > 0. */
-static void svg_series(FILE *f, const struct panel *p, const double *lx, const double *ly,
-                       size_t n, const char *color, const char *dash, double marker_r)
+static void svg_series(FILE *f, const struct panel *p, const double *lx, const double *ly, size_t n,
+                       const char *color, const char *dash, double marker_r)
 {
-    fprintf(f, "<polyline clip-path=\"url(#%s)\" fill=\"none\" stroke=\"%s\" stroke-width=\"1.8\""
-               "%s%s%s points=\"", p->clip_id, color, dash ? " stroke-dasharray=\"" : "",
-            dash ? dash : "", dash ? "\"" : "");
+    fprintf(f,
+            "<polyline clip-path=\"url(#%s)\" fill=\"none\" stroke=\"%s\" stroke-width=\"1.8\""
+            "%s%s%s points=\"",
+            p->clip_id, color, dash ? " stroke-dasharray=\"" : "", dash ? dash : "",
+            dash ? "\"" : "");
     for (size_t i = 0; i < n; i++)
         if (isfinite(lx[i]) && isfinite(ly[i]))
             fprintf(f, "%.1f,%.1f ", panel_x(p, lx[i]), panel_y(p, ly[i]));
     fputs("\"/>\n", f);
     for (size_t i = 0; marker_r > 0 && i < n; i++)
         if (isfinite(lx[i]) && isfinite(ly[i]))
-            fprintf(f, "<circle clip-path=\"url(#%s)\" cx=\"%.1f\" cy=\"%.1f\" r=\"%.1f\" "
-                       "fill=\"%s\"/>\n", p->clip_id, panel_x(p, lx[i]), panel_y(p, ly[i]),
-                    marker_r, color);
+            fprintf(f,
+                    "<circle clip-path=\"url(#%s)\" cx=\"%.1f\" cy=\"%.1f\" r=\"%.1f\" "
+                    "fill=\"%s\"/>\n",
+                    p->clip_id, panel_x(p, lx[i]), panel_y(p, ly[i]), marker_r, color);
 }
 
 static void svg_legend(FILE *f, double x, double y, int row, const char *color, const char *dash,
                        const char *label)
 {
     double yy = y + 17.0 * row;
-    fprintf(f, "<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"%s\" "
-               "stroke-width=\"1.8\"%s%s%s/>\n", x, yy - 4, x + 24, yy - 4, color,
-            dash ? " stroke-dasharray=\"" : "", dash ? dash : "", dash ? "\"" : "");
+    fprintf(f,
+            "<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"%s\" "
+            "stroke-width=\"1.8\"%s%s%s/>\n",
+            x, yy - 4, x + 24, yy - 4, color, dash ? " stroke-dasharray=\"" : "", dash ? dash : "",
+            dash ? "\"" : "");
     fprintf(f, "<text x=\"%.1f\" y=\"%.1f\" font-size=\"12\">", x + 30, yy);
     svg_text_escaped(f, label);
     fputs("</text>\n", f);
 }
 
 /* The line of slope `slope` (log-log) through the centroid of the finite points, across p. */
-static void svg_ideal(FILE *f, const struct panel *p, const double *lx, const double *ly,
-                      size_t n, double slope)
+static void svg_ideal(FILE *f, const struct panel *p, const double *lx, const double *ly, size_t n,
+                      double slope)
 {
     double sx = 0.0, sy = 0.0;
     size_t k = 0;
@@ -135,13 +148,13 @@ static void svg_ideal(FILE *f, const struct panel *p, const double *lx, const do
 /* The summary's rows as drawn, in log10 units: one value per row in each array (NAN where a
  * value cannot be drawn), and the ranges they cover. */
 struct svg_data {
-    size_t n;          /* rows */
-    double *buf;       /* the seven arrays below, one allocation */
-    double *lspp;      /* spp */
-    double *lsec;      /* seconds */
-    double *lrmse;     /* RMSE by the summary's error source */
-    double *lraw;      /* uncorrected RMSE against the reference (corrected runs only) */
-    double *llo;       /* error bar ends: sqrt(mean MSE -+ std over seeds) */
+    size_t n;      /* rows */
+    double *buf;   /* the seven arrays below, one allocation */
+    double *lspp;  /* spp */
+    double *lsec;  /* seconds */
+    double *lrmse; /* RMSE by the summary's error source */
+    double *lraw;  /* uncorrected RMSE against the reference (corrected runs only) */
+    double *llo;   /* error bar ends: sqrt(mean MSE -+ std over seeds) */
     double *lhi;
     double *lfit;      /* the RMSE fit at each spp */
     bool corrected;    /* the error has the reference's noise removed */
@@ -171,8 +184,7 @@ static bool svg_data_init(struct svg_data *d, const struct stats_summary *s)
         d->lspp[r] = log10((double)row->spp);
         d->lsec[r] = row->seconds > 0.0 ? log10(row->seconds) : NAN;
         d->lrmse[r] = row->rmse > 0.0 ? log10(row->rmse) : NAN;
-        d->lraw[r] = d->corrected && row->mse_raw_mean > 0.0 ? 0.5 * log10(row->mse_raw_mean)
-                                                             : NAN;
+        d->lraw[r] = d->corrected && row->mse_raw_mean > 0.0 ? 0.5 * log10(row->mse_raw_mean) : NAN;
         double lo = row->mse_mean - row->mse_std, hi = row->mse_mean + row->mse_std;
         d->llo[r] = s->n_seeds > 1 && lo > 0.0 ? 0.5 * log10(lo) : NAN;
         d->lhi[r] = s->n_seeds > 1 && hi > 0.0 ? 0.5 * log10(hi) : NAN;
@@ -229,8 +241,13 @@ static void svg_panel_spp(FILE *f, const struct stats_summary *s, const struct s
                           struct panel *p1)
 {
     size_t n = d->n;
-    *p1 = (struct panel){.x0 = 85, .x1 = 480, .y0 = 45, .y1 = 410, .ylo = floor(d->ymin),
-                         .yhi = ceil(d->ymax), .clip_id = "clip_spp"};
+    *p1 = (struct panel){.x0 = 85,
+                         .x1 = 480,
+                         .y0 = 45,
+                         .y1 = 410,
+                         .ylo = floor(d->ymin),
+                         .yhi = ceil(d->ymax),
+                         .clip_id = "clip_spp"};
     if (p1->yhi - p1->ylo < 1.0)
         p1->yhi = p1->ylo + 1.0;
     double xlo = n ? d->lspp[0] : 0.0, xhi = n ? d->lspp[n - 1] : 1.0;
@@ -263,9 +280,11 @@ static void svg_panel_spp(FILE *f, const struct stats_summary *s, const struct s
     svg_series(f, p1, d->lspp, d->lfit, n, "#1f77b4", "6,3", 0.0);
     for (size_t r = 0; r < n; r++)
         if (isfinite(d->llo[r]) && isfinite(d->lhi[r]))
-            fprintf(f, "<line clip-path=\"url(#clip_spp)\" x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" "
-                       "y2=\"%.1f\" stroke=\"#1f77b4\"/>\n", panel_x(p1, d->lspp[r]),
-                    panel_y(p1, d->llo[r]), panel_x(p1, d->lspp[r]), panel_y(p1, d->lhi[r]));
+            fprintf(f,
+                    "<line clip-path=\"url(#clip_spp)\" x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" "
+                    "y2=\"%.1f\" stroke=\"#1f77b4\"/>\n",
+                    panel_x(p1, d->lspp[r]), panel_y(p1, d->llo[r]), panel_x(p1, d->lspp[r]),
+                    panel_y(p1, d->lhi[r]));
     svg_series(f, p1, d->lspp, d->lrmse, n, "#1f77b4", NULL, 3.0);
     char line[160];
     int row = 0;
@@ -297,8 +316,15 @@ static void svg_panel_spp(FILE *f, const struct stats_summary *s, const struct s
 static void svg_panel_seconds(FILE *f, const struct stats_summary *s, const struct svg_data *d,
                               const struct panel *p1)
 {
-    struct panel p2 = {.x0 = 590, .x1 = 985, .y0 = 45, .y1 = 410, .ylo = p1->ylo, .yhi = p1->yhi,
-                       .xlo = floor(d->smin), .xhi = ceil(d->smax), .clip_id = "clip_sec"};
+    struct panel p2 = {.x0 = 590,
+                       .x1 = 985,
+                       .y0 = 45,
+                       .y1 = 410,
+                       .ylo = p1->ylo,
+                       .yhi = p1->yhi,
+                       .xlo = floor(d->smin),
+                       .xhi = ceil(d->smax),
+                       .clip_id = "clip_sec"};
     if (p2.xhi - p2.xlo < 1.0)
         p2.xhi = p2.xlo + 1.0;
     struct svg_ticks ticks = {0};
@@ -338,7 +364,8 @@ bool plot_write_svg(const char *path, const struct stats_curve *c, const struct 
     fputs("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<svg xmlns=\"http://www.w3.org/2000/svg\" "
           "width=\"1000\" height=\"600\" viewBox=\"0 0 1000 600\" "
           "font-family=\"Helvetica, Arial, sans-serif\">\n"
-          "<rect width=\"1000\" height=\"600\" fill=\"white\"/>\n", f);
+          "<rect width=\"1000\" height=\"600\" fill=\"white\"/>\n",
+          f);
     char depth[16];
     stats_depth_name(c->max_depth, depth, sizeof depth);
     fprintf(f, "<text x=\"500\" y=\"24\" text-anchor=\"middle\" font-size=\"15\">");
@@ -470,8 +497,8 @@ static void fill_rect(uint8_t *rgb8, int width, int height, int x0, int y0, int 
             put_pixel(rgb8, width, height, x, y, color);
 }
 
-int plot_draw_text(uint8_t *rgb8, int width, int height, int x, int y, int scale,
-                   const char *text, const uint8_t color[3])
+int plot_draw_text(uint8_t *rgb8, int width, int height, int x, int y, int scale, const char *text,
+                   const uint8_t color[3])
 {
     int advance = (PLOT_FONT_W + 1) * scale;
     int x_at = x;
@@ -524,8 +551,8 @@ static bool make_thumb(const struct stats_image *img, float exposure, struct plo
                 for (int dy = 0; dy < down; dy++)
                     for (int dx = 0; dx < down; dx++)
                         sum += img->rgb[c][(size_t)(y0 + dy) * (size_t)img->width + x0 + dx];
-                t->rgb8[((size_t)y * w + x) * 3 + c] =
-                    image_srgb8(&srgb, sum / (down * down) * scale);
+                t->rgb8[((size_t)y * w + x) * 3 + c] = image_srgb8(&srgb,
+                                                                   sum / (down * down) * scale);
             }
         }
     return true;
@@ -562,8 +589,7 @@ void plot_sheet_free(struct plot_sheet *sheet)
     memset(sheet, 0, sizeof *sheet);
 }
 
-bool plot_write_contact_sheet(const char *path, const struct plot_sheet *c,
-                              struct mcpt_error *err)
+bool plot_write_contact_sheet(const char *path, const struct plot_sheet *c, struct mcpt_error *err)
 {
     if (!c->n_thumbs) {
         mcpt_error_runtime(err, path, "expected snapshots for the contact sheet, got none");
@@ -599,15 +625,15 @@ bool plot_write_contact_sheet(const char *path, const struct plot_sheet *c,
         int ty = y0 + t->height + 3 * scale;
         plot_draw_text(rgb8, width, height, x0, ty, scale, text, WHITE);
         if (isnan(t->psnr_db))
-            snprintf(text, sizeof text, t->source == STATS_ERR_REFERENCE_CORRECTED
-                                            ? "below ref noise" : "no estimate");
+            snprintf(text, sizeof text,
+                     t->source == STATS_ERR_REFERENCE_CORRECTED ? "below ref noise"
+                                                                : "no estimate");
         else if (isinf(t->psnr_db))
             snprintf(text, sizeof text, "inf dB");
         else
             snprintf(text, sizeof text, "%.1f dB%s", t->psnr_db,
                      t->source == STATS_ERR_OWN_VARIANCE ? " est" : "");
-        plot_draw_text(rgb8, width, height, x0, ty + (PLOT_FONT_H + 3) * scale, scale, text,
-                        WHITE);
+        plot_draw_text(rgb8, width, height, x0, ty + (PLOT_FONT_H + 3) * scale, scale, text, WHITE);
     }
     bool ok = image_write_png_rgb8(path, width, height, rgb8, err);
     free(rgb8);
@@ -620,7 +646,7 @@ bool plot_write_contact_sheet(const char *path, const struct plot_sheet *c,
  * labelled ticks.  Legend rows, in font pixels s: margin 4, title 7, gap 4, bar 12, tick 3,
  * gap 2, labels 7, margin 4. */
 
-#define HEATMAP_MIN_WIDTH 256 /* pixels: narrower images are scaled up by a whole factor */
+#define HEATMAP_MIN_WIDTH 256  /* pixels: narrower images are scaled up by a whole factor */
 #define HEATMAP_LEGEND_ROWS 43 /* font pixels: the sum of the legend rows above */
 
 /* viridis (van der Walt & Smith 2015, matplotlib's default colour map), 9 stops at t = k / 8,
@@ -628,7 +654,7 @@ bool plot_write_contact_sheet(const char *path, const struct plot_sheet *c,
 static void viridis8(double t, uint8_t out[3])
 {
     static const uint8_t STOPS[9][3] = {
-        {68, 1, 84},   {71, 44, 122},  {59, 81, 139},  {44, 113, 142}, {33, 144, 141},
+        {68, 1, 84},    {71, 44, 122}, {59, 81, 139},  {44, 113, 142}, {33, 144, 141},
         {39, 173, 129}, {92, 200, 99}, {170, 220, 50}, {253, 231, 37},
     };
     t = t > 0.0 ? (t < 1.0 ? t : 1.0) : 0.0;
@@ -677,8 +703,7 @@ static bool heatmap_begin(struct heatmap *hm, const char *title)
     if (!hm->rgb8)
         return false;
     fill_rect(hm->rgb8, hm->width, hm->height, 0, 0, hm->width, hm->height, BACKGROUND);
-    plot_draw_text(hm->rgb8, hm->width, hm->height, 4 * s, hm->y_legend + 4 * s, s, title,
-                    WHITE);
+    plot_draw_text(hm->rgb8, hm->width, hm->height, 4 * s, hm->y_legend + 4 * s, s, title, WHITE);
     for (int x = hm->bar_x0; x < hm->bar_x1; x++) {
         uint8_t col[3];
         viridis8((double)(x - hm->bar_x0) / (double)(hm->bar_x1 - 1 - hm->bar_x0), col);
@@ -720,7 +745,7 @@ bool plot_write_error_heatmap(const char *path, const struct stats_image *a,
                               const struct stats_image *r, struct mcpt_error *err)
 {
     size_t n_pixels = (size_t)a->width * (size_t)a->height;
-    double *e = malloc(n_pixels * sizeof *e);       /* log10 relative squared error per pixel */
+    double *e = malloc(n_pixels * sizeof *e); /* log10 relative squared error per pixel */
     double *sorted = malloc(n_pixels * sizeof *e);
     struct heatmap hm = {0};
     bool ok = false;
@@ -746,8 +771,8 @@ bool plot_write_error_heatmap(const char *path, const struct stats_image *a,
         lo = hi - 8;
 
     if (!heatmap_layout(&hm, a->width, a->height)) {
-        mcpt_error_runtime(err, path, "expected an image small enough to map, got %dx%d",
-                           a->width, a->height);
+        mcpt_error_runtime(err, path, "expected an image small enough to map, got %dx%d", a->width,
+                           a->height);
         goto done;
     }
     if (!heatmap_begin(&hm, "(a-r)^2/(r^2+0.01), mean RGB"))
@@ -784,10 +809,11 @@ bool plot_write_count_heatmap(const char *path, const struct film *film, struct 
         hi = n > hi ? n : hi;
     }
     struct heatmap hm;
-    if (!heatmap_layout(&hm, film->width, film->height) || hm.width > 65535 ||
-        hm.height > 65535) {
-        mcpt_error_runtime(err, path, "expected a film whose sample-count map is at most 65535 "
-                           "pixels a side, got a %dx%d film", film->width, film->height);
+    if (!heatmap_layout(&hm, film->width, film->height) || hm.width > 65535 || hm.height > 65535) {
+        mcpt_error_runtime(err, path,
+                           "expected a film whose sample-count map is at most 65535 "
+                           "pixels a side, got a %dx%d film",
+                           film->width, film->height);
         return false;
     }
     if (!heatmap_begin(&hm, "samples per pixel")) {
@@ -812,4 +838,3 @@ bool plot_write_count_heatmap(const char *path, const struct film *film, struct 
     free(hm.rgb8);
     return ok;
 }
-

@@ -71,7 +71,7 @@ bool plot_write_count_heatmap(const char *path, const struct film *film, struct 
 /* Draws printable ASCII text into an interleaved RGB8 image with its top-left corner at (x, y),
  * each font pixel a scale x scale square, clipped to the image; other characters draw a box.
  * Returns the width of the text in pixels. */
-int plot_draw_text(uint8_t *rgb8, int width, int height, int x, int y, int scale,
-                   const char *text, const uint8_t color[3]);
+int plot_draw_text(uint8_t *rgb8, int width, int height, int x, int y, int scale, const char *text,
+                   const uint8_t color[3]);
 
 #endif

@@ -128,8 +128,8 @@ static uint32_t cmj_columns(uint32_t n_samples)
 
 static uint32_t sobol_joint_index(const struct sampler *s);
 
-void sample_start_spp(struct sampler *s, enum sampler_kind kind, uint64_t seed,
-                      uint32_t pixel_idx, uint32_t sample_idx, uint32_t set_spp)
+void sample_start_spp(struct sampler *s, enum sampler_kind kind, uint64_t seed, uint32_t pixel_idx,
+                      uint32_t sample_idx, uint32_t set_spp)
 {
     s->kind = kind;
     s->seed = seed;
@@ -173,10 +173,7 @@ static uint32_t dim_seed(const struct sampler *s, uint32_t dim, uint32_t tag)
 
 /* A 32-bit fraction x / 2^32 as a float in [0, 1): its top 24 bits, exact (so truncation, not
  * rounding: a value never crosses up into the next stratum or up to 1). */
-static float fraction_to_float(uint32_t x)
-{
-    return (float)(x >> 8) * 0x1p-24f;
-}
+static float fraction_to_float(uint32_t x) { return (float)(x >> 8) * 0x1p-24f; }
 
 /* -- stratified: correlated multi-jittered sampling, Kensler 2013, "Correlated Multi-Jittered
  * Sampling", Pixar Technical Memo 13-01 -- */

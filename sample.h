@@ -95,9 +95,9 @@ struct sampler {
     uint32_t sample_idx;
     uint32_t dim; /* next dimension to be returned */
     struct pcg32 rng;
-    uint32_t set_spp;    /* stratified: samples per stratified set (0 or 1: none) */
-    uint32_t cmj_cols;   /* stratified: columns m of the m x n multi-jittered grid */
-    uint64_t pixel_hash; /* hash of (seed, pixel_idx): root of every scrambling seed */
+    uint32_t set_spp;     /* stratified: samples per stratified set (0 or 1: none) */
+    uint32_t cmj_cols;    /* stratified: columns m of the m x n multi-jittered grid */
+    uint64_t pixel_hash;  /* hash of (seed, pixel_idx): root of every scrambling seed */
     uint32_t sobol_index; /* Sobol': the shuffled index of the joint dimensions */
 };
 
@@ -109,8 +109,8 @@ void sample_start(struct sampler *s, enum sampler_kind kind, uint64_t seed, uint
  * spp): sample indices k set_spp .. (k+1) set_spp - 1 form set k, whose points fill every
  * stratum once.  Only SAMPLER_STRATIFIED uses set_spp; Sobol' is stratified at every
  * power-of-two prefix without it. */
-void sample_start_spp(struct sampler *s, enum sampler_kind kind, uint64_t seed,
-                      uint32_t pixel_idx, uint32_t sample_idx, uint32_t set_spp);
+void sample_start_spp(struct sampler *s, enum sampler_kind kind, uint64_t seed, uint32_t pixel_idx,
+                      uint32_t sample_idx, uint32_t set_spp);
 /* Moves to dimension dim (>= the current one), skipping the values in between. */
 void sample_set_dim(struct sampler *s, uint32_t dim);
 /* The value of the next dimension, in [0, 1). */
@@ -150,7 +150,7 @@ struct sample_cone {
     float sin2_theta_max;    /* sin^2 theta_max */
     float one_minus_cos_max; /* 1 - cos theta_max; sin^2 theta_max / 2 for a narrow cone */
     bool is_narrow;          /* made from sin^2 theta_max < sin^2(1.5 deg): Taylor expansions */
-}; /* 16 bytes */
+};                           /* 16 bytes */
 /* The cone of any half-angle, from cos_theta_max in [-1, 1). */
 struct sample_cone sample_cone_from_cos(float cos_theta_max);
 /* The cone of half-angle theta_max <= 90 deg from sin2_theta_max in (0, 1]: seen from a point at
@@ -182,7 +182,7 @@ struct sample_alias_bin {
     float q;        /* probability of keeping this bin's own index once the bin is chosen */
     uint32_t alias; /* the index returned otherwise */
     float pmf;      /* probability that a pick returns this bin's index */
-}; /* 12 bytes */
+};                  /* 12 bytes */
 
 /* Fills bins[0 .. n-1] from the n weights (finite, >= 0; all zero means uniform).  A zero
  * weight is never picked.  Returns false when n == 0, a weight is negative or not finite, or

@@ -48,7 +48,7 @@ static float pdf_by_area(float pdf_area, const struct surface *ref, const struct
 {
     float pdf_sa;
     return area_to_solid_angle(pdf_area, v3_sub(on->p, ref->p), on->ng, wi, &pdf_sa) ? pdf_sa
-                                                                                   : 0.0f;
+                                                                                     : 0.0f;
 }
 
 /* ---- sphere ---- */
@@ -162,8 +162,7 @@ bool shape_sphere_sample(const struct sphere *s, const struct surface *ref, vec2
     vec3 wz = v3_scale(wc, -1.0f / sqrtf(v3_dot(wc, wc))); /* centre -> reference point */
     vec3 wx, wy;
     v3_basis(wz, &wx, &wy);
-    vec3 n = v3_from_local(v3(sin_alpha * cosf(phi), sin_alpha * sinf(phi), cos_alpha), wx, wy,
-                           wz);
+    vec3 n = v3_from_local(v3(sin_alpha * cosf(phi), sin_alpha * sinf(phi), cos_alpha), wx, wy, wz);
     ss->n = n;
     ss->p = sphere_point(s, v3_scale(n, s->radius), &ss->p_error);
     vec3 d = v3_sub(ss->p, ref->p);
@@ -175,8 +174,8 @@ bool shape_sphere_sample(const struct sphere *s, const struct surface *ref, vec2
     return ss->pdf_sa > 0.0f;
 }
 
-float shape_sphere_pdf(const struct sphere *s, const struct surface *ref,
-                       const struct surface *on, vec3 wi)
+float shape_sphere_pdf(const struct sphere *s, const struct surface *ref, const struct surface *on,
+                       vec3 wi)
 {
     vec3 wc;
     struct sample_cone cone;

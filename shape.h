@@ -32,11 +32,11 @@ struct plane {
 
 /* A point on a surface, as the integrator needs it. */
 struct surface {
-    vec3 p;        /* position */
-    vec3 p_error;  /* absolute error bound of p, per component */
-    vec3 ng;       /* unit geometric normal (front side of the primitive) */
-    vec3 ns;       /* unit shading normal, on the same side as ng */
-    vec2 uv;       /* surface parameterisation */
+    vec3 p;       /* position */
+    vec3 p_error; /* absolute error bound of p, per component */
+    vec3 ng;      /* unit geometric normal (front side of the primitive) */
+    vec3 ns;      /* unit shading normal, on the same side as ng */
+    vec2 uv;      /* surface parameterisation */
     uint32_t mat_idx;
 };
 
@@ -89,7 +89,7 @@ float shape_triangle_pdf(const vec3 p[3], const struct surface *ref, const struc
                          vec3 wi);
 float shape_quad_pdf(const struct quad *q, const struct surface *ref, const struct surface *on,
                      vec3 wi);
-float shape_sphere_pdf(const struct sphere *s, const struct surface *ref,
-                       const struct surface *on, vec3 wi);
+float shape_sphere_pdf(const struct sphere *s, const struct surface *ref, const struct surface *on,
+                       vec3 wi);
 
 #endif

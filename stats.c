@@ -121,11 +121,24 @@ bool stats_compare(const struct stats_image *a, const struct stats_image *ref,
     }
     double nan = NAN;
     *m = (struct stats_metrics){
-        .width = a->width, .height = a->height,
-        .mse = nan, .mse_se = nan, .rmse = nan, .relmse = nan, .mrse_pbrt = nan, .mae = nan,
-        .psnr_db = nan, .bias = {nan, nan, nan}, .noise_floor = nan, .mse_corrected = nan,
-        .mse_corrected_se = nan, .rmse_corrected = nan, .relmse_corrected = nan,
-        .psnr_corrected_db = nan, .mean_variance = nan, .relmse_own = nan,
+        .width = a->width,
+        .height = a->height,
+        .mse = nan,
+        .mse_se = nan,
+        .rmse = nan,
+        .relmse = nan,
+        .mrse_pbrt = nan,
+        .mae = nan,
+        .psnr_db = nan,
+        .bias = {nan, nan, nan},
+        .noise_floor = nan,
+        .mse_corrected = nan,
+        .mse_corrected_se = nan,
+        .rmse_corrected = nan,
+        .relmse_corrected = nan,
+        .psnr_corrected_db = nan,
+        .mean_variance = nan,
+        .relmse_own = nan,
     };
     size_t n_pixels = (size_t)a->width * (size_t)a->height;
     bool has_var_a = a->var[0] && a->var[1] && a->var[2];
@@ -214,8 +227,7 @@ bool stats_compare(const struct stats_image *a, const struct stats_image *ref,
     return true;
 }
 
-void stats_relative_error_map(const struct stats_image *a, const struct stats_image *r,
-                              double *e)
+void stats_relative_error_map(const struct stats_image *a, const struct stats_image *r, double *e)
 {
     size_t n_pixels = (size_t)a->width * (size_t)a->height;
     for (size_t i = 0; i < n_pixels; i++) {
@@ -294,8 +306,10 @@ void stats_print_metrics(FILE *f, const struct stats_metrics *m, const char *a_p
     fprintf(f, "bias               R %s  G %s  B %s  mean (a-r)\n", fmt_num(b[0], 64, m->bias[0]),
             fmt_num(b[1], 64, m->bias[1]), fmt_num(b[2], 64, m->bias[2]));
     if (!isnan(m->noise_floor)) {
-        fprintf(f, "noise_floor        %s  mean variance of the reference: the least MSE it "
-                "can show\n", fmt_num(b[0], 64, m->noise_floor));
+        fprintf(f,
+                "noise_floor        %s  mean variance of the reference: the least MSE it "
+                "can show\n",
+                fmt_num(b[0], 64, m->noise_floor));
         fprintf(f, "mse_corrected      %s  (standard error %s)  mse - noise_floor\n",
                 fmt_num(b[0], 64, m->mse_corrected), fmt_num(b[1], 64, m->mse_corrected_se));
         fprintf(f, "rmse_corrected     %s\n", fmt_num(b[0], 64, m->rmse_corrected));
@@ -305,8 +319,10 @@ void stats_print_metrics(FILE *f, const struct stats_metrics *m, const char *a_p
         fprintf(f, "noise_floor        unknown: the reference has no variance.R/G/B channels\n");
     }
     if (!isnan(m->mean_variance))
-        fprintf(f, "mean_variance      %s  the image's own MSE estimate (its variance "
-                "channels)\n", fmt_num(b[0], 64, m->mean_variance));
+        fprintf(f,
+                "mean_variance      %s  the image's own MSE estimate (its variance "
+                "channels)\n",
+                fmt_num(b[0], 64, m->mean_variance));
 }
 
 void stats_write_metrics_json(FILE *f, const struct stats_metrics *m, const char *a_path,
@@ -322,8 +338,9 @@ void stats_write_metrics_json(FILE *f, const struct stats_metrics *m, const char
         const char *key;
         double v;
     } fields[] = {
-        {"mse", m->mse}, {"mse_se", m->mse_se}, {"rmse", m->rmse}, {"relmse", m->relmse},
-        {"mrse_pbrt", m->mrse_pbrt}, {"mae", m->mae}, {"psnr_db", m->psnr_db},
+        {"mse", m->mse},         {"mse_se", m->mse_se},       {"rmse", m->rmse},
+        {"relmse", m->relmse},   {"mrse_pbrt", m->mrse_pbrt}, {"mae", m->mae},
+        {"psnr_db", m->psnr_db},
     };
     for (size_t i = 0; i < sizeof fields / sizeof fields[0]; i++) {
         fprintf(f, ", \"%s\": ", fields[i].key);
@@ -338,10 +355,10 @@ void stats_write_metrics_json(FILE *f, const struct stats_metrics *m, const char
         const char *key;
         double v;
     } more[] = {
-        {"noise_floor", m->noise_floor}, {"mse_corrected", m->mse_corrected},
+        {"noise_floor", m->noise_floor},           {"mse_corrected", m->mse_corrected},
         {"mse_corrected_se", m->mse_corrected_se}, {"rmse_corrected", m->rmse_corrected},
         {"relmse_corrected", m->relmse_corrected}, {"psnr_corrected_db", m->psnr_corrected_db},
-        {"mean_variance", m->mean_variance}, {"relmse_own", m->relmse_own},
+        {"mean_variance", m->mean_variance},       {"relmse_own", m->relmse_own},
     };
     for (size_t i = 0; i < sizeof more / sizeof more[0]; i++) {
         fprintf(f, ", \"%s\": ", more[i].key);
@@ -380,8 +397,12 @@ double stats_t_quantile_975(unsigned dof)
 bool stats_fit_line(const double *x, const double *y, size_t n, struct stats_fit *fit)
 {
     double nan = NAN;
-    *fit = (struct stats_fit){.slope = nan, .intercept = nan, .r2 = nan, .slope_se = nan,
-                              .ci_lo = nan, .ci_hi = nan};
+    *fit = (struct stats_fit){.slope = nan,
+                              .intercept = nan,
+                              .r2 = nan,
+                              .slope_se = nan,
+                              .ci_lo = nan,
+                              .ci_hi = nan};
     double sx = 0.0, sy = 0.0;
     for (size_t i = 0; i < n; i++)
         if (isfinite(x[i]) && isfinite(y[i])) {
@@ -480,10 +501,15 @@ bool stats_curve_add(struct stats_curve *c, const struct film *film, const struc
         return false;
 
     struct stats_point *p = &c->points[c->n_points];
-    *p = (struct stats_point){.seed = seed, .spp = spp, .seconds = seconds,
-                              .mean_variance = m.mean_variance, .mse_raw = m.mse,
-                              .psnr_raw_db = m.psnr_db, .noise_floor = m.noise_floor,
-                              .mrse_pbrt = m.mrse_pbrt, .mae = m.mae};
+    *p = (struct stats_point){.seed = seed,
+                              .spp = spp,
+                              .seconds = seconds,
+                              .mean_variance = m.mean_variance,
+                              .mse_raw = m.mse,
+                              .psnr_raw_db = m.psnr_db,
+                              .noise_floor = m.noise_floor,
+                              .mrse_pbrt = m.mrse_pbrt,
+                              .mae = m.mae};
     if (ref && !isnan(m.noise_floor)) {
         p->source = STATS_ERR_REFERENCE_CORRECTED;
         p->mse = m.mse_corrected;
@@ -500,7 +526,7 @@ bool stats_curve_add(struct stats_curve *c, const struct film *film, const struc
     p->rmse = sqrt_or_nan(p->mse);
     /* a corrected MSE <= 0 lies below the reference's noise: no PSNR can be claimed */
     p->psnr_db = p->source == STATS_ERR_REFERENCE_CORRECTED && !(p->mse > 0.0) ? NAN
-                                                                              : psnr_of(p->mse);
+                                                                               : psnr_of(p->mse);
     /* efficiency = 1 / (MSE time) (PBRT 4e, ch. 2, "Error in Monte Carlo Estimators");
      * time to unit variance = V time, its own-variance counterpart */
     p->efficiency = p->mse > 0.0 && seconds > 0.0 ? 1.0 / (p->mse * seconds) : NAN;
@@ -650,7 +676,8 @@ bool stats_summarize(const struct stats_curve *c, double target_rmse, struct sta
         row->seconds = sum_sec / k;
         row->mean_variance = sum_var / k;
         row->efficiency = row->mse_mean > 0.0 && row->seconds > 0.0
-                              ? 1.0 / (row->mse_mean * row->seconds) : NAN;
+                              ? 1.0 / (row->mse_mean * row->seconds)
+                              : NAN;
         row->time_to_unit_variance = row->mean_variance * row->seconds;
         row->mse_raw_mean = sum_raw / k;
         row->noise_floor = sum_floor / k;
@@ -821,11 +848,15 @@ bool stats_write_json(const char *path, const struct stats_curve *c, const struc
             const char *key;
             double v;
         } fields[] = {
-            {"mse_mean", row->mse_mean}, {"mse_std", row->mse_std}, {"rmse", row->rmse},
-            {"psnr_db", row->psnr_db}, {"mean_variance", row->mean_variance},
+            {"mse_mean", row->mse_mean},
+            {"mse_std", row->mse_std},
+            {"rmse", row->rmse},
+            {"psnr_db", row->psnr_db},
+            {"mean_variance", row->mean_variance},
             {"efficiency", row->efficiency},
             {"time_to_unit_variance", row->time_to_unit_variance},
-            {"mse_raw_mean", row->mse_raw_mean}, {"noise_floor", row->noise_floor},
+            {"mse_raw_mean", row->mse_raw_mean},
+            {"noise_floor", row->noise_floor},
         };
         json_num(f, row->seconds);
         for (size_t i = 0; i < sizeof fields / sizeof fields[0]; i++) {
@@ -982,8 +1013,9 @@ size_t stats_integrate(enum stats_integrand f, enum sampler_kind kind, uint32_t 
             double d = sum / (double)spp - exact;
             welford_add(&w, d * d);
         }
-        rows[n_rows++] = (struct stats_integrate_row){
-            .spp = (uint32_t)spp, .mse = w.mean, .mse_se = sqrt(welford_var(&w) / w.n)};
+        rows[n_rows++] = (struct stats_integrate_row){.spp = (uint32_t)spp,
+                                                      .mse = w.mean,
+                                                      .mse_se = sqrt(welford_var(&w) / w.n)};
     }
     return n_rows;
 }

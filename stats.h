@@ -22,9 +22,9 @@
 struct stats_image {
     int width;
     int height;
-    const float *rgb[3];  /* R, G, B planes, width * height each, row-major */
-    const float *var[3];  /* variance of the mean per channel, or all NULL when unknown */
-    const float *count;   /* samples per pixel, or NULL when unknown */
+    const float *rgb[3]; /* R, G, B planes, width * height each, row-major */
+    const float *var[3]; /* variance of the mean per channel, or all NULL when unknown */
+    const float *count;  /* samples per pixel, or NULL when unknown */
 };
 
 /* Points out at the R, G, B channels of img and, when all three are present, at variance.R/G/B
@@ -58,9 +58,9 @@ struct stats_metrics {
     double rmse_corrected;   /* sqrt(mse_corrected); NAN when mse_corrected <= 0 */
     double relmse_corrected; /* mean ((a - r)^2 - var r) / (r^2 + 0.01) */
     double psnr_corrected_db;
-    double mean_variance;    /* mean variance of the mean of a (a's variance channels; NAN
+    double mean_variance; /* mean variance of the mean of a (a's variance channels; NAN
                                 when a has none or a pixel has fewer than 2 samples) */
-    double relmse_own;       /* mean var a / (a^2 + 0.01): a's own relMSE estimate */
+    double relmse_own;    /* mean var a / (a^2 + 0.01): a's own relMSE estimate */
 };
 
 /* Compares a with ref (may be NULL: then only a's own-variance fields are filled).  Fails
@@ -78,19 +78,18 @@ void stats_write_metrics_json(FILE *f, const struct stats_metrics *m, const char
 /* The per-pixel terms of the relMSE: e[i] = mean over the channels of pixel i where a and r
  * are both finite of (a - r)^2 / (r^2 + 0.01); NAN where none is.  a and r must have the same
  * size; e holds width * height values. */
-void stats_relative_error_map(const struct stats_image *a, const struct stats_image *r,
-                              double *e);
+void stats_relative_error_map(const struct stats_image *a, const struct stats_image *r, double *e);
 
 /* ---- line fits ---- */
 
 /* Ordinary least squares y = intercept + slope x with its 95% confidence interval. */
 struct stats_fit {
-    size_t n;          /* points used (finite x and y) */
+    size_t n; /* points used (finite x and y) */
     double slope;
     double intercept;
-    double r2;         /* coefficient of determination 1 - SSE / SST */
-    double slope_se;   /* standard error of the slope, sqrt(s^2 / Sxx), s^2 = SSE / (n - 2) */
-    double ci_lo;      /* slope -+ t(0.975, n - 2) slope_se; NAN when n < 3 */
+    double r2;       /* coefficient of determination 1 - SSE / SST */
+    double slope_se; /* standard error of the slope, sqrt(s^2 / Sxx), s^2 = SSE / (n - 2) */
+    double ci_lo;    /* slope -+ t(0.975, n - 2) slope_se; NAN when n < 3 */
     double ci_hi;
 };
 
@@ -115,7 +114,7 @@ const char *stats_error_source_name(enum stats_error_source source);
 struct stats_point {
     uint64_t seed;
     uint32_t spp;
-    double seconds;               /* render time of this seed's passes up to this spp */
+    double seconds; /* render time of this seed's passes up to this spp */
     enum stats_error_source source;
     double mse;                   /* by source; NAN when unknown */
     double rmse;                  /* sqrt(mse); NAN when mse <= 0 or unknown */
@@ -126,7 +125,7 @@ struct stats_point {
     double time_to_unit_variance; /* mean_variance seconds */
     double mse_raw;               /* mean (a - r)^2; NAN without a reference (likewise below) */
     double psnr_raw_db;
-    double noise_floor;           /* mean variance of the reference */
+    double noise_floor; /* mean variance of the reference */
     double mrse_pbrt;
     double mae;
 };
@@ -219,8 +218,8 @@ void stats_summary_free(struct stats_summary *s);
 void stats_depth_name(uint32_t max_depth, char *buf, size_t buf_bytes);
 
 /* The CSV: the header line STATS_CSV_HEADER then one row per point, in the order added. */
-#define STATS_CSV_HEADER                                                                          \
-    "spp,seconds,mse,rmse,relmse,psnr_db,mean_variance,efficiency,sampler,integrator,seed,"       \
+#define STATS_CSV_HEADER                                                                           \
+    "spp,seconds,mse,rmse,relmse,psnr_db,mean_variance,efficiency,sampler,integrator,seed,"        \
     "error_source,time_to_unit_variance,mse_raw,psnr_raw_db,noise_floor,mrse_pbrt,mae,max_depth"
 bool stats_write_csv(const char *path, const struct stats_curve *c, struct mcpt_error *err);
 /* The JSON summary (keys in docs/convergence.md), the fits and the ensemble table. */

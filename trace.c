@@ -51,27 +51,26 @@ struct vertex {
     const struct material *m; /* the material, its albedo texture looked up */
     vec3 t;                   /* shading frame: x = t, y = b, z = sf->ns */
     vec3 b;
-    vec3 wo_world;            /* unit direction towards the previous vertex */
-    vec3 wo;                  /* wo_world in the shading frame */
-    vec3 n_sky;               /* ns turned to the side of wo: the sky is sampled about it */
+    vec3 wo_world; /* unit direction towards the previous vertex */
+    vec3 wo;       /* wo_world in the shading frame */
+    vec3 n_sky;    /* ns turned to the side of wo: the sky is sampled about it */
 };
 
 /* The vertex a ray left from and how its direction was drawn: what MIS needs to weigh the
  * emission that ray finds. */
 struct last_bounce {
-    struct surface sf;  /* the vertex (valid once the path has bounced) */
-    vec3 n_sky;         /* its sky-sampling normal */
-    float pdf_bsdf;     /* solid-angle pdf of the direction sample */
-    bool is_specular;   /* the sample came from a delta lobe: no MIS */
+    struct surface sf; /* the vertex (valid once the path has bounced) */
+    vec3 n_sky;        /* its sky-sampling normal */
+    float pdf_bsdf;    /* solid-angle pdf of the direction sample */
+    bool is_specular;  /* the sample came from a delta lobe: no MIS */
 };
 
 static bool intersect(const struct trace_scene *ts, const struct ray *ray, struct hit_record *hr);
 static bool occluded(const struct trace_scene *ts, const struct ray *ray);
 static struct ray spawn_ray(const struct surface *sf, vec3 d);
-static struct ray spawn_ray_to(const struct surface *from, vec3 p_to, vec3 p_to_error,
-                               vec3 n_to);
-static struct vertex make_vertex(const struct surface *sf, const struct material *m,
-                                 vec3 wo_world, struct material *m_textured);
+static struct ray spawn_ray_to(const struct surface *from, vec3 p_to, vec3 p_to_error, vec3 n_to);
+static struct vertex make_vertex(const struct surface *sf, const struct material *m, vec3 wo_world,
+                                 struct material *m_textured);
 static float emission_weight(const struct trace_scene *ts, const struct trace_options *opt,
                              const struct last_bounce *last, uint32_t light_idx,
                              const struct surface *on, vec3 wi);
@@ -93,8 +92,8 @@ static bool split_keeps(enum render_split split, uint32_t n_bounces)
 
 /* ---- the path loop ---- */
 
-vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *opt,
-                    struct ray ray, struct sampler *sampler, uint64_t *n_rays)
+vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *opt, struct ray ray,
+                    struct sampler *sampler, uint64_t *n_rays)
 {
     const struct scene *scene = ts->scene;
     const uint32_t n_ls = opt->light_samples ? opt->light_samples : 1;
@@ -106,9 +105,9 @@ vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *op
         max_bounces = 1; /* nothing beyond the first bounce is kept */
     vec3 L = v3_splat(0.0f);
     vec3 beta = v3_splat(1.0f);
-    float eta_scale = 1.0f;      /* product of etap^2 over refractions, undone for roulette */
+    float eta_scale = 1.0f; /* product of etap^2 over refractions, undone for roulette */
     struct last_bounce last = {0};
-    struct sampler extra;        /* light samples 1 .. N-1 (sample.h, SAMPLE_DIM_LIGHT_EXTRA) */
+    struct sampler extra; /* light samples 1 .. N-1 (sample.h, SAMPLE_DIM_LIGHT_EXTRA) */
     bool extra_started = false;
 
     for (uint32_t n_bounces = 0;;) {
@@ -147,8 +146,8 @@ vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *op
                 struct sampler *s = light_sampler(sampler, &extra, &extra_started, bounce, j, n_ls);
                 float u_choice = sample_1d(s);
                 vec2 u_light = sample_2d(s);
-                L = v3_add(L, v3_mul(beta, sample_one_light(ts, opt, &v, u_choice, u_light,
-                                                            n_rays)));
+                L = v3_add(L,
+                           v3_mul(beta, sample_one_light(ts, opt, &v, u_choice, u_light, n_rays)));
             }
         }
 
@@ -384,8 +383,7 @@ bool trace_render(const struct trace_scene *ts, const struct trace_options *opt,
 
 /* ---- preparation ---- */
 
-struct trace_scene *trace_prepare(const struct scene *scene, int n_threads,
-                                  struct mcpt_error *err)
+struct trace_scene *trace_prepare(const struct scene *scene, int n_threads, struct mcpt_error *err)
 {
     struct trace_scene *ts = calloc(1, sizeof *ts);
     uint32_t *indices = NULL;
@@ -437,8 +435,8 @@ struct ray trace_camera_ray(const struct trace_scene *ts, float px, float py, ve
 
 /* The vertex at surface sf reached from direction wo_world: its material m, with the albedo
  * texture looked up into *m_textured when it has one, and the local shading frame z = ns. */
-static struct vertex make_vertex(const struct surface *sf, const struct material *m,
-                                 vec3 wo_world, struct material *m_textured)
+static struct vertex make_vertex(const struct surface *sf, const struct material *m, vec3 wo_world,
+                                 struct material *m_textured)
 {
     struct vertex v;
     v.sf = sf;
@@ -500,8 +498,7 @@ static struct sampler *light_sampler(struct sampler *sampler, struct sampler *ex
  * The estimators without light sampling still sample point lights here: nothing else can find
  * a delta light. */
 static vec3 sample_one_light(const struct trace_scene *ts, const struct trace_options *opt,
-                             const struct vertex *v, float u_choice, vec2 u_light,
-                             uint64_t *n_rays)
+                             const struct vertex *v, float u_choice, vec2 u_light, uint64_t *n_rays)
 {
     const vec3 zero = v3_splat(0.0f);
     const uint32_t n_ls = opt->light_samples ? opt->light_samples : 1;
@@ -573,14 +570,12 @@ static struct surface triangle_surface(const struct scene *scene, uint32_t tri_i
         ns[k] = tri->vn[k] >= 0 ? scene->normals[tri->vn[k]] : v3_splat(0.0f);
         uv[k] = tri->vt[k] >= 0 ? scene->uvs[tri->vt[k]] : (vec2){0.0f, 0.0f};
     }
-    return shape_triangle_surface(p, has_ns ? ns : NULL, has_uv ? uv : NULL, b1, b2,
-                                  tri->mat_idx);
+    return shape_triangle_surface(p, has_ns ? ns : NULL, has_uv ? uv : NULL, b1, b2, tri->mat_idx);
 }
 
 enum hit_kind { HIT_NONE, HIT_TRI, HIT_SPHERE, HIT_QUAD, HIT_PLANE };
 
-static bool intersect(const struct trace_scene *ts, const struct ray *ray_in,
-                      struct hit_record *hr)
+static bool intersect(const struct trace_scene *ts, const struct ray *ray_in, struct hit_record *hr)
 {
     const struct scene *scene = ts->scene;
     struct ray ray = *ray_in;

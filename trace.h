@@ -13,16 +13,15 @@
 #include "scene.h"
 
 #define TRACE_DEPTH_INFINITE UINT32_MAX /* max_depth meaning "until Russian roulette ends it" */
-#define TRACE_DEPTH_CAP 1024u /* hard cap on bounces, whatever max_depth says */
-#define TRACE_TILE_SIZE 16    /* tile edge in pixels */
+#define TRACE_DEPTH_CAP 1024u           /* hard cap on bounces, whatever max_depth says */
+#define TRACE_TILE_SIZE 16              /* tile edge in pixels */
 
 struct trace_scene; /* opaque: scene + BVH + camera + light table */
 
 /* Builds the BVH (with n_threads) and the light table for scene, which must outlive the result.
  * Returns NULL and fills *err on failure: a bad-input error for a bad camera or a light of
  * non-finite power (light_table_build), a runtime error when memory runs out. */
-struct trace_scene *trace_prepare(const struct scene *scene, int n_threads,
-                                  struct mcpt_error *err);
+struct trace_scene *trace_prepare(const struct scene *scene, int n_threads, struct mcpt_error *err);
 void trace_free(struct trace_scene *ts);
 struct bvh_stats trace_bvh_stats(const struct trace_scene *ts);
 
@@ -38,14 +37,14 @@ struct trace_options {
     void (*progress)(void *user, uint64_t samples_done, uint64_t samples_total);
     void *progress_user;
     /* sampling (docs/sampling.md) */
-    uint32_t sampler_spp;  /* stratified: samples per stratified set; 0 = spp, or batch when
+    uint32_t sampler_spp; /* stratified: samples per stratified set; 0 = spp, or batch when
                               adaptive.  Progressive renders pass their final spp here so that
                               the last image equals a one-call render. */
-    bool adaptive;         /* stop each pixel by trace_adaptive_stop; spp is then the maximum */
-    float tolerance;       /* adaptive: T, relative half-width of the 95% interval */
-    float adaptive_floor;  /* adaptive: luminance below which T applies absolutely */
-    uint32_t min_spp;      /* adaptive: samples before the first test */
-    uint32_t batch;        /* adaptive: samples between tests (>= 1) */
+    bool adaptive;        /* stop each pixel by trace_adaptive_stop; spp is then the maximum */
+    float tolerance;      /* adaptive: T, relative half-width of the 95% interval */
+    float adaptive_floor; /* adaptive: luminance below which T applies absolutely */
+    uint32_t min_spp;     /* adaptive: samples before the first test */
+    uint32_t batch;       /* adaptive: samples between tests (>= 1) */
     /* light transport (trace_radiance) */
     enum render_direct direct; /* direct-lighting estimator; 0 is RENDER_DIRECT_MIS */
     uint32_t light_samples;    /* light samples (shadow rays) per path vertex; 0 means 1 */
@@ -56,7 +55,7 @@ struct trace_options {
                                   later one; 0 means TRACE_RR_DEPTH_DEFAULT */
 };
 
-#define TRACE_RR_DEPTH_DEFAULT 2u  /* as PBRT 4e: the first two bounces are never cut short */
+#define TRACE_RR_DEPTH_DEFAULT 2u /* as PBRT 4e: the first two bounces are never cut short */
 
 #define TRACE_ADAPTIVE_TOLERANCE 0.05f /* default T */
 #define TRACE_ADAPTIVE_FLOOR 0.01f     /* default floor, luminance in the image's linear units */
@@ -98,8 +97,8 @@ bool trace_render(const struct trace_scene *ts, const struct trace_options *opt,
  * bounces opt->split asks for.  sampler is the camera sample's, past its pixel and lens
  * dimensions; the path reads its bounce dimensions from it (sample.h).  *n_rays is incremented
  * by the rays traced. */
-vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *opt,
-                    struct ray ray, struct sampler *sampler, uint64_t *n_rays);
+vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *opt, struct ray ray,
+                    struct sampler *sampler, uint64_t *n_rays);
 
 /* The camera ray of film position (px, py) for this sample's lens dimensions. */
 struct ray trace_camera_ray(const struct trace_scene *ts, float px, float py, vec2 u_lens);

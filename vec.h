@@ -32,7 +32,7 @@ struct ray {
     float t_min; /* smallest accepted hit parameter */
     vec3 d;      /* direction */
     float t_max; /* largest accepted hit parameter; +INFINITY for an unbounded ray */
-}; /* 32 bytes */
+};               /* 32 bytes */
 
 /* Every failure is reported here; main prints "file:line:col: error: msg" and exits with the
  * status its kind names.  line == 0 means the error has no line (e.g. the file cannot be
@@ -51,8 +51,7 @@ struct mcpt_error {
 };
 
 static inline void mcpt_error_setv(struct mcpt_error *err, enum mcpt_error_kind kind,
-                                   const char *file, int line, int col, const char *fmt,
-                                   va_list ap)
+                                   const char *file, int line, int col, const char *fmt, va_list ap)
 {
     if (!err)
         return;

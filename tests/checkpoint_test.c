@@ -34,8 +34,13 @@ Test(checkpoint, round_trip_and_damage, .init = setup, .fini = teardown)
         p->n = (uint32_t)i;
         p->n_dropped = i == 7;
     }
-    struct checkpoint_info info = {.scene_hash = 42, .seed = 7, .spp = 16, .max_depth = 3,
-                                   .sampler = 0, .sample_offset = 5, .args_bytes = 9};
+    struct checkpoint_info info = {.scene_hash = 42,
+                                   .seed = 7,
+                                   .spp = 16,
+                                   .max_depth = 3,
+                                   .sampler = 0,
+                                   .sample_offset = 5,
+                                   .args_bytes = 9};
     snprintf(info.scene_path, sizeof info.scene_path, "a/scene.txt");
     memcpy(info.args, "--spp=16", 9);
     char path[300];
@@ -115,8 +120,12 @@ Test(checkpoint, scene_hash_is_fnv1a_64, .init = setup, .fini = teardown)
  * checkpoint). */
 Test(checkpoint, matches_names_the_first_difference)
 {
-    struct checkpoint_info saved = {.scene_hash = 1, .seed = 2, .spp = 64, .max_depth = 5,
-                                    .sampler = SAMPLER_SOBOL, .sample_offset = 0};
+    struct checkpoint_info saved = {.scene_hash = 1,
+                                    .seed = 2,
+                                    .spp = 64,
+                                    .max_depth = 5,
+                                    .sampler = SAMPLER_SOBOL,
+                                    .sample_offset = 0};
     snprintf(saved.scene_path, sizeof saved.scene_path, "scenes/x.txt");
     struct checkpoint_info run = saved;
     struct mcpt_error err;

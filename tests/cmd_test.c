@@ -76,20 +76,30 @@ Test(cmd, subcommand_exit_statuses, .init = setup, .fini = teardown, .timeout = 
     snprintf(bad_out, sizeof bad_out, "%s/no/such/dir/out.png", tmpdir);
     const char *render[] = {"tests/data/cli/tiny.txt", "--spp", "2", "--quiet", "-o", img, NULL};
     cr_assert_eq(run_mcpt(render, err, sizeof err), 0, "%s", err);
-    const char *render_part[] = {"tests/data/cli/tiny.txt", "--spp", "2", "--sample-range", "0:2",
-                                 "--quiet", "-o", part, NULL};
+    const char *render_part[] = {"tests/data/cli/tiny.txt",
+                                 "--spp",
+                                 "2",
+                                 "--sample-range",
+                                 "0:2",
+                                 "--quiet",
+                                 "-o",
+                                 part,
+                                 NULL};
     cr_assert_eq(run_mcpt(render_part, err, sizeof err), 0, "%s", err);
 
-    const char *help[][3] = {{"compare", "--help", NULL}, {"integrate", "--help", NULL},
+    const char *help[][3] = {{"compare", "--help", NULL},
+                             {"integrate", "--help", NULL},
                              {"merge", "--help", NULL}};
     for (int i = 0; i < 3; i++)
         cr_assert_eq(run_mcpt(help[i], err, sizeof err), 0, "%s --help: %s", help[i][0], err);
-    const char *usage[][4] = {{"compare", "--bogus", NULL}, {"integrate", "--bogus", NULL},
-                              {"merge", "--bogus", NULL}, {"compare", img, "missing.exr", NULL},
+    const char *usage[][4] = {{"compare", "--bogus", NULL},
+                              {"integrate", "--bogus", NULL},
+                              {"merge", "--bogus", NULL},
+                              {"compare", img, "missing.exr", NULL},
                               {"merge", "missing.exr", "-o", NULL}};
     for (int i = 0; i < 5; i++)
-        cr_assert_eq(run_mcpt(usage[i], err, sizeof err), 2, "%s %s: %s", usage[i][0],
-                     usage[i][1], err);
+        cr_assert_eq(run_mcpt(usage[i], err, sizeof err), 2, "%s %s: %s", usage[i][0], usage[i][1],
+                     err);
 
     const char *heat[] = {"compare", img, img, "--heatmap", bad_out, NULL};
     cr_assert_eq(run_mcpt(heat, err, sizeof err), 1, "%s", err);

@@ -156,9 +156,9 @@ Test(image, exr_round_trip_is_bit_exact)
     for (int c = 0; c < 3; c++)
         for (size_t i = 0; i < n_px; i++)
             img.data[c][i] = float_from_bits(xorshift32(&state));
-    const float planted[] = {0x1p-149f,  0x1p-127f, -0x1p-140f, FLT_MAX,  -FLT_MAX,  -0.0f,
-                             1e30f,      -12345.678f, INFINITY,  -INFINITY, NAN,      FLT_MIN,
-                             0x1.fffffep-127f /* largest denormal */};
+    const float planted[] = {0x1p-149f, 0x1p-127f, -0x1p-140f,      FLT_MAX,  -FLT_MAX,
+                             -0.0f,     1e30f,     -12345.678f,     INFINITY, -INFINITY,
+                             NAN,       FLT_MIN,   0x1.fffffep-127f /* largest denormal */};
     const size_t n_planted = sizeof planted / sizeof planted[0];
     for (size_t i = 0; i < n_px; i++) {
         img.data[3][i] = i < n_planted ? planted[i] : (float)i * -1e-3f;
@@ -383,10 +383,9 @@ Test(image, exr_reads_tiled_half_float_uint_file)
     for (int y = 0; y < 13; y++) {
         for (int x = 0; x < 21; x++) {
             int i = y * 21 + x;
-            cr_assert_eq(img.data[0][i], (float)(x - 10) * 0.25f + (float)y * 8.0f, "Y(%d, %d)",
-                         x, y);
-            cr_assert_eq(img.data[1][i], (float)x * 1000.5f - (float)y * 0.125f, "Z(%d, %d)", x,
+            cr_assert_eq(img.data[0][i], (float)(x - 10) * 0.25f + (float)y * 8.0f, "Y(%d, %d)", x,
                          y);
+            cr_assert_eq(img.data[1][i], (float)x * 1000.5f - (float)y * 0.125f, "Z(%d, %d)", x, y);
             float id = (x == 0 && y == 0) ? (float)4294967295u : (float)(x + 100 * y);
             cr_assert_eq(img.data[2][i], id, "id(%d, %d)", x, y);
         }
@@ -681,8 +680,8 @@ static int srgb_byte_ref(double v)
  * above-one and infinite values; NaN -> 0.  Read back with libpng. */
 Test(image, png_srgb_known_values)
 {
-    const float in[] = {0.0f,  1.0f,   0.5f,      0.18f, 0.0031308f, 0.001f,  0.0002f,
-                        0.0001f, -1.0f, 2.0f,     INFINITY, -INFINITY, NAN,   1.0f / 255.0f};
+    const float in[] = {0.0f,    1.0f,  0.5f, 0.18f,    0.0031308f, 0.001f, 0.0002f,
+                        0.0001f, -1.0f, 2.0f, INFINITY, -INFINITY,  NAN,    1.0f / 255.0f};
     const int expected[] = {0, 255, 188, 118, 10, 3, 1, 0, 0, 255, 255, 0, 0, 13};
     const int n = (int)(sizeof in / sizeof in[0]);
     float rgb[3 * 14];
@@ -691,8 +690,7 @@ Test(image, png_srgb_known_values)
             rgb[3 * i + c] = in[i];
     char path[256];
     struct mcpt_error err;
-    cr_assert(image_write_png_srgb(scratch_path(path, sizeof path, "k.png"), n, 1, rgb, 0.0f,
-                                   &err),
+    cr_assert(image_write_png_srgb(scratch_path(path, sizeof path, "k.png"), n, 1, rgb, 0.0f, &err),
               "%s", err.msg);
     int w;
     int h;

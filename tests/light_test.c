@@ -29,31 +29,42 @@ static struct light lt_lights[5];
 
 static struct scene light_scene(void)
 {
-    lt_materials[0] = (struct material){.name = "lamp", .kind = MAT_DIFFUSE,
-                                        .Le = v3(1.0f, 2.0f, 3.0f), .two_sided_emission = true};
-    lt_materials[1] = (struct material){.name = "glow", .kind = MAT_DIFFUSE,
-                                        .Le = v3(0.5f, 0.5f, 0.5f), .two_sided_emission = true};
+    lt_materials[0] = (struct material){.name = "lamp",
+                                        .kind = MAT_DIFFUSE,
+                                        .Le = v3(1.0f, 2.0f, 3.0f),
+                                        .two_sided_emission = true};
+    lt_materials[1] = (struct material){.name = "glow",
+                                        .kind = MAT_DIFFUSE,
+                                        .Le = v3(0.5f, 0.5f, 0.5f),
+                                        .two_sided_emission = true};
     lt_spheres[0] = (struct sphere){.center = v3(0.5f, 0.3f, 2.5f), .radius = 0.7f};
-    lt_spheres[1] = (struct sphere){.center = v3(0.1f, -0.2f, 0.2f), .radius = 1.0f,
-                                    .mat_idx = 1};
-    lt_quads[0] = (struct quad){.corner = v3(-0.5f, -2.0f, 0.3f), .e1 = v3(1.0f, 0.0f, 0.2f),
+    lt_spheres[1] = (struct sphere){.center = v3(0.1f, -0.2f, 0.2f), .radius = 1.0f, .mat_idx = 1};
+    lt_quads[0] = (struct quad){.corner = v3(-0.5f, -2.0f, 0.3f),
+                                .e1 = v3(1.0f, 0.0f, 0.2f),
                                 .e2 = v3(0.0f, 0.3f, 1.0f)};
     lt_lights[0] = (struct light){.kind = LIGHT_TRIANGLE, .prim_idx = 0};
     lt_lights[1] = (struct light){.kind = LIGHT_QUAD, .prim_idx = 0};
     lt_lights[2] = (struct light){.kind = LIGHT_SPHERE, .prim_idx = 0};
     lt_lights[3] = (struct light){.kind = LIGHT_SPHERE, .prim_idx = 1};
-    lt_lights[4] = (struct light){.kind = LIGHT_POINT, .position = v3(0.3f, 0.4f, 3.0f),
+    lt_lights[4] = (struct light){.kind = LIGHT_POINT,
+                                  .position = v3(0.3f, 0.4f, 3.0f),
                                   .intensity = v3(2.0f, 1.0f, 0.5f)};
     struct scene s = {
-        .camera = {.eye = v3(0, 0, 5), .look_at = v3(0, 0, 0), .up = v3(0, 1, 0),
-                   .fov_deg = 40.0f},
-        .width = 4, .height = 4,
-        .materials = lt_materials, .n_materials = 2,
-        .positions = lt_positions, .n_positions = 3,
-        .tris = lt_tris, .n_tris = 1,
-        .spheres = lt_spheres, .n_spheres = 2,
-        .quads = lt_quads, .n_quads = 1,
-        .lights = lt_lights, .n_lights = 4, /* the point light joins where a test says so */
+        .camera = {.eye = v3(0, 0, 5), .look_at = v3(0, 0, 0), .up = v3(0, 1, 0), .fov_deg = 40.0f},
+        .width = 4,
+        .height = 4,
+        .materials = lt_materials,
+        .n_materials = 2,
+        .positions = lt_positions,
+        .n_positions = 3,
+        .tris = lt_tris,
+        .n_tris = 1,
+        .spheres = lt_spheres,
+        .n_spheres = 2,
+        .quads = lt_quads,
+        .n_quads = 1,
+        .lights = lt_lights,
+        .n_lights = 4, /* the point light joins where a test says so */
         .sky = {.kind = SKY_GRADIENT, .horizon = v3(1, 1, 1), .zenith = v3(0.2f, 0.3f, 1.0f)},
     };
     return s;
@@ -68,7 +79,9 @@ static struct light_table *build(const struct scene *s)
     return lt;
 }
 
-static const struct surface REF = {.p = {0, 0, 0}, .p_error = {0, 0, 0}, .ng = {0, 0, 1},
+static const struct surface REF = {.p = {0, 0, 0},
+                                   .p_error = {0, 0, 0},
+                                   .ng = {0, 0, 1},
                                    .ns = {0, 0, 1}};
 
 /* Ray-triangle test in double (Moller & Trumbore 1997, "Fast, Minimum Storage Ray/Triangle
@@ -97,14 +110,16 @@ static bool ray_triangle(vec3 p0, vec3 p1, vec3 p2, const struct ray *ray, float
 
 /* light_pdf of direction wi from ref, finding where the ray along wi meets light light_idx's
  * primitive alone (other primitives do not occlude it here); 0 where it misses. */
-static float pdf_along(const struct light_table *lt, const struct scene *scene,
-                       uint32_t light_idx, const struct surface *ref, vec3 n_sky, vec3 wi)
+static float pdf_along(const struct light_table *lt, const struct scene *scene, uint32_t light_idx,
+                       const struct surface *ref, vec3 n_sky, vec3 wi)
 {
     if (light_idx == light_sky_idx(lt))
         return light_pdf(lt, light_idx, ref, n_sky, NULL, wi);
     const struct light *l = &scene->lights[light_idx];
-    struct ray ray = {.o = offset_ray_origin(ref->p, ref->p_error, ref->ng, wi), .d = wi,
-                      .t_min = 0.0f, .t_max = INFINITY};
+    struct ray ray = {.o = offset_ray_origin(ref->p, ref->p_error, ref->ng, wi),
+                      .d = wi,
+                      .t_min = 0.0f,
+                      .t_max = INFINITY};
     struct surface on;
     float t;
     switch (l->kind) {
@@ -300,7 +315,8 @@ Test(light, nonfinite_power_is_bad_input)
 {
     struct scene s = light_scene();
     s.n_lights = 2;
-    lt_quads[0] = (struct quad){.corner = v3(1.0f, 2.0f, 3.0f), .e1 = v3(2e19f, 0.0f, 0.0f),
+    lt_quads[0] = (struct quad){.corner = v3(1.0f, 2.0f, 3.0f),
+                                .e1 = v3(2e19f, 0.0f, 0.0f),
                                 .e2 = v3(0.0f, 2e19f, 0.0f)};
     struct mcpt_error err;
     cr_assert_null(light_table_build(&s, &err));

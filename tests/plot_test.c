@@ -137,8 +137,11 @@ Test(plot, svg_is_complete_and_escaped)
     snprintf(path, sizeof path, "%s/c.svg", dir);
     struct fixture fx;
     fixture_init(&fx);
-    struct stats_run_info info = {.scene = "a<b>&c.txt", .sampler = "sobol",
-                                  .integrator = "path-mis", .max_depth = 5, .width = 8,
+    struct stats_run_info info = {.scene = "a<b>&c.txt",
+                                  .sampler = "sobol",
+                                  .integrator = "path-mis",
+                                  .max_depth = 5,
+                                  .width = 8,
                                   .height = 8};
     struct stats_curve curve;
     stats_curve_init(&curve, &info);

@@ -107,13 +107,18 @@ static void make_checkpoint(const char *path, uint32_t spp_done, uint32_t spp_ta
     cr_assert_not_null(ts, "%s", err.msg);
     struct film film;
     cr_assert(film_init(&film, scene.width, scene.height, &err));
-    struct trace_options opt = {.spp = spp_done, .max_depth = scene.render.max_depth,
-                                .seed = 0, .sampler = SAMPLER_INDEPENDENT, .n_threads = 2};
+    struct trace_options opt = {.spp = spp_done,
+                                .max_depth = scene.render.max_depth,
+                                .seed = 0,
+                                .sampler = SAMPLER_INDEPENDENT,
+                                .n_threads = 2};
     struct trace_result res;
     cr_assert(trace_render(ts, &opt, &film, &res, &err));
-    struct checkpoint_info info = {.scene_hash = fnv1a_file(SCENE), .seed = 0,
-                                        .spp = spp_target, .max_depth = opt.max_depth,
-                                        .sampler = SAMPLER_INDEPENDENT};
+    struct checkpoint_info info = {.scene_hash = fnv1a_file(SCENE),
+                                   .seed = 0,
+                                   .spp = spp_target,
+                                   .max_depth = opt.max_depth,
+                                   .sampler = SAMPLER_INDEPENDENT};
     snprintf(info.scene_path, sizeof info.scene_path, "%s", SCENE);
     int n = snprintf(info.args, sizeof info.args, "--spp=%u", spp_target) + 1;
     n += snprintf(info.args + n, sizeof info.args - (size_t)n, "--sampler=independent") + 1;
@@ -134,8 +139,8 @@ Test(resume, from_checkpoint_bit_identical, .init = setup, .fini = teardown)
     snprintf(resumed, sizeof resumed, "%s/resumed.exr", tmpdir);
     snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
     make_checkpoint(ckpt, 13, 64);
-    const char *a_full[] = {SCENE, "--spp", "64", "--sampler", "independent", "--threads", "1",
-                            "-o", full, NULL};
+    const char *a_full[] = {SCENE,       "--spp", "64", "--sampler", "independent",
+                            "--threads", "1",     "-o", full,        NULL};
     cr_assert_eq(test_run_mcpt(a_full, NULL, err_path, ALARM_S), 0);
     const char *a_res[] = {"--resume", ckpt, "--threads", "2", "-o", resumed, NULL};
     char err[4096];
@@ -158,29 +163,28 @@ Test(resume, mismatch_refused, .init = setup, .fini = teardown)
     const char *seed[] = {SCENE, "--resume", ckpt, "--seed", "5", "-o", out, NULL};
     cr_assert_eq(test_run_mcpt(seed, NULL, err_path, ALARM_S), 2);
     test_read_file(err_path, err, sizeof err);
-    snprintf(want, sizeof want,
-             "%s: error: expected --seed 0 as in the checkpoint, got 5\n", ckpt);
+    snprintf(want, sizeof want, "%s: error: expected --seed 0 as in the checkpoint, got 5\n", ckpt);
     cr_assert_str_eq(err, want);
 
     const char *spp[] = {"--resume", ckpt, "--spp", "9", "-o", out, NULL};
     cr_assert_eq(test_run_mcpt(spp, NULL, err_path, ALARM_S), 2);
     test_read_file(err_path, err, sizeof err);
-    snprintf(want, sizeof want, "%s: error: expected --spp 8 as in the checkpoint, got 9\n",
-             ckpt);
+    snprintf(want, sizeof want, "%s: error: expected --spp 8 as in the checkpoint, got 9\n", ckpt);
     cr_assert_str_eq(err, want);
 
     const char *size[] = {"--resume", ckpt, "--width", "8", "-o", out, NULL};
     cr_assert_eq(test_run_mcpt(size, NULL, err_path, ALARM_S), 2);
     test_read_file(err_path, err, sizeof err);
-    snprintf(want, sizeof want, "%s: error: expected a 24x16 film as in the checkpoint, got "
-                                "8x16\n", ckpt);
+    snprintf(want, sizeof want,
+             "%s: error: expected a 24x16 film as in the checkpoint, got "
+             "8x16\n",
+             ckpt);
     cr_assert_str_eq(err, want);
 
     const char *scene[] = {"tests/data/cli/tiny.txt", "--resume", ckpt, "-o", out, NULL};
     cr_assert_eq(test_run_mcpt(scene, NULL, err_path, ALARM_S), 2);
     test_read_file(err_path, err, sizeof err);
-    snprintf(want, sizeof want, "%s: error: expected the scene the checkpoint was made from",
-             ckpt);
+    snprintf(want, sizeof want, "%s: error: expected the scene the checkpoint was made from", ckpt);
     cr_assert(strncmp(err, want, strlen(want)) == 0, "%s", err);
     cr_assert_not(test_exists(out));
     cr_assert(test_exists(ckpt), "a refused resume keeps its checkpoint");
@@ -202,8 +206,8 @@ Test(interrupt, sigint_then_sigterm_then_bit_identical, .init = setup, .fini = t
     snprintf(final, sizeof final, "%s/final.exr", tmpdir);
     snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
 
-    const char *a_full[] = {SCENE, "--spp", SIGNAL_SPP, "--threads", "1", "--quiet", "-o", full,
-                            NULL};
+    const char *a_full[] = {SCENE,     "--spp", SIGNAL_SPP, "--threads", "1",
+                            "--quiet", "-o",    full,       NULL};
     cr_assert_eq(test_run_mcpt(a_full, NULL, err_path, ALARM_S), 0);
 
     /* first interruption: SIGINT */
@@ -269,8 +273,7 @@ Test(interrupt, second_signal_exits_at_once, .init = setup, .fini = teardown, .t
     double stop_s = now_s() - t0;
     test_read_file(err_path, err, sizeof err);
     cr_assert(rc == 130 || rc == 143, "exit %d: %s", rc, err);
-    cr_assert_not(strstr(err, "interrupted by"), "the first signal's path ran to the end: %s",
-                  err);
+    cr_assert_not(strstr(err, "interrupted by"), "the first signal's path ran to the end: %s", err);
     cr_assert_lt(stop_s, 1.0, "took %.2f s", stop_s);
 
     char buf[16] = {0};

@@ -223,8 +223,7 @@ Test(sample, sobol_power_of_two_prefixes_stratified)
         for (size_t d = 0; d < sizeof dims / sizeof dims[0]; d++)
             for (int m = 0; m <= 12; m++)
                 for (uint32_t block = 0; block < 4; block += 3)
-                    cr_assert(strata_1d(SAMPLER_SOBOL, pixels[p], block << m, 1u << m, 0,
-                                        dims[d]),
+                    cr_assert(strata_1d(SAMPLER_SOBOL, pixels[p], block << m, 1u << m, 0, dims[d]),
                               "pixel %u dim %u 2^%d block %u", pixels[p], dims[d], m, block);
 }
 
@@ -472,8 +471,7 @@ static void check_chi2(struct chi2_spec spec, const char *name)
     struct chi2_result r;
     chi2_run(&spec, &r);
     cr_assert(chi2_accept(&r, N_WARP_CHI2_TESTS), "%s: %s", name, r.msg);
-    cr_assert(fabs(r.pdf_integral - 1.0) < 2e-3, "%s: pdf integrates to %f", name,
-              r.pdf_integral);
+    cr_assert(fabs(r.pdf_integral - 1.0) < 2e-3, "%s: pdf integrates to %f", name, r.pdf_integral);
 }
 
 /* Each warp's samples fit its pdf (Pearson's chi-square on a 2D histogram against the pdf
@@ -482,8 +480,7 @@ static void check_chi2(struct chi2_spec spec, const char *name)
 Test(sample, warps_chi2, .timeout = 60)
 {
     check_chi2(chi2_sphere(draw_uniform_sphere, pdf_sphere_at, NULL), "uniform sphere");
-    check_chi2(chi2_sphere(draw_uniform_hemisphere, pdf_hemisphere_at, NULL),
-               "uniform hemisphere");
+    check_chi2(chi2_sphere(draw_uniform_hemisphere, pdf_hemisphere_at, NULL), "uniform hemisphere");
     check_chi2(chi2_sphere(draw_cosine_hemisphere, pdf_cosine_at, NULL), "cosine hemisphere");
     struct sample_cone narrow = sample_cone_from_cos(0.95f), wide = sample_cone_from_cos(-0.3f);
     struct sample_cone sphere = sample_cone_from_sin2(0.25f); /* a sphere at twice its radius */
@@ -739,10 +736,15 @@ Test(sampling, deterministic_for_any_thread_count, .timeout = 120)
     struct mcpt_error err;
     for (int k = 0; k < SAMPLER_COUNT; k++)
         for (int adaptive = 0; adaptive < 2; adaptive++) {
-            struct trace_options opt = {.spp = adaptive ? 48 : 8, .max_depth = 5, .seed = 42,
-                                        .sampler = KINDS[k], .adaptive = adaptive,
-                                        .tolerance = 0.3f, .adaptive_floor = 0.01f,
-                                        .min_spp = 8, .batch = 8};
+            struct trace_options opt = {.spp = adaptive ? 48 : 8,
+                                        .max_depth = 5,
+                                        .seed = 42,
+                                        .sampler = KINDS[k],
+                                        .adaptive = adaptive,
+                                        .tolerance = 0.3f,
+                                        .adaptive_floor = 0.01f,
+                                        .min_spp = 8,
+                                        .batch = 8};
             struct film a, b, c;
             cr_assert(film_init(&a, s.width, s.height, &err));
             cr_assert(film_init(&b, s.width, s.height, &err));
@@ -800,8 +802,10 @@ Test(sampling, stratified_and_sobol_beat_independent, .timeout = 120)
         for (int seed = 0; seed < SEEDS; seed++) {
             struct film film;
             cr_assert(film_init(&film, W, H, &err));
-            struct trace_options opt = {.spp = SPP, .max_depth = s.render.max_depth,
-                                        .seed = 1000u + (uint64_t)seed, .sampler = KINDS[k],
+            struct trace_options opt = {.spp = SPP,
+                                        .max_depth = s.render.max_depth,
+                                        .seed = 1000u + (uint64_t)seed,
+                                        .sampler = KINDS[k],
                                         .n_threads = 2};
             render_film(ts, &opt, &film);
             for (int i = 0; i < W * H; i++)
@@ -877,7 +881,8 @@ Test(sampling, render_statement_parameters)
     struct mcpt_error err;
     cr_assert(load_text(CAM "render spp=8 sampler=stratified adaptive=true tolerance=0.1 "
                             "adaptive-floor=0.002 batch=16 min-spp=32 max-spp=512\n",
-                        &s, &err), "%s", err.msg);
+                        &s, &err),
+              "%s", err.msg);
     cr_assert_eq(s.render.sampler, SAMPLER_STRATIFIED);
     cr_assert(s.render.adaptive);
     cr_assert_float_eq(s.render.tolerance, 0.1f, 1e-7f);

@@ -81,8 +81,8 @@ Test(shape, quad_edges_and_corners)
     cr_assert_not(shape_quad_intersect(&q, &r, &t), "outside");
     r = mkray(v3(0.5f, 0.5f, 1), v3(1, 0, 0));
     cr_assert_not(shape_quad_intersect(&q, &r, &t), "parallel");
-    struct surface sf = shape_quad_surface(&q, &(struct ray){v3(0.25f, 0.75f, 1), 0,
-                                                             v3(0, 0, -1), INFINITY}, 1.0f);
+    struct surface sf =
+        shape_quad_surface(&q, &(struct ray){v3(0.25f, 0.75f, 1), 0, v3(0, 0, -1), INFINITY}, 1.0f);
     cr_assert_float_eq(sf.ng.z, 1.0f, 1e-6f);
     cr_assert_float_eq(sf.uv.x, 0.25f, 1e-6f);
     cr_assert_float_eq(sf.uv.y, 0.75f, 1e-6f);
@@ -124,8 +124,7 @@ Test(shape, sphere_offset_no_self_hit)
             struct ray out = mkray(offset_ray_origin(sf.p, sf.p_error, sf.ng, w), w);
             float t2;
             bool hit = shape_sphere_intersect(&s, &out, &t2);
-            cr_assert(!hit || t2 > 1e-3f * radii[k], "radius %g: self hit at t = %g", radii[k],
-                      t2);
+            cr_assert(!hit || t2 > 1e-3f * radii[k], "radius %g: self hit at t = %g", radii[k], t2);
         }
     }
 }
@@ -147,8 +146,8 @@ Test(shape, triangle_surface_interpolates)
         cr_assert(fabs(v3_get(sf.p, k) - exact) <= v3_get(sf.p_error, k), "axis %d", k);
         cr_assert(v3_get(sf.p_error, k) > 0.0f);
     }
-    vec3 n = v3_normalize(v3_add(v3_add(v3_scale(ns[0], (float)b[0]), v3_scale(ns[1], b1)),
-                                 v3_scale(ns[2], b2)));
+    vec3 n = v3_normalize(
+        v3_add(v3_add(v3_scale(ns[0], (float)b[0]), v3_scale(ns[1], b1)), v3_scale(ns[2], b2)));
     float side = v3_dot(n, sf.ng) < 0.0f ? -1.0f : 1.0f;
     cr_assert(v3_length(v3_sub(sf.ns, v3_scale(n, side))) < 1e-6f);
     cr_assert_float_eq(sf.uv.x, b1, 1e-6f);

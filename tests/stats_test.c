@@ -86,11 +86,11 @@ Test(stats, metrics_constant_offset)
     cr_assert_float_eq(m.mse, d2, 1e-12);
     cr_assert_float_eq(m.rmse, sqrt(d2), 1e-12);
     cr_assert_float_eq(m.mae, d1, 1e-12);
-    cr_assert_float_eq(m.relmse, d2 / (0.25 + 0.01), 1e-12);        /* (a-r)^2 / (r^2 + 0.01) */
-    cr_assert_float_eq(m.mrse_pbrt, d2 / (0.51 * 0.51), 1e-12);     /* (a-r)^2 / (r + 0.01)^2 */
-    cr_assert_float_eq(m.psnr_db, -10.0 * log10(d2), 1e-9);         /* peak 1 */
-    cr_assert_float_eq(m.mse_se, 0.0, 1e-15);                        /* every pixel alike */
-    cr_assert(isnan(m.noise_floor) && isnan(m.mse_corrected));       /* r has no variance */
+    cr_assert_float_eq(m.relmse, d2 / (0.25 + 0.01), 1e-12);    /* (a-r)^2 / (r^2 + 0.01) */
+    cr_assert_float_eq(m.mrse_pbrt, d2 / (0.51 * 0.51), 1e-12); /* (a-r)^2 / (r + 0.01)^2 */
+    cr_assert_float_eq(m.psnr_db, -10.0 * log10(d2), 1e-9);     /* peak 1 */
+    cr_assert_float_eq(m.mse_se, 0.0, 1e-15);                   /* every pixel alike */
+    cr_assert(isnan(m.noise_floor) && isnan(m.mse_corrected));  /* r has no variance */
     free(pa.data);
     free(pr.data);
 }
@@ -160,8 +160,7 @@ Test(stats, noise_correction_recovers_true_mse)
     struct stats_metrics m;
     cr_assert(stats_compare(&a, &r, &m, &err));
     double truth = sigma * sigma / 4.0;
-    cr_assert(fabs(m.noise_floor / (sigma * sigma / 16.0) - 1.0) < 0.05, "floor %g",
-              m.noise_floor);
+    cr_assert(fabs(m.noise_floor / (sigma * sigma / 16.0) - 1.0) < 0.05, "floor %g", m.noise_floor);
     cr_assert(fabs(m.mse_corrected - truth) < 3.0 * m.mse_corrected_se,
               "corrected %g +- %g, true MSE %g", m.mse_corrected, m.mse_corrected_se, truth);
     cr_assert(fabs(m.mse - truth) > 10.0 * m.mse_se, "uncorrected %g should be biased", m.mse);
@@ -198,9 +197,9 @@ Test(stats, relative_error_map_terms)
             plane(&pr, c)[i] = 0.5f;
             plane(&pa, c)[i] = 0.5f;
         }
-    plane(&pa, 0)[0] = 0.75f;     /* pixel 0: one channel off by 1/4 */
-    plane(&pa, 1)[1] = NAN;       /* pixel 1: exact, one channel not finite */
-    plane(&pa, 2)[1] = 0.25f;     /*          and one off by 1/4 */
+    plane(&pa, 0)[0] = 0.75f; /* pixel 0: one channel off by 1/4 */
+    plane(&pa, 1)[1] = NAN;   /* pixel 1: exact, one channel not finite */
+    plane(&pa, 2)[1] = 0.25f; /*          and one off by 1/4 */
     for (int c = 0; c < 3; c++)
         plane(&pr, c)[2] = INFINITY; /* pixel 2: no finite channel */
     double e[3];
@@ -290,11 +289,14 @@ Test(stats, fit_ci_coverage)
 
 /* A curve of n_seeds runs at spp 1 .. 4096 with mse = (1/N)^(1 + delta_s) exp(eta) per seed:
  * delta_s the run's own slope offset, eta independent noise per point. */
-static void synthetic_curve(struct stats_curve *c, size_t n_seeds, double sd_delta,
-                            double sd_eta, struct pcg32 *rng)
+static void synthetic_curve(struct stats_curve *c, size_t n_seeds, double sd_delta, double sd_eta,
+                            struct pcg32 *rng)
 {
-    struct stats_run_info info = {.scene = "synthetic", .sampler = "independent",
-                                  .integrator = "path-mis", .width = 1, .height = 1};
+    struct stats_run_info info = {.scene = "synthetic",
+                                  .sampler = "independent",
+                                  .integrator = "path-mis",
+                                  .width = 1,
+                                  .height = 1};
     stats_curve_init(c, &info);
     c->cap_points = n_seeds * 13;
     c->points = calloc(c->cap_points, sizeof *c->points);
@@ -303,10 +305,12 @@ static void synthetic_curve(struct stats_curve *c, size_t n_seeds, double sd_del
         double delta = sd_delta * gauss(rng);
         for (int e = 0; e <= 12; e++) {
             double n = exp2(e);
-            c->points[c->n_points++] = (struct stats_point){
-                .seed = 100 + k, .spp = (uint32_t)n, .seconds = 0.01 * n,
-                .source = STATS_ERR_REFERENCE,
-                .mse = pow(n, -(1.0 + delta)) * exp(sd_eta * gauss(rng))};
+            c->points[c->n_points++] = (struct stats_point){.seed = 100 + k,
+                                                            .spp = (uint32_t)n,
+                                                            .seconds = 0.01 * n,
+                                                            .source = STATS_ERR_REFERENCE,
+                                                            .mse = pow(n, -(1.0 + delta)) *
+                                                                   exp(sd_eta * gauss(rng))};
         }
     }
 }
@@ -329,7 +333,7 @@ Test(stats, seed_bootstrap_interval)
     cr_assert_float_eq(s.rmse_fit.slope, -0.5, 1e-12);
     cr_assert_float_eq(s.mse_slope_boot_lo, -1.0, 1e-12);
     cr_assert_float_eq(s.mse_slope_boot_hi, -1.0, 1e-12);
-    cr_assert_float_eq(s.time_fit.slope, 0.01, 1e-12);   /* seconds per spp */
+    cr_assert_float_eq(s.time_fit.slope, 0.01, 1e-12);    /* seconds per spp */
     cr_assert_float_eq(s.time_fit.intercept, 0.0, 1e-12); /* no overhead */
     /* half the last RMSE needs 4x the spp under N^-1/2, 4 x 4096 x 0.01 s */
     cr_assert_float_eq(s.target_spp, 16384.0, 1e-6);
@@ -426,8 +430,12 @@ Test(stats, csv_json_formats)
             plane(&pr, c)[i] = 0.5f;
             plane(&pr, 3 + c)[i] = 1e-4f;
         }
-    struct stats_run_info info = {.scene = "s.txt", .reference = "ref.exr", .sampler = "sobol",
-                                  .integrator = "path-mis", .max_depth = UINT32_MAX, .width = 8,
+    struct stats_run_info info = {.scene = "s.txt",
+                                  .reference = "ref.exr",
+                                  .sampler = "sobol",
+                                  .integrator = "path-mis",
+                                  .max_depth = UINT32_MAX,
+                                  .width = 8,
                                   .height = 8};
     struct stats_curve curve;
     stats_curve_init(&curve, &info);
@@ -551,22 +559,52 @@ Test(stats, snapshot_run_equals_plain_run, .init = setup, .fini = teardown, .tim
         snprintf(plain, sizeof plain, "%s/plain-%s.exr", tmpdir, samplers[k]);
         snprintf(snap, sizeof snap, "%s/snap-%s.exr", tmpdir, samplers[k]);
         snprintf(curve, sizeof curve, "%s/curve-%s.csv", tmpdir, samplers[k]);
-        const char *a[] = {"scenes/cornell-box.txt", "--width", "16", "--height", "12", "--spp",
-                           "12", "--seed", "5", "--sampler", samplers[k], "-o", plain, "--quiet",
+        const char *a[] = {"scenes/cornell-box.txt",
+                           "--width",
+                           "16",
+                           "--height",
+                           "12",
+                           "--spp",
+                           "12",
+                           "--seed",
+                           "5",
+                           "--sampler",
+                           samplers[k],
+                           "-o",
+                           plain,
+                           "--quiet",
                            NULL};
         cr_assert_eq(run_mcpt(a), 0);
         /* the independent run also repeats itself for seeds 6 and 7: OUT.exr stays seed 5's */
-        const char *b[] = {"scenes/cornell-box.txt", "--width", "16", "--height", "12", "--spp",
-                           "12", "--seed", "5", "--sampler", samplers[k], "-o", snap,
-                           "--snapshots", "pow2", "--curve", curve, "--preview-every", "0.001",
-                           k == 2 ? "--seeds" : NULL, "3", NULL};
+        const char *b[] = {"scenes/cornell-box.txt",
+                           "--width",
+                           "16",
+                           "--height",
+                           "12",
+                           "--spp",
+                           "12",
+                           "--seed",
+                           "5",
+                           "--sampler",
+                           samplers[k],
+                           "-o",
+                           snap,
+                           "--snapshots",
+                           "pow2",
+                           "--curve",
+                           curve,
+                           "--preview-every",
+                           "0.001",
+                           k == 2 ? "--seeds" : NULL,
+                           "3",
+                           NULL};
         cr_assert_eq(run_mcpt(b), 0);
         assert_same_exr_data(plain, snap);
         cr_assert(same_bytes(plain, snap), "%s: EXR files differ", samplers[k]);
     }
     /* the snapshots and the curve's companions exist; the CSV has the 5 measured rows */
-    const char *files[] = {"snap-sobol-spp01.exr", "snap-sobol-spp08.png", "snap-sobol-spp12.exr",
-                           "snap-sobol-contact.png", "curve-sobol.json", "curve-sobol.svg"};
+    const char *files[] = {"snap-sobol-spp01.exr",   "snap-sobol-spp08.png", "snap-sobol-spp12.exr",
+                           "snap-sobol-contact.png", "curve-sobol.json",     "curve-sobol.svg"};
     for (size_t i = 0; i < sizeof files / sizeof files[0]; i++) {
         char path[400];
         struct stat st;
@@ -600,12 +638,39 @@ Test(stats, compare_reproduces_curve_row, .init = setup, .fini = teardown, .time
     snprintf(curve, sizeof curve, "%s/curve.csv", tmpdir);
     snprintf(snap4, sizeof snap4, "%s/out-spp4.exr", tmpdir);
     snprintf(heat, sizeof heat, "%s/heat.png", tmpdir);
-    const char *a[] = {"scenes/cornell-box.txt", "--width", "16", "--height", "16", "--spp", "64",
-                       "--seed", "99", "-o", ref, "--quiet", NULL};
+    const char *a[] = {"scenes/cornell-box.txt",
+                       "--width",
+                       "16",
+                       "--height",
+                       "16",
+                       "--spp",
+                       "64",
+                       "--seed",
+                       "99",
+                       "-o",
+                       ref,
+                       "--quiet",
+                       NULL};
     cr_assert_eq(run_mcpt(a), 0);
-    const char *b[] = {"scenes/cornell-box.txt", "--width", "16", "--height", "16", "--spp", "8",
-                       "--seed", "1", "-o", out, "--snapshots", "pow2", "--reference", ref,
-                       "--curve", curve, "--quiet", NULL};
+    const char *b[] = {"scenes/cornell-box.txt",
+                       "--width",
+                       "16",
+                       "--height",
+                       "16",
+                       "--spp",
+                       "8",
+                       "--seed",
+                       "1",
+                       "-o",
+                       out,
+                       "--snapshots",
+                       "pow2",
+                       "--reference",
+                       ref,
+                       "--curve",
+                       curve,
+                       "--quiet",
+                       NULL};
     cr_assert_eq(run_mcpt(b), 0);
     const char *text = read_text(curve);
     const char *row = strstr(text, "\n4,");
@@ -638,15 +703,35 @@ Test(stats, compare_reproduces_curve_row, .init = setup, .fini = teardown, .time
     cr_assert_eq(run_mcpt(missing), 2);
     char small[300];
     snprintf(small, sizeof small, "%s/small.exr", tmpdir);
-    const char *d[] = {"scenes/cornell-box.txt", "--width", "8", "--height", "8", "--spp", "1",
-                       "-o", small, "--quiet", NULL};
+    const char *d[] = {"scenes/cornell-box.txt",
+                       "--width",
+                       "8",
+                       "--height",
+                       "8",
+                       "--spp",
+                       "1",
+                       "-o",
+                       small,
+                       "--quiet",
+                       NULL};
     cr_assert_eq(run_mcpt(d), 0);
     const char *mismatch[] = {"compare", small, ref, NULL};
     cr_assert_eq(run_mcpt(mismatch), 2);
     const char *one[] = {"compare", small, NULL};
     cr_assert_eq(run_mcpt(one), 2);
-    const char *bad_ref[] = {"scenes/cornell-box.txt", "--width", "8", "--height", "8", "--spp",
-                             "2", "-o", out, "--reference", ref, "--quiet", NULL};
+    const char *bad_ref[] = {"scenes/cornell-box.txt",
+                             "--width",
+                             "8",
+                             "--height",
+                             "8",
+                             "--spp",
+                             "2",
+                             "-o",
+                             out,
+                             "--reference",
+                             ref,
+                             "--quiet",
+                             NULL};
     cr_assert_eq(run_mcpt(bad_ref), 2);
 }
 

@@ -25,8 +25,8 @@
 
 /* Image mean per channel over pixels [x0, x1) x [y0, y1) and its standard error: the pixels
  * are independent, so Var(mean) = sum_i Var(mean_i) / N^2. */
-static void region_mean_se(const struct film *film, int x0, int y0, int x1, int y1,
-                           double mean[3], double se[3])
+static void region_mean_se(const struct film *film, int x0, int y0, int x1, int y1, double mean[3],
+                           double se[3])
 {
     double n = (double)(x1 - x0) * (y1 - y0);
     for (int c = 0; c < 3; c++) {
@@ -64,7 +64,8 @@ static void render_opt(const struct trace_scene *ts, struct trace_options opt, s
 
 static struct trace_options default_options(uint64_t seed)
 {
-    return (struct trace_options){.max_depth = TRACE_DEPTH_INFINITE, .seed = seed,
+    return (struct trace_options){.max_depth = TRACE_DEPTH_INFINITE,
+                                  .seed = seed,
                                   .sampler = SAMPLER_INDEPENDENT};
 }
 
@@ -74,9 +75,11 @@ static void render(const struct trace_scene *ts, struct film *film, uint32_t spp
     render_opt(ts, default_options(seed), film, spp, threads);
 }
 
-static const enum render_direct ALL_DIRECT[RENDER_DIRECT_COUNT] = {
-    RENDER_DIRECT_MIS, RENDER_DIRECT_LIGHT, RENDER_DIRECT_BSDF, RENDER_DIRECT_COSINE,
-    RENDER_DIRECT_HEMISPHERE};
+static const enum render_direct ALL_DIRECT[RENDER_DIRECT_COUNT] = {RENDER_DIRECT_MIS,
+                                                                   RENDER_DIRECT_LIGHT,
+                                                                   RENDER_DIRECT_BSDF,
+                                                                   RENDER_DIRECT_COSINE,
+                                                                   RENDER_DIRECT_HEMISPHERE};
 
 /* A loaded scene with its trace_scene and a film of the scene's size. */
 struct setup {
@@ -181,7 +184,8 @@ Test(trace, diffuse_plane_under_sky, .timeout = 60)
         if (sky == 0) {
             expect = v3_mul(rho, s.scene.sky.radiance);
         } else {
-            s.scene.sky = (struct sky){.kind = SKY_GRADIENT, .horizon = v3(1.0f, 0.5f, 0.2f),
+            s.scene.sky = (struct sky){.kind = SKY_GRADIENT,
+                                       .horizon = v3(1.0f, 0.5f, 0.2f),
                                        .zenith = v3(0.1f, 0.4f, 1.5f)};
             expect = v3_mul(rho, v3_add(v3_scale(s.scene.sky.horizon, 1.0f / 3.0f),
                                         v3_scale(s.scene.sky.zenith, 2.0f / 3.0f)));
@@ -196,8 +200,7 @@ Test(trace, diffuse_plane_under_sky, .timeout = 60)
             for (int c = 0; c < 3; c++)
                 cr_assert(fabs(mean[c] - v3_get(expect, c)) <= 4.0 * se[c] + 1e-5,
                           "sky %d, %s, channel %d: %f +- %f, expected %f", sky,
-                          scene_direct_name(ALL_DIRECT[d]), c, mean[c], se[c],
-                          v3_get(expect, c));
+                          scene_direct_name(ALL_DIRECT[d]), c, mean[c], se[c], v3_get(expect, c));
         }
     }
     setup_free(&s);
@@ -240,18 +243,26 @@ static struct light furnace_light[1];
 
 static struct scene furnace_scene(float rho, float Le)
 {
-    furnace_mat[0] = (struct material){.kind = MAT_DIFFUSE, .albedo = v3_splat(rho),
-                                       .Le = v3_splat(Le), .two_sided_emission = true};
+    furnace_mat[0] = (struct material){.kind = MAT_DIFFUSE,
+                                       .albedo = v3_splat(rho),
+                                       .Le = v3_splat(Le),
+                                       .two_sided_emission = true};
     furnace_sphere[0] = (struct sphere){.center = v3(0, 0, 0), .radius = 1.0f, .mat_idx = 0};
     furnace_light[0] = (struct light){.kind = LIGHT_SPHERE, .prim_idx = 0};
     struct scene s = {
-        .camera = {.eye = v3(0.1f, -0.2f, 0.3f), .look_at = v3(0, 0, -1), .up = v3(0, 1, 0),
+        .camera = {.eye = v3(0.1f, -0.2f, 0.3f),
+                   .look_at = v3(0, 0, -1),
+                   .up = v3(0, 1, 0),
                    .fov_deg = 60.0f},
-        .width = 16, .height = 16,
+        .width = 16,
+        .height = 16,
         .render = {.spp = 16, .max_depth = TRACE_DEPTH_INFINITE},
-        .materials = furnace_mat, .n_materials = 1,
-        .spheres = furnace_sphere, .n_spheres = 1,
-        .lights = furnace_light, .n_lights = 1,
+        .materials = furnace_mat,
+        .n_materials = 1,
+        .spheres = furnace_sphere,
+        .n_spheres = 1,
+        .lights = furnace_light,
+        .n_lights = 1,
     };
     return s;
 }
@@ -300,8 +311,11 @@ Test(trace, every_estimator_converges_to_the_same_image, .timeout = 120)
     cr_assert(film_init(&ref, s.film.width, s.film.height, &err));
     render_opt(s.ts, default_options(21), &ref, 128, 2);
     const int w = s.film.width, h = s.film.height;
-    const int regions[5][4] = {{0, 0, w / 2, h / 2}, {w / 2, 0, w, h / 2},
-                               {0, h / 2, w / 2, h}, {w / 2, h / 2, w, h}, {0, 0, w, h}};
+    const int regions[5][4] = {{0, 0, w / 2, h / 2},
+                               {w / 2, 0, w, h / 2},
+                               {0, h / 2, w / 2, h},
+                               {w / 2, h / 2, w, h},
+                               {0, 0, w, h}};
     for (int variant = 0; variant < 6; variant++) {
         struct trace_options opt = default_options(22 + variant);
         const char *what;
@@ -319,14 +333,16 @@ Test(trace, every_estimator_converges_to_the_same_image, .timeout = 120)
         render_opt(s.ts, opt, &s.film, 128, 2);
         for (int r = 0; r < 5; r++) {
             double m[3], e[3], mr[3], er[3];
-            region_mean_se(&s.film, regions[r][0], regions[r][1], regions[r][2], regions[r][3],
-                           m, e);
+            region_mean_se(&s.film, regions[r][0], regions[r][1], regions[r][2], regions[r][3], m,
+                           e);
             region_mean_se(&ref, regions[r][0], regions[r][1], regions[r][2], regions[r][3], mr,
                            er);
             for (int c = 0; c < 3; c++) {
                 double tol = 4.0 * sqrt(e[c] * e[c] + er[c] * er[c]);
-                cr_assert(fabs(m[c] - mr[c]) <= tol, "%s, region %d, channel %d: %f vs MIS %f "
-                          "(tolerance %f)", what, r, c, m[c], mr[c], tol);
+                cr_assert(fabs(m[c] - mr[c]) <= tol,
+                          "%s, region %d, channel %d: %f vs MIS %f "
+                          "(tolerance %f)",
+                          what, r, c, m[c], mr[c], tol);
             }
         }
     }
@@ -386,7 +402,9 @@ Test(trace, shading_normals_do_not_leak)
     setup_load(&s, "tests/data/trace/leak.txt");
     struct material kinds[3] = {
         s.scene.materials[0],
-        {.kind = MAT_PLASTIC, .albedo = v3(0.8f, 0.8f, 0.8f), .specular = v3_splat(0.04f),
+        {.kind = MAT_PLASTIC,
+         .albedo = v3(0.8f, 0.8f, 0.8f),
+         .specular = v3_splat(0.04f),
          .roughness = 0.5f},
         {.kind = MAT_CONDUCTOR, .specular = v3(0.9f, 0.9f, 0.9f), .roughness = 0.3f},
     };
@@ -521,8 +539,8 @@ Test(trace, regression_against_reference_image, .timeout = 120)
     }
     cr_log_info("regression: %d of %d pixels beyond |z| = %.2f, %d allowed (worst %.2f)", n_fail,
                 n_pixels, z_crit, k_max, z_worst);
-    cr_assert(n_fail <= k_max, "%d of %d pixels beyond |z| = %.2f, %d allowed (worst %.2f)",
-              n_fail, n_pixels, z_crit, k_max, z_worst);
+    cr_assert(n_fail <= k_max, "%d of %d pixels beyond |z| = %.2f, %d allowed (worst %.2f)", n_fail,
+              n_pixels, z_crit, k_max, z_worst);
     image_free(&ref);
     setup_free(&s);
 }

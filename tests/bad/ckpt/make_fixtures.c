@@ -42,8 +42,10 @@ static void valid(const char *path, const char *args, uint32_t args_bytes, uint3
         film.pixels[i].sum[0] = film.pixels[i].sum[1] = film.pixels[i].sum[2] = 4.0;
     }
     film.pixels[0].n = n_first;
-    struct checkpoint_info info = {.scene_hash = 0x0123456789abcdefull, .spp = 16,
-                                   .max_depth = 4, .args_bytes = args_bytes};
+    struct checkpoint_info info = {.scene_hash = 0x0123456789abcdefull,
+                                   .spp = 16,
+                                   .max_depth = 4,
+                                   .args_bytes = args_bytes};
     snprintf(info.scene_path, sizeof info.scene_path, "tests/data/resume/small.txt");
     memcpy(info.args, args, args_bytes);
     if (!checkpoint_save(path, &film, &info, &err)) {

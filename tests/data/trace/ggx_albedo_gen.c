@@ -22,9 +22,9 @@
 
 #define N_R 32
 #define N_MU 32
-#define GEN_TOL 1e-5      /* absolute tolerance of each integral */
-#define SAFETY 3.0        /* nodes are raised by SAFETY times the largest shortfall seen */
-#define MU_MIN 1e-4       /* where mu = 0 is evaluated */
+#define GEN_TOL 1e-5 /* absolute tolerance of each integral */
+#define SAFETY 3.0   /* nodes are raised by SAFETY times the largest shortfall seen */
+#define MU_MIN 1e-4  /* where mu = 0 is evaluated */
 
 struct ctx {
     vec3 wo;
