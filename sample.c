@@ -257,7 +257,9 @@ static vec2 stratified_2d(const struct sampler *s, uint32_t dim)
     uint32_t p;
     uint32_t i = strat_position(s, dim, &p);
     uint32_t n_set = s->set_spp > 1 ? s->set_spp : 1;
-    uint32_t m = s->cmj_cols, n = (n_set + m - 1) / m;
+    /* rows n = ceil(N / m), written so that N near 2^32 cannot wrap (n = 0 would never end
+     * kensler_permute's cycle walk) */
+    uint32_t m = s->cmj_cols, n = n_set / m + (n_set % m != 0);
     uint32_t sp = kensler_permute(i, n_set, p * 0x51633e2du);
     uint32_t sx = kensler_permute(sp % m, m, p * 0x68bc21ebu);
     uint32_t sy = kensler_permute(sp / m, n, p * 0x02e5be93u);

@@ -293,6 +293,25 @@ Test(sample, stratified_sets_fill_every_stratum)
     }
 }
 
+/* Stratified sets as large as a uint32_t holds (--spp 4294967295, or --batch 4294967295 with
+ * --adaptive): the m x n grid's rows ceil(N / m) must not wrap to 0 (issue 15: the sample never
+ * ended); the points lie in [0, 1). */
+Test(sample, stratified_set_of_2_32_minus_1)
+{
+    static const uint32_t ns[] = {UINT32_MAX, UINT32_MAX - 1, 4294836225u /* 65535^2 */};
+    for (size_t t = 0; t < sizeof ns / sizeof ns[0]; t++) {
+        for (uint32_t i = 0; i < 64; i++) {
+            struct sampler s;
+            sample_start_spp(&s, SAMPLER_STRATIFIED, 1u, 5u, i, ns[t]);
+            float u1 = sample_1d(&s);
+            vec2 u2 = sample_2d(&s);
+            cr_assert(u1 >= 0.0f && u1 < 1.0f && u2.x >= 0.0f && u2.x < 1.0f && u2.y >= 0.0f &&
+                          u2.y < 1.0f,
+                      "N %u sample %u: %g %g %g", ns[t], i, u1, u2.x, u2.y);
+        }
+    }
+}
+
 /* Every sampler: a dimension's value depends on (seed, pixel, sample, dimension) alone, not on
  * how it was reached (sequential reads, 2D reads, sample_set_dim jumps); another seed or pixel
  * gives other values. */
