@@ -7,6 +7,7 @@
 
 #include <errno.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include "file.h"
 #include "sample.h"
@@ -34,9 +35,16 @@ static uint64_t fnv1a(uint64_t h, const void *data, size_t n_bytes)
 
 bool checkpoint_hash_file(const char *path, uint64_t *hash, struct mcpt_error *err)
 {
-    FILE *f = fopen(path, "rb");
+    const char *not_regular;
+    int fd = file_open_input(path, false, &not_regular);
+    FILE *f = fd >= 0 ? fdopen(fd, "rb") : NULL;
     if (!f) {
-        mcpt_error_set(err, path, 0, 0, "expected a readable file, got '%s'", strerror(errno));
+        if (not_regular)
+            mcpt_error_set(err, path, 0, 0, "expected a regular file, got %s", not_regular);
+        else
+            mcpt_error_set(err, path, 0, 0, "expected a readable file, got '%s'", strerror(errno));
+        if (fd >= 0)
+            close(fd);
         return false;
     }
     uint64_t h = FNV_OFFSET;
@@ -208,14 +216,18 @@ bool checkpoint_load(const char *path, struct film *film, struct checkpoint_info
     struct ckpt_file cf = {.hash = FNV_OFFSET, .ok = true};
     struct stat st;
     uint32_t width, height;
-    cf.f = fopen(path, "rb");
+    const char *not_regular;
+    int fd = file_open_input(path, false, &not_regular); /* a FIFO must not block */
+    if (fd < 0 && not_regular) {
+        mcpt_error_set(err, path, 0, 0, "expected a checkpoint file, got %s", not_regular);
+        goto fail;
+    }
+    cf.f = fd >= 0 ? fdopen(fd, "rb") : NULL;
     if (!cf.f || fstat(fileno(cf.f), &st) != 0) {
         mcpt_error_set(err, path, 0, 0, "expected a readable checkpoint, got '%s'",
                        strerror(errno));
-        goto fail;
-    }
-    if (!S_ISREG(st.st_mode)) {
-        mcpt_error_set(err, path, 0, 0, "expected a checkpoint file, got a directory or device");
+        if (fd >= 0 && !cf.f)
+            close(fd);
         goto fail;
     }
     if (!read_header(&cf, path, (uint64_t)st.st_size, info, &width, &height, err))

@@ -448,18 +448,11 @@ bool image_read_exr(const char *path, struct image *img, struct mcpt_error *err)
     struct stat st;
 
     memset(img, 0, sizeof *img);
-    s.fd = open(path, O_RDONLY | O_CLOEXEC);
-    if (s.fd < 0) {
-        mcpt_error_set(err, path, 0, 0, "cannot open: %s", strerror(errno));
+    s.fd = file_open_regular(path, err); /* never blocks on a FIFO */
+    if (s.fd < 0)
         return false;
-    }
     if (fstat(s.fd, &st) != 0) {
         mcpt_error_set(err, path, 0, 0, "cannot open: %s", strerror(errno));
-        goto fail;
-    }
-    if (!S_ISREG(st.st_mode)) {
-        mcpt_error_set(err, path, 0, 0, "cannot open: %s",
-                       S_ISDIR(st.st_mode) ? strerror(EISDIR) : "not a regular file");
         goto fail;
     }
     s.size_bytes = (int64_t)st.st_size;

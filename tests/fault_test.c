@@ -50,3 +50,33 @@ Test(hang, stratified_set_of_2_32_minus_1, .init = setup, .fini = teardown)
     rc = run(range, err, sizeof err);
     cr_assert_eq(rc, 0, "--spp 4294967295 --sample-range 0:1: exit %d: %s", rc, err);
 }
+
+/* A FIFO with no writer, given wherever mcpt reads a file (--resume, compare's two images,
+ * merge's parts, --reference), is refused at once as bad input naming it: open() of a FIFO
+ * blocks until a writer comes, so inputs are opened without blocking and must be regular
+ * files. */
+Test(hang, fifo_inputs_refused_at_once, .init = setup, .fini = teardown)
+{
+    char fifo[300], out[300], img[300], err[4096], want[400];
+    snprintf(fifo, sizeof fifo, "%s/fifo", tmpdir);
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(img, sizeof img, "%s/img.exr", tmpdir);
+    cr_assert_eq(mkfifo(fifo, 0644), 0);
+    const char *render[] = {TINY, "--spp", "2", "-o", img, "--quiet", NULL};
+    cr_assert_eq(run(render, err, sizeof err), 0, "%s", err);
+    const char *cases[][10] = {
+        {TINY, "--resume", fifo, "-o", out, NULL},
+        {"compare", fifo, img, NULL},
+        {"compare", img, fifo, NULL},
+        {"merge", fifo, "-o", out, NULL},
+        {TINY, "--reference", fifo, "--spp", "2", "-o", out, NULL},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        int rc = run(cases[i], err, sizeof err);
+        cr_assert_eq(rc, 2, "case %zu: exit %d: %s", i, rc, err);
+        snprintf(want, sizeof want, "%s: error: expected a ", fifo);
+        cr_assert(strncmp(err, want, strlen(want)) == 0 && strstr(err, "got a FIFO\n"),
+                  "case %zu: %s", i, err);
+        cr_assert_not(test_exists(out), "case %zu wrote %s", i, out);
+    }
+}

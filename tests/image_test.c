@@ -461,7 +461,7 @@ Test(image, exr_read_non_exr_fails)
     cr_assert(strncmp(err.msg, "cannot read OpenEXR header: ", 28) == 0, "%s", err.msg);
 
     cr_assert_not(image_read_exr(g_dir, &img, &err));
-    cr_assert_str_eq(err.msg, "cannot open: Is a directory");
+    cr_assert_str_eq(err.msg, "expected a regular file, got a directory");
 }
 
 /* A valid file cut short (its chunk table points past the end) fails in the pixel data, and the
