@@ -130,7 +130,14 @@ static int run_compare(int argc, char **argv)
     struct image a_exr = {0}, ref_exr = {0};
     struct stats_image a, ref;
     struct stats_metrics m;
-    bool ok = read_image(a_path, &a_exr, &a, &err) && read_image(ref_path, &ref_exr, &ref, &err);
+    struct output_file files[3] = {{.role = "the heat map (--heatmap)"},
+                                   {.role = "the image A"},
+                                   {.role = "the reference"}};
+    const char *paths[3] = {heatmap, a_path, ref_path};
+    for (int k = 0; k < 3; k++)
+        snprintf(files[k].path, sizeof files[k].path, "%s", paths[k] ? paths[k] : "");
+    bool ok = (!heatmap || output_check(files, 1, files + 1, 2, &err)) &&
+              read_image(a_path, &a_exr, &a, &err) && read_image(ref_path, &ref_exr, &ref, &err);
     if (ok && !stats_compare(&a, &ref, &m, &err)) {
         snprintf(err.file, sizeof err.file, "%s", ref_path);
         ok = false;
@@ -330,6 +337,28 @@ static void print_merge(int n_parts, const struct film *film, const struct parti
            is_complete ? ", the whole render" : ", not yet the whole render", out);
 }
 
+/* The merged image and its preview may overwrite no part and must be creatable. */
+static bool check_merge_outputs(const struct output_paths *paths, char **parts, int n_parts,
+                                struct mcpt_error *err)
+{
+    struct output_file *files = malloc(sizeof *files * ((size_t)n_parts + 2));
+    if (!files) {
+        mcpt_error_runtime(err, NULL, "out of memory checking the output files");
+        return false;
+    }
+    snprintf(files[0].path, sizeof files[0].path, "%s", paths->exr);
+    files[0].role = "the merged image (-o)";
+    snprintf(files[1].path, sizeof files[1].path, "%s", paths->png);
+    files[1].role = "its PNG preview";
+    for (int k = 0; k < n_parts; k++) {
+        snprintf(files[2 + k].path, sizeof files[2 + k].path, "%s", parts[k]);
+        files[2 + k].role = "a part";
+    }
+    bool ok = output_check(files, 2, files + 2, n_parts, err);
+    free(files);
+    return ok;
+}
+
 static int run_merge(int argc, char **argv)
 {
     enum { OPT_EXPOSURE = 256, OPT_QUIET };
@@ -379,6 +408,7 @@ static int run_merge(int argc, char **argv)
     struct partial_info info;
     bool ok = out && optind < argc &&
               output_paths_init(&paths, NULL, out, NULL, NULL, false, &err) &&
+              check_merge_outputs(&paths, argv + optind, argc - optind, &err) &&
               partial_merge_files((const char *const *)argv + optind, argc - optind, &film, &info,
                                   &err) &&
               output_write_image(&paths, &film, &info, exposure, &err);

@@ -7,9 +7,11 @@
  * written by output.c; an interrupted render's checkpoint is checkpoint.c's.  This file holds
  * the run's options and state, the render passes (snapshots, curves, previews), the progress
  * line and the signal handler, and is the only one that may exit. */
+#include <ctype.h>
 #include <getopt.h>
 #include <signal.h>
 #include <stdlib.h>
+#include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -68,6 +70,8 @@ static const char USAGE_MORE[] =
     "                         with its options (later options override; render settings must\n"
     "                         match); the result is bit-identical to an uninterrupted run;\n"
     "                         SCENE may be left out (the checkpoint names it)\n"
+    "      --restart          discard the checkpoint of an interrupted render of the same\n"
+    "                         output (without it, a render refuses to start over one)\n"
     "      --sample-range A:B render only sample indices A..B-1 of every pixel of the --spp\n"
     "                         render (0 <= A < B <= spp); the EXR carries the sums that\n"
     "                         mcpt merge adds up (docs/distributed.md)\n"
@@ -126,6 +130,7 @@ struct options {
     uint32_t light_samples;           /* --light-samples N; 0: from the scene, else 1 */
     uint32_t rr_depth;                /* --rr-depth D; 0: from the scene, else the default */
     const char *resume_path;          /* --resume CKPT, or NULL */
+    bool restart;                     /* --restart: discard an existing checkpoint */
     bool has_range;                   /* --sample-range A:B given */
     struct partial_range range;       /* its sample indices */
     bool is_done;                     /* --help or --version answered: nothing to render */
@@ -159,6 +164,7 @@ struct convergence {
 /* Everything one render holds, from parse to report; run_free releases it. */
 struct run {
     struct options o;
+    const char *argv0;            /* the program as invoked, for the commands we suggest */
     struct checkpoint_info saved; /* --resume: the interrupted run's settings and options */
     struct scene scene;
     bool has_scene;          /* scene loaded (run_free frees it) */
@@ -213,6 +219,7 @@ enum {
     OPT_VERSION,
     OPT_CHECKPOINT,
     OPT_RESUME,
+    OPT_RESTART,
     OPT_SAMPLER = 512,
     OPT_ADAPTIVE,
     OPT_TOLERANCE,
@@ -262,6 +269,7 @@ static const struct option LONG_OPTS[] = {
     {"version", no_argument, NULL, OPT_VERSION},
     {"checkpoint", required_argument, NULL, OPT_CHECKPOINT},
     {"resume", required_argument, NULL, OPT_RESUME},
+    {"restart", no_argument, NULL, OPT_RESTART},
     {"snapshots", required_argument, NULL, OPT_SNAPSHOTS},
     {"reference", required_argument, NULL, OPT_REFERENCE},
     {"curve", required_argument, NULL, OPT_CURVE},
@@ -415,6 +423,9 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
     case OPT_QUIET:
         o->quiet = true;
         return true;
+    case OPT_RESTART:
+        o->restart = true;
+        return true;
     case OPT_CHECKPOINT:
     case OPT_RESUME:
         *(c == OPT_RESUME ? &o->resume_path : &o->checkpoint_path) = optarg;
@@ -482,7 +493,8 @@ static bool parse_args(int argc, char **argv, struct options *o, struct mcpt_err
     opterr = 0;
     optind = 0; /* glibc: a fresh scan (parse_args runs twice with --resume) */
     for (int c; (c = getopt_long(argc, argv, ":o:h", LONG_OPTS, NULL)) != -1;) {
-        if (c != OPT_RESUME && !record_option(o, c, optarg))
+        /* --resume and --restart are this run's, not the render's: a checkpoint omits them */
+        if (c != OPT_RESUME && c != OPT_RESTART && !record_option(o, c, optarg))
             return cmd_usage_error(err, "expected options of at most %d bytes in all, got more",
                                    CHECKPOINT_ARGS_BYTES);
         if (!apply_option(o, c, argv[optind - 1], err))
@@ -528,6 +540,7 @@ static bool resume_options(int argc, char **argv, struct run *run, struct mcpt_e
 /* parse: the command line, after the interrupted run's options when it says --resume. */
 static bool parse(int argc, char **argv, struct run *run, struct mcpt_error *err)
 {
+    run->argv0 = argv[0];
     if (!parse_args(argc, argv, &run->o, err))
         return false;
     return run->o.is_done || !run->o.resume_path || resume_options(argc, argv, run, err);
@@ -731,6 +744,97 @@ static bool render_options(struct run *run, struct mcpt_error *err)
     return !o->resume_path || resume_matches(run, err);
 }
 
+/* ---- render: the checks before it ---- */
+
+/* word as a shell reads it back: as it is when it holds only characters no shell treats
+ * specially, else in single quotes (a quote inside as '\''). */
+static void shell_word(const char *word, char *out, size_t out_bytes)
+{
+    bool is_plain = *word != '\0';
+    for (const char *c = word; *c; c++)
+        is_plain = is_plain && (isalnum((unsigned char)*c) || strchr("_./:=+,@%-", *c));
+    if (is_plain) {
+        snprintf(out, out_bytes, "%s", word);
+        return;
+    }
+    size_t n = 0;
+    if (n + 1 < out_bytes)
+        out[n++] = '\'';
+    for (const char *c = word; *c && n + 5 < out_bytes; c++) {
+        if (*c == '\'') {
+            memcpy(out + n, "'\\''", 4);
+            n += 4;
+        } else {
+            out[n++] = *c;
+        }
+    }
+    if (n + 1 < out_bytes)
+        out[n++] = '\'';
+    out[n < out_bytes ? n : out_bytes - 1] = '\0';
+}
+
+/* The command that continues the render saved at ckpt: the program as it was invoked
+ * (./mcpt, mcpt, a full path), the scene and --resume. */
+static void resume_command(const struct run *run, const char *ckpt, char *out, size_t out_bytes)
+{
+    char prog[FILE_PATH_BYTES], scene[FILE_PATH_BYTES], path[FILE_PATH_BYTES];
+    shell_word(run->argv0, prog, sizeof prog);
+    shell_word(run->o.scene_path, scene, sizeof scene);
+    shell_word(ckpt, path, sizeof path);
+    snprintf(out, out_bytes, "%s %s --resume %s", prog, scene, path);
+}
+
+/* Before the render, what would make it fail late or do harm: no output may be an input (the
+ * scene, the reference, the checkpoint resumed from unless it is the one to rewrite) or another
+ * output, every output must be creatable (output_check), and a checkpoint left by an
+ * interrupted render of this output is not overwritten unless --restart says so (it is then
+ * removed here). */
+static bool check_outputs(struct run *run, struct mcpt_error *err)
+{
+    const struct options *o = &run->o;
+    struct output_file *files = malloc(sizeof *files * (OUTPUT_MAX_FILES + 3));
+    if (!files) {
+        mcpt_error_runtime(err, NULL, "out of memory checking the output files");
+        return false;
+    }
+    bool measuring = run->cv.measuring;
+    int n_out = output_list(&run->out, measuring ? o->curve_path : NULL, measuring && o->snapshots,
+                            run->topt.spp, files, err);
+    struct output_file *in = files + (n_out > 0 ? n_out : 0);
+    int n_in = 0;
+    struct file_id ckpt_id, resume_id;
+    bool is_resumed_here = o->resume_path && file_id_of(run->out.checkpoint, &ckpt_id) &&
+                           file_id_of(o->resume_path, &resume_id) &&
+                           file_id_same(&ckpt_id, &resume_id);
+    const char *in_paths[3] = {o->scene_path, measuring ? o->reference_path : NULL,
+                               is_resumed_here ? NULL : o->resume_path};
+    static const char *in_roles[3] = {"the scene file", "the reference (--reference)",
+                                      "the checkpoint of --resume"};
+    for (int k = 0; k < 3; k++)
+        if (in_paths[k]) {
+            snprintf(in[n_in].path, sizeof in[n_in].path, "%s", in_paths[k]);
+            in[n_in++].role = in_roles[k];
+        }
+    bool ok = n_out > 0 && output_check(files, n_out, in, n_in, err);
+    free(files);
+    if (!ok)
+        return false;
+    struct stat st;
+    if (is_resumed_here || stat(run->out.checkpoint, &st) != 0)
+        return true;
+    if (o->restart) {
+        unlink(run->out.checkpoint); /* the user discards the interrupted render */
+        return true;
+    }
+    char cmd[3 * FILE_PATH_BYTES + 16];
+    resume_command(run, run->out.checkpoint, cmd, sizeof cmd);
+    mcpt_error_set(err, run->out.checkpoint, 0, 0,
+                   "expected no checkpoint of an interrupted render here, got one: continue it "
+                   "with '%.600s', or discard it with --restart",
+                   cmd);
+    return false;
+}
+
 /* ---- render: progress, signals, passes ---- */
 
 static void report_progress(void *user, uint64_t done, uint64_t total)
@@ -902,7 +1006,7 @@ static bool render_passes(struct run *run, struct mcpt_error *err)
 static bool render(struct run *run, struct mcpt_error *err)
 {
     const struct options *o = &run->o;
-    if (!render_options(run, err))
+    if (!render_options(run, err) || !check_outputs(run, err))
         return false;
     run->prog = (struct progress){.is_tty = isatty(STDERR_FILENO),
                                   .quiet = o->quiet,
@@ -1010,11 +1114,12 @@ static int report(const struct run *run)
                 (unsigned long long)res->n_nonfinite, res->first_bad_x, res->first_bad_y,
                 res->first_bad_sample);
     if (res->cancelled) {
+        char cmd[3 * FILE_PATH_BYTES + 16];
+        resume_command(run, run->out.checkpoint, cmd, sizeof cmd);
         fprintf(stderr,
                 "mcpt: interrupted by %s: wrote the partial %s (its 'samples' channel "
-                "counts each pixel's samples) and the checkpoint %s; continue with: mcpt %s "
-                "--resume %s\n",
-                signal_name, run->out.exr, run->out.checkpoint, o->scene_path, run->out.checkpoint);
+                "counts each pixel's samples) and the checkpoint %s; continue with: %s\n",
+                signal_name, run->out.exr, run->out.checkpoint, cmd);
         return 128 + run->signal;
     }
     if (o->quiet)

@@ -149,3 +149,87 @@ bool output_write_convergence(const struct output_paths *p, const char *curve_pa
     return with_suffix(p->exr, "-contact.png", path, sizeof path, err) &&
            plot_write_contact_sheet(path, sheet, err);
 }
+
+/* ---- before a render: the files it may write, and the harm they could do ---- */
+
+/* Adds path with role to files[*n]; false with *err when it does not fit. */
+static bool add_file(struct output_file *files, int *n, const char *path, const char *role,
+                     struct mcpt_error *err)
+{
+    if (*n >= OUTPUT_MAX_FILES || !copy_path(files[*n].path, sizeof files[*n].path, path, err))
+        return false;
+    files[(*n)++].role = role;
+    return true;
+}
+
+int output_list(const struct output_paths *p, const char *curve_path, bool snapshots,
+                uint32_t spp_final, struct output_file *files, struct mcpt_error *err)
+{
+    int n = 0;
+    char path[FILE_PATH_BYTES], suffix[64];
+    bool ok = add_file(files, &n, p->exr, "the image (-o)", err) &&
+              add_file(files, &n, p->png, "the PNG preview", err) &&
+              add_file(files, &n, p->checkpoint, "the checkpoint", err) &&
+              (!p->heatmap[0] || add_file(files, &n, p->heatmap, "the sample-count map", err));
+    if (ok && curve_path)
+        ok = add_file(files, &n, curve_path, "the curve (--curve)", err) &&
+             with_suffix(curve_path, ".json", path, sizeof path, err) &&
+             add_file(files, &n, path, "the curve's JSON", err) &&
+             with_suffix(curve_path, ".svg", path, sizeof path, err) &&
+             add_file(files, &n, path, "the curve's plot", err);
+    if (ok && snapshots) {
+        int digits = snprintf(NULL, 0, "%u", spp_final);
+        for (uint64_t spp = 1; ok; spp = spp * 2 < spp_final ? spp * 2 : spp_final) {
+            snprintf(suffix, sizeof suffix, "-spp%0*u.exr", digits, (uint32_t)spp);
+            ok = with_suffix(p->exr, suffix, path, sizeof path, err) &&
+                 add_file(files, &n, path, "a snapshot", err) &&
+                 with_suffix(files[n - 1].path, ".png", path, sizeof path, err) &&
+                 add_file(files, &n, path, "a snapshot's preview", err);
+            if (spp >= spp_final)
+                break;
+        }
+        ok = ok && with_suffix(p->exr, "-contact.png", path, sizeof path, err) &&
+             add_file(files, &n, path, "the contact sheet", err);
+    }
+    return ok ? n : -1;
+}
+
+bool output_check(const struct output_file *outputs, int n_outputs,
+                  const struct output_file *inputs, int n_inputs, struct mcpt_error *err)
+{
+    struct file_id *ids = malloc(sizeof *ids * (size_t)(n_outputs + n_inputs));
+    if (!ids) {
+        mcpt_error_runtime(err, NULL, "out of memory checking the output files");
+        return false;
+    }
+    bool ok = true;
+    for (int i = 0; i < n_outputs + n_inputs; i++) {
+        const char *path = i < n_outputs ? outputs[i].path : inputs[i - n_outputs].path;
+        if (!file_id_of(path, &ids[i])) {
+            mcpt_error_set(err, path, 0, 0,
+                           "expected a file name that can be resolved, got one "
+                           "too long or outside any working directory");
+            ok = false;
+            goto done;
+        }
+    }
+    for (int i = 0; i < n_outputs; i++) {
+        for (int k = 0; k < n_outputs + n_inputs; k++) {
+            if (k == i || (k < n_outputs && k > i) || !file_id_same(&ids[i], &ids[k]))
+                continue;
+            const struct output_file *other = k < n_outputs ? &outputs[k] : &inputs[k - n_outputs];
+            mcpt_error_set(err, outputs[i].path, 0, 0,
+                           "expected %s to be a file of its own, got the same file as %s '%s'",
+                           outputs[i].role, other->role, other->path);
+            ok = false;
+            goto done;
+        }
+    }
+    for (int i = 0; ok && i < n_outputs; i++)
+        ok = file_check_creatable(outputs[i].path, err);
+    for (int i = 0; ok && i < n_outputs; i++)
+        file_remove_stale(outputs[i].path);
+done:
+    free(ids);
+    return ok;
+}

@@ -55,4 +55,30 @@ bool output_write_convergence(const struct output_paths *p, const char *curve_pa
                               const struct stats_curve *c, const struct stats_summary *s,
                               const struct plot_sheet *sheet, struct mcpt_error *err);
 
+/* One file a command reads or writes, and what it is, for messages ("the image (-o)"). */
+struct output_file {
+    char path[FILE_PATH_BYTES];
+    const char *role; /* a static string */
+};
+
+/* The most files output_list names: image, preview, checkpoint, sample map, 2 per snapshot
+ * (33 at most), contact sheet, curve CSV, JSON and SVG. */
+#define OUTPUT_MAX_FILES 80
+
+/* Lists into files (room for OUTPUT_MAX_FILES) every file a render named by p may write:
+ * with curve_path the curve's three files, with snapshots those at 1, 2, 4, ... spp_final spp
+ * and the contact sheet.  Returns the count; -1 with *err (bad input) when a name does not
+ * fit. */
+int output_list(const struct output_paths *p, const char *curve_path, bool snapshots,
+                uint32_t spp_final, struct output_file *files, struct mcpt_error *err);
+
+/* Checks, before any work, that the outputs can be written without harm: no output is the same
+ * file as an input or as another output (file_id_same: device and inode where the file exists,
+ * the normalised path otherwise), and each can be created (file_check_creatable).  Then removes
+ * the temporaries dead writers left beside each output (file_remove_stale).  False with *err
+ * (file = the output; bad input, or a runtime error for a full disk) on the first problem, e.g.
+ * "expected the image (-o) to be a file of its own, got the scene file 'box.txt'". */
+bool output_check(const struct output_file *outputs, int n_outputs,
+                  const struct output_file *inputs, int n_inputs, struct mcpt_error *err);
+
 #endif

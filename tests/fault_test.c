@@ -9,6 +9,8 @@
 #include <signal.h>
 #include <time.h>
 
+#include "checkpoint.h"
+#include "sample.h"
 #include "test_util.h"
 
 #define TINY "tests/data/cli/tiny.txt"
@@ -79,4 +81,243 @@ Test(hang, fifo_inputs_refused_at_once, .init = setup, .fini = teardown)
                   "case %zu: %s", i, err);
         cr_assert_not(test_exists(out), "case %zu wrote %s", i, out);
     }
+}
+
+/* ---- outputs that would destroy a file ---- */
+
+/* Copies the file at from to to. */
+static void copy_file(const char *from, const char *to)
+{
+    char buf[65536];
+    long n = test_read_file(from, buf, sizeof buf);
+    cr_assert_geq(n, 0, "cannot read %s", from);
+    FILE *f = fopen(to, "wb");
+    cr_assert_not_null(f);
+    cr_assert_eq(fwrite(buf, 1, (size_t)n, f), (size_t)n);
+    fclose(f);
+}
+
+/* Saves at path the checkpoint of an untouched render of the tiny scene (a copy at scene) to
+ * spp samples per pixel with its defaults, as an interrupted `mcpt scene --spp spp -o out`
+ * would. */
+static void save_checkpoint(const char *path, const char *scene, uint32_t spp, const char *out)
+{
+    struct film film;
+    struct mcpt_error err;
+    cr_assert(film_init(&film, 16, 12, &err)); /* the tiny scene's film */
+    struct checkpoint_info info = {.spp = spp, .max_depth = 3, .sampler = SAMPLER_SOBOL};
+    cr_assert(checkpoint_hash_file(scene, &info.scene_hash, &err), "%s", err.msg);
+    snprintf(info.scene_path, sizeof info.scene_path, "%s", scene);
+    int n = snprintf(info.args, sizeof info.args, "--spp=%u", spp) + 1;
+    n += snprintf(info.args + n, sizeof info.args - (size_t)n, "--output=%s", out) + 1;
+    info.args_bytes = (uint32_t)n;
+    cr_assert(checkpoint_save(path, &film, &info, &err), "%s", err.msg);
+    film_free(&film);
+}
+
+/* Whether the file at path still holds the bytes of the file at original. */
+static bool same_bytes(const char *path, const char *original)
+{
+    static char a[65536], b[65536];
+    long na = test_read_file(path, a, sizeof a), nb = test_read_file(original, b, sizeof b);
+    return na >= 0 && na == nb && memcmp(a, b, (size_t)na) == 0;
+}
+
+/* An output naming an input or another output is refused before anything is written: -o or
+ * --curve naming the scene (also by another spelling, or a hard link), -o naming the
+ * --reference, --heatmap equal to -o, -o naming the checkpoint of --resume, an image whose
+ * preview would take its own name, and the subcommands' outputs naming their inputs (merge -o
+ * a part, compare --heatmap an image).  Exit 2, one line naming the output and what it would
+ * overwrite; every input keeps its bytes. */
+Test(clobber, outputs_never_overwrite_inputs, .init = setup, .fini = teardown)
+{
+    char scene[300], scene_alias[300], hard[300], ref[300], ckpt[300], out[300], part[300];
+    char err[4096];
+    snprintf(scene, sizeof scene, "%s/scene.txt", tmpdir);
+    snprintf(scene_alias, sizeof scene_alias, "%s/./sub/../scene.txt", tmpdir);
+    snprintf(hard, sizeof hard, "%s/hard.txt", tmpdir);
+    snprintf(ref, sizeof ref, "%s/ref.exr", tmpdir);
+    snprintf(ckpt, sizeof ckpt, "%s/c.ckpt", tmpdir);
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(part, sizeof part, "%s/part.exr", tmpdir);
+    copy_file(TINY, scene);
+    cr_assert_eq(link(scene, hard), 0);
+    char sub[300];
+    snprintf(sub, sizeof sub, "%s/sub", tmpdir);
+    cr_assert_eq(mkdir(sub, 0755), 0);
+    const char *mk_ref[] = {scene, "--spp", "2", "-o", ref, "--quiet", NULL};
+    cr_assert_eq(run(mk_ref, err, sizeof err), 0, "%s", err);
+    const char *mk_part[] = {scene, "--spp",   "4", "--sample-range", "0:2", "-o",
+                             part,  "--quiet", NULL};
+    cr_assert_eq(run(mk_part, err, sizeof err), 0, "%s", err);
+    save_checkpoint(ckpt, scene, 4, out);
+    char ref_copy[300], part_copy[300], ckpt_copy[300];
+    snprintf(ref_copy, sizeof ref_copy, "%s/ref-copy.exr", tmpdir);
+    snprintf(part_copy, sizeof part_copy, "%s/part-copy.exr", tmpdir);
+    snprintf(ckpt_copy, sizeof ckpt_copy, "%s/c-copy.ckpt", tmpdir);
+    copy_file(ref, ref_copy);
+    copy_file(part, part_copy);
+    copy_file(ckpt, ckpt_copy);
+
+    struct {
+        const char *args[12];
+        const char *victim; /* the file named first in the message */
+        const char *what;   /* the start of the message after "error: " */
+    } cases[] = {
+        {{scene, "-o", scene, NULL},
+         scene,
+         "expected the image (-o) to be a file of its own, got the same file as the scene file"},
+        {{scene, "-o", scene_alias, NULL},
+         scene_alias,
+         "expected the image (-o) to be a file of its own, got the same file as the scene file"},
+        {{scene, "-o", hard, NULL},
+         hard,
+         "expected the image (-o) to be a file of its own, got the same file as the scene file"},
+        {{scene, "--curve", scene, "-o", out, NULL},
+         scene,
+         "expected the curve (--curve) to be a file of its own, got the same file as the scene "
+         "file"},
+        {{scene, "--reference", ref, "-o", ref, NULL},
+         ref,
+         "expected the image (-o) to be a file of its own, got the same file as the reference"},
+        {{scene, "--adaptive", "--heatmap", out, "-o", out, NULL},
+         out,
+         "expected the sample-count map to be a file of its own, got the same file as the image "
+         "(-o)"},
+        {{scene, "--resume", ckpt, "-o", ckpt, NULL},
+         ckpt,
+         "expected the image (-o) to be a file of its own, got the same file as the checkpoint of "
+         "--resume"},
+        {{scene, "-o", out, "--checkpoint", scene, NULL},
+         scene,
+         "expected the checkpoint to be a file of its own, got the same file as the scene file"},
+        {{"merge", part, "-o", part, NULL},
+         part,
+         "expected the merged image (-o) to be a file of its own, got the same file as a part"},
+        {{"compare", ref, part, "--heatmap", ref, NULL},
+         ref,
+         "expected the heat map (--heatmap) to be a file of its own, got the same file as the "
+         "image A"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        int rc = run(cases[i].args, err, sizeof err);
+        char want[600];
+        snprintf(want, sizeof want, "%s: error: %s", cases[i].victim, cases[i].what);
+        cr_assert_eq(rc, 2, "case %zu: exit %d: %s", i, rc, err);
+        cr_assert(strncmp(err, want, strlen(want)) == 0, "case %zu:\n  want %s\n  got  %s", i, want,
+                  err);
+        cr_assert(same_bytes(scene, TINY), "case %zu: the scene changed", i);
+        cr_assert(same_bytes(ref, ref_copy), "case %zu: the reference changed", i);
+        cr_assert(same_bytes(part, part_copy), "case %zu: the part changed", i);
+        cr_assert(same_bytes(ckpt, ckpt_copy), "case %zu: the checkpoint changed", i);
+    }
+    /* -o x.png: the preview would take the image's own name */
+    char png[300];
+    snprintf(png, sizeof png, "%s/x.png", tmpdir);
+    const char *as_png[] = {scene, "-o", png, NULL};
+    cr_assert_eq(run(as_png, err, sizeof err), 2, "%s", err);
+    cr_assert(strstr(err, "expected the PNG preview to be a file of its own, got the same file "
+                          "as the image (-o)"),
+              "%s", err);
+    cr_assert_not(test_exists(png));
+}
+
+/* ---- failing late ---- */
+
+/* An output that cannot be created fails before the render (a 10^6-spp render would take
+ * minutes): -o into a missing folder, -o naming a directory, --checkpoint into a missing
+ * folder, --curve into a missing folder.  Exit 2 within a second or two, nothing written. */
+Test(late, uncreatable_outputs_fail_before_the_render, .init = setup, .fini = teardown)
+{
+    char missing[300], ckpt[300], curve[300], out[300], err[4096];
+    snprintf(missing, sizeof missing, "%s/no/out.exr", tmpdir);
+    snprintf(ckpt, sizeof ckpt, "%s/no/out.ckpt", tmpdir);
+    snprintf(curve, sizeof curve, "%s/no/curve.csv", tmpdir);
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    struct {
+        const char *args[10];
+        const char *victim;
+        const char *what;
+    } cases[] = {
+        {{TINY, "--spp", "1000000", "-o", missing, NULL}, missing, "cannot create: no folder"},
+        {{TINY, "--spp", "1000000", "-o", tmpdir, NULL},
+         tmpdir,
+         "expected a regular file or a new name to write, got a directory"},
+        {{TINY, "--spp", "1000000", "-o", out, "--checkpoint", ckpt, NULL},
+         ckpt,
+         "cannot create: no folder"},
+        {{TINY, "--spp", "1000000", "-o", out, "--curve", curve, NULL},
+         curve,
+         "cannot create: no folder"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        struct timespec t0, t1;
+        clock_gettime(CLOCK_MONOTONIC, &t0);
+        int rc = run(cases[i].args, err, sizeof err);
+        clock_gettime(CLOCK_MONOTONIC, &t1);
+        double dt = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
+        char want[600];
+        snprintf(want, sizeof want, "%s: error: %s", cases[i].victim, cases[i].what);
+        cr_assert_eq(rc, 2, "case %zu: exit %d: %s", i, rc, err);
+        cr_assert(strncmp(err, want, strlen(want)) == 0, "case %zu:\n  want %s\n  got  %s", i, want,
+                  err);
+        cr_assert_lt(dt, 5.0, "case %zu took %.1f s: it rendered first", i, dt);
+        cr_assert_not(test_exists(out), "case %zu", i);
+    }
+}
+
+/* A read-only filesystem (a tmpfs mounted read-only, so root too is refused): the output is
+ * refused before the render.  Needs the right to mount; skipped, saying so, without it. */
+Test(late, read_only_filesystem_fails_before_the_render, .init = setup, .fini = teardown)
+{
+    char mnt[300], out[320], cmd[700], err[4096];
+    snprintf(mnt, sizeof mnt, "%s/ro", tmpdir);
+    cr_assert_eq(mkdir(mnt, 0755), 0);
+    snprintf(cmd, sizeof cmd, "mount -t tmpfs -o ro,size=64k tmpfs '%s' 2>/dev/null", mnt);
+    if (system(cmd) != 0)
+        cr_skip_test("cannot mount a tmpfs here (not root?): read-only case not run");
+    snprintf(out, sizeof out, "%s/out.exr", mnt);
+    const char *args[] = {TINY, "--spp", "1000000", "-o", out, NULL};
+    int rc = run(args, err, sizeof err);
+    snprintf(cmd, sizeof cmd, "umount '%s'", mnt);
+    cr_assert_eq(system(cmd), 0);
+    char want[600];
+    snprintf(want, sizeof want, "%s: error: cannot create: Read-only file system\n", out);
+    cr_assert_eq(rc, 2, "exit %d: %s", rc, err);
+    cr_assert_str_eq(err, want);
+}
+
+/* ---- an interrupted render is not started over by accident (issue 14, item 5) ---- */
+
+/* Re-running a render whose checkpoint exists is refused (exit 2) with a message that gives
+ * the command continuing it, as this binary was invoked, and names --restart; the checkpoint
+ * is kept.  The suggested command resumes it; --restart discards it and renders afresh. */
+Test(restart, existing_checkpoint_refused_until_resume_or_restart, .init = setup, .fini = teardown)
+{
+    char scene[300], out[300], ckpt[320], err[4096], want[1200];
+    snprintf(scene, sizeof scene, "%s/scene.txt", tmpdir);
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(ckpt, sizeof ckpt, "%s.ckpt", out);
+    copy_file(TINY, scene);
+    save_checkpoint(ckpt, scene, 4, out);
+    const char *again[] = {scene, "--spp", "4", "-o", out, NULL};
+    cr_assert_eq(run(again, err, sizeof err), 2, "%s", err);
+    const char *bin = getenv("MCPT") ? getenv("MCPT") : "./mcpt";
+    snprintf(want, sizeof want,
+             "%s: error: expected no checkpoint of an interrupted render here, got one: "
+             "continue it with '%s %s --resume %s', or discard it with --restart\n",
+             ckpt, bin, scene, ckpt);
+    cr_assert_str_eq(err, want);
+    cr_assert(test_exists(ckpt));
+    cr_assert_not(test_exists(out));
+    /* the command suggested, word for word */
+    const char *resume[] = {scene, "--resume", ckpt, "--quiet", NULL};
+    cr_assert_eq(run(resume, err, sizeof err), 0, "%s", err);
+    cr_assert(test_exists(out));
+    cr_assert_not(test_exists(ckpt), "a finished render removes its checkpoint");
+    /* --restart: the old checkpoint goes, the render starts over */
+    save_checkpoint(ckpt, scene, 4, out);
+    const char *restart[] = {scene, "--spp", "2", "-o", out, "--restart", "--quiet", NULL};
+    cr_assert_eq(run(restart, err, sizeof err), 0, "%s", err);
+    cr_assert_not(test_exists(ckpt));
 }
