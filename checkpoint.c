@@ -188,6 +188,18 @@ static bool read_header(struct ckpt_file *cf, const char *path, uint64_t size_by
                        *width, *height);
         return false;
     }
+    if (info->spp < 1 || (uint64_t)info->sample_offset + info->spp > UINT32_MAX) {
+        mcpt_error_set(err, path, 0, 0,
+                       "expected a target of 1 or more samples per pixel whose indices (from "
+                       "the offset %u) stay below 2^32, got %u",
+                       info->sample_offset, info->spp);
+        return false;
+    }
+    if (info->sampler >= SAMPLER_COUNT) {
+        mcpt_error_set(err, path, 0, 0, "expected a sampler number below %d, got %u", SAMPLER_COUNT,
+                       info->sampler);
+        return false;
+    }
     if (n_path >= CHECKPOINT_PATH_BYTES) {
         mcpt_error_set(err, path, 0, 0, "expected a scene path of at most %d bytes, got %u",
                        CHECKPOINT_PATH_BYTES - 1, n_path);
@@ -255,14 +267,24 @@ bool checkpoint_load(const char *path, struct film *film, struct checkpoint_info
                        (unsigned long long)expect_hash, (unsigned long long)hash);
         goto fail;
     }
+    /* a valid checksum says the bytes are as written, not that a writer made them: every
+     * value is checked as the renderer would have left it */
     for (uint64_t i = 0; i < n_pixels; i++) {
         const struct film_pixel *p = &film->pixels[i];
-        if ((uint64_t)p->n + p->n_dropped > info->spp) {
+        const char *problem = film_pixel_problem(p, info->spp);
+        unsigned long long x = i % width, y = i / width;
+        if (problem && (uint64_t)p->n + p->n_dropped > info->spp) {
             mcpt_error_set(err, path, 0, 0,
                            "expected at most %u samples in a pixel (the spp), "
                            "got %llu at pixel %llu,%llu",
-                           info->spp, (unsigned long long)p->n + p->n_dropped,
-                           (unsigned long long)(i % width), (unsigned long long)(i / width));
+                           info->spp, (unsigned long long)p->n + p->n_dropped, x, y);
+            goto fail;
+        }
+        if (problem) {
+            mcpt_error_set(err, path, 0, 0,
+                           "expected pixel sums that %u samples can give, got %s at pixel "
+                           "%llu,%llu",
+                           p->n, problem, x, y);
             goto fail;
         }
     }

@@ -39,10 +39,14 @@ bool checkpoint_save(const char *path, const struct film *film, const struct che
                      struct mcpt_error *err);
 
 /* Reads a checkpoint written by checkpoint_save into a new film (free with film_free) and
- * *info.  Every field is checked (magic, version, byte order, record size, film size against
- * memory, string lengths, per-pixel counts at most spp, exact file length, checksum); on any
+ * *info.  The file must be a regular one (a FIFO is refused without blocking).  Every field is
+ * checked (magic, version, byte order, record size, film size against memory, spp >= 1 with
+ * sample indices below 2^32, the sampler, string lengths, exact file length, checksum), then
+ * every pixel's values as a render leaves them (film_pixel_problem: counts at most spp, finite
+ * sums, squares >= 0 and consistent with the sums): a valid checksum proves no writer.  On any
  * mismatch returns false with *film zeroed and *err naming path and what was expected (bad
- * input; a runtime error when the film cannot be allocated). */
+ * input; a runtime error when the film cannot be allocated).  The stored options are only
+ * checked to be NUL-ended words; main.c checks them as options. */
 bool checkpoint_load(const char *path, struct film *film, struct checkpoint_info *info,
                      struct mcpt_error *err);
 

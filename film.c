@@ -6,6 +6,7 @@
 #include "film.h"
 
 #include <float.h>
+#include <math.h>
 #include <stdlib.h>
 #include <unistd.h>
 
@@ -50,6 +51,36 @@ void film_free(struct film *film)
 {
     free(film->pixels);
     memset(film, 0, sizeof *film);
+}
+
+/* Whether sum and sum_sq can be the sum and sum of squares of n finite float samples. */
+static const char *sums_problem(double sum, double sum_sq, double n)
+{
+    /* rounding: each of the n additions errs by at most half an ulp, so both sums are within a
+     * relative n * 2^-53 of the exact ones; 1e-6 covers n up to 2^32 with room */
+    const double slack = 1.0 + 1e-6;
+    const double max_sample = FLT_MAX;
+    if (!(fabs(sum) <= n * max_sample))
+        return "a sum that is not finite or exceeds the count times the largest float";
+    if (!(sum_sq >= 0.0 && sum_sq <= n * max_sample * max_sample))
+        return "a sum of squares below 0, not finite or beyond the count's reach";
+    if (sum * sum > n * sum_sq * slack)
+        return "a sum whose square exceeds the count times the sum of squares";
+    return NULL;
+}
+
+const char *film_pixel_problem(const struct film_pixel *p, uint64_t max_samples)
+{
+    if ((uint64_t)p->n + p->n_dropped > max_samples)
+        return "more samples than the render takes";
+    double n = (double)p->n;
+    for (int c = 0; c < 3; c++) {
+        const char *problem = sums_problem(p->sum[c], p->sum_sq[c], n);
+        if (problem)
+            return problem;
+    }
+    /* the luminance's sum is the luminance of the RGB sums (film_sum_lum) */
+    return sums_problem(film_sum_lum(p), p->sum_lum_sq, n);
 }
 
 double film_mean(const struct film_pixel *p, int c)

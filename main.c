@@ -513,10 +513,41 @@ static bool parse_args(int argc, char **argv, struct options *o, struct mcpt_err
 /* --resume: loads the checkpoint's film and settings, then parses its stored options followed
  * by this command line (later words win), so the run goes on as the interrupted one did unless
  * told otherwise; the scene is the checkpoint's unless one is named. */
+/* Whether every stored word of the checkpoint at path is an option as record_option writes
+ * it: "--name" for an option without a value, "--name=value" for one with, and a name that a
+ * render records (not --help, --version, --resume or --restart).  False with *err (bad input,
+ * file = path) naming the first other word, which parse_args would otherwise blame on the
+ * command line. */
+static bool check_stored_options(const char *path, const struct checkpoint_info *ck,
+                                 struct mcpt_error *err)
+{
+    for (uint32_t i = 0; i < ck->args_bytes; i += (uint32_t)strlen(ck->args + i) + 1) {
+        const char *word = ck->args + i;
+        const char *eq = strchr(word, '=');
+        size_t n_name = eq ? (size_t)(eq - word) - 2 : strlen(word) - 2;
+        bool ok = false;
+        for (int k = 0; LONG_OPTS[k].name && strncmp(word, "--", 2) == 0; k++) {
+            const struct option *opt = &LONG_OPTS[k];
+            if (strlen(opt->name) == n_name && strncmp(word + 2, opt->name, n_name) == 0)
+                ok = (opt->has_arg == required_argument) == (eq != NULL) && opt->val != 'h' &&
+                     opt->val != OPT_VERSION && opt->val != OPT_RESUME && opt->val != OPT_RESTART;
+        }
+        if (!ok) {
+            mcpt_error_set(err, path, 0, 0,
+                           "expected stored options '--name' or '--name=value' of a render, got "
+                           "'%.100s'",
+                           word);
+            return false;
+        }
+    }
+    return true;
+}
+
 static bool resume_options(int argc, char **argv, struct run *run, struct mcpt_error *err)
 {
     struct checkpoint_info *ck = &run->saved;
-    if (!checkpoint_load(run->o.resume_path, &run->film, ck, err))
+    if (!checkpoint_load(run->o.resume_path, &run->film, ck, err) ||
+        !check_stored_options(run->o.resume_path, ck, err))
         return false;
     char **words = malloc(sizeof(char *) * ((size_t)ck->args_bytes + (size_t)argc + 1));
     if (!words) {
@@ -530,7 +561,17 @@ static bool resume_options(int argc, char **argv, struct run *run, struct mcpt_e
     for (int i = 1; i < argc; i++)
         words[n++] = argv[i];
     words[n] = NULL;
+    int n_stored = n - argc; /* words 1 .. n_stored are the checkpoint's */
+    const char *ckpt_path = run->o.resume_path; /* parse_args clears run->o first */
     bool ok = parse_args(n, words, &run->o, err);
+    if (!ok && optind - 1 <= n_stored) { /* a stored value (--spp=0): the checkpoint's fault */
+        char *hint = strstr(err->msg, " (see mcpt --help)");
+        if (hint)
+            *hint = '\0';
+        snprintf(err->file, sizeof err->file, "%s", ckpt_path);
+        size_t len = strlen(err->msg);
+        snprintf(err->msg + len, sizeof err->msg - len, " (a stored option)");
+    }
     free(words); /* run->o points into ck and argv, not into words */
     if (ok && !run->o.scene_path)
         run->o.scene_path = ck->scene_path;

@@ -281,6 +281,14 @@ bool partial_read_exr(const char *path, struct film *film, struct partial_info *
                            (unsigned long long)p->n + p->n_dropped, x, y);
             goto done;
         }
+        const char *problem = film_pixel_problem(p, n_expected); /* values no render writes */
+        if (problem) {
+            mcpt_error_set(err, path, 0, 0,
+                           "expected pixel sums that %u samples can give, got %s at pixel "
+                           "%zu,%zu",
+                           p->n, problem, x, y);
+            goto done;
+        }
     }
     ok = true;
 done:

@@ -1,6 +1,7 @@
 /* tests/checkpoint_test.c - checkpoint.c: an interrupted render's file.  Save then load is the
  * identity on the pixel records and settings; every kind of damage (a flipped bit, a truncation,
- * a count no run could make) is refused naming the file; a failed write leaves nothing; the
+ * a count no run could make, sums no samples could give under a valid checksum) is refused
+ * naming the file; a failed write leaves nothing; the
  * scene hash is FNV-1a 64 (Fowler, Noll, Vo) of the file's bytes; a resumed run whose settings
  * differ from the saved ones is refused naming the first difference.  The resume itself, through
  * the binary, is tests/resume_test.c's. */
@@ -24,14 +25,10 @@ Test(checkpoint, round_trip_and_damage, .init = setup, .fini = teardown)
     struct film film, back;
     struct mcpt_error err;
     cr_assert(film_init(&film, 5, 3, &err));
-    for (int i = 0; i < 15; i++) {
+    for (int i = 0; i < 15; i++) { /* pixel i: i samples, as a render adds them */
         struct film_pixel *p = &film.pixels[i];
-        for (int c = 0; c < 3; c++) {
-            p->sum[c] = 0.1 * i + c;
-            p->sum_sq[c] = 1.0 / (i + 1);
-        }
-        p->sum_lum_sq = i;
-        p->n = (uint32_t)i;
+        for (int k = 0; k < i; k++)
+            film_add(p, v3(0.1f * (float)k, 1.0f / (float)(i + 1), (float)(i * k)));
         p->n_dropped = i == 7;
     }
     struct checkpoint_info info = {.scene_hash = 42,
@@ -81,6 +78,27 @@ Test(checkpoint, round_trip_and_damage, .init = setup, .fini = teardown)
     cr_assert(checkpoint_save(path, &film, &info, &err));
     cr_assert_not(checkpoint_load(path, &back, &got, &err));
     cr_assert(strstr(err.msg, "at most 16 samples in a pixel"), "%s", err.msg);
+    film.pixels[3].n = 3;
+
+    /* a valid checksum over values no render writes: a NaN sum, an infinite or negative sum of
+     * squares (issue 15) */
+    double *fields[] = {&film.pixels[4].sum[1], &film.pixels[4].sum_sq[2],
+                        &film.pixels[4].sum_sq[0]};
+    double values[] = {NAN, INFINITY, -1.0};
+    for (int k = 0; k < 3; k++) {
+        double keep = *fields[k];
+        *fields[k] = values[k];
+        cr_assert(checkpoint_save(path, &film, &info, &err));
+        cr_assert_not(checkpoint_load(path, &back, &got, &err), "value %g accepted", values[k]);
+        cr_assert(strncmp(err.msg, "expected pixel sums that 4 samples can give, got ", 49) == 0 &&
+                      strstr(err.msg, "at pixel 4,0"),
+                  "%s", err.msg);
+        cr_assert_null(back.pixels);
+        *fields[k] = keep;
+    }
+    cr_assert(checkpoint_save(path, &film, &info, &err));
+    cr_assert(checkpoint_load(path, &back, &got, &err), "%s", err.msg);
+    film_free(&back);
 
     /* writing into a missing folder fails cleanly and leaves nothing */
     char bad[320];
