@@ -78,6 +78,18 @@ static void exr_stream_error(exr_const_context_t ctxt, exr_result_t code, const 
         snprintf(s->first_msg, sizeof s->first_msg, "%s", msg ? msg : "unknown error");
 }
 
+/* The error handler of a write context.  It must not read the context's user data:
+ * exr_get_user_data takes the context's lock, which the library holds while it reports a
+ * write error, so exr_stream_error would wait for itself forever (a full disk hung mcpt).
+ * exr_stream_write records its errno itself; the library's messages are dropped, and
+ * exr_error_set falls back to the text of the result code. */
+static void exr_write_error(exr_const_context_t ctxt, exr_result_t code, const char *msg)
+{
+    (void)ctxt;
+    (void)code;
+    (void)msg;
+}
+
 static int64_t exr_stream_read(exr_const_context_t ctxt, void *user, void *buffer, uint64_t sz,
                                uint64_t offset, exr_stream_error_func_ptr_t error_cb)
 {
@@ -195,7 +207,7 @@ static bool exr_encode(int fd, const char *path, const struct image *img, struct
     exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
     init.user_data = &s;
     init.write_fn = exr_stream_write;
-    init.error_handler_fn = exr_stream_error;
+    init.error_handler_fn = exr_write_error;
     init.zip_level = 1; /* deflate level: half the time of the default 6 for about 1% larger
                            files of noisy float data */
 
@@ -269,16 +281,20 @@ fail:
     return false;
 }
 
+bool image_encode_exr(struct file_atomic *af, const struct image *img, struct mcpt_error *err)
+{
+    if (!image_is_writable(af->path, img, err) || !exr_encode(af->fd, af->path, img, err)) {
+        file_atomic_abort(af);
+        return false;
+    }
+    return file_atomic_finish(af, err);
+}
+
 bool image_write_exr(const char *path, const struct image *img, struct mcpt_error *err)
 {
     struct file_atomic af;
-    if (!image_is_writable(path, img, err) || !file_atomic_open(&af, path, err))
-        return false;
-    if (!exr_encode(af.fd, path, img, err)) {
-        file_atomic_abort(&af);
-        return false;
-    }
-    return file_atomic_commit(&af, err);
+    return image_is_writable(path, img, err) && file_atomic_open(&af, path, err) &&
+           image_encode_exr(&af, img, err) && file_atomic_rename(&af, err);
 }
 
 /* ---- EXR reading ----------------------------------------------------------------------------- */
@@ -592,23 +608,31 @@ static bool png_encode(struct png_sink *sink, int width, int height, const uint8
     return true;
 }
 
+/* Encodes rgb8 into the open temporary af and finishes it (not renamed); on failure removes
+ * it. */
+static bool png_encode_atomic(struct file_atomic *af, int width, int height, const uint8_t *rgb8,
+                              bool is_srgb, struct mcpt_error *err)
+{
+    struct png_sink sink = {.fd = af->fd};
+    if (!png_encode(&sink, width, height, rgb8, is_srgb)) {
+        if (sink.io_errno)
+            mcpt_error_runtime(err, af->path, "cannot write: %s", strerror(sink.io_errno));
+        else
+            mcpt_error_runtime(err, af->path, "cannot write PNG: %s", sink.msg);
+        file_atomic_abort(af);
+        return false;
+    }
+    return file_atomic_finish(af, err);
+}
+
 /* Writes rgb8 atomically to path. */
 static bool png_write_atomic(const char *path, int width, int height, const uint8_t *rgb8,
                              bool is_srgb, struct mcpt_error *err)
 {
     struct file_atomic af;
-    if (!file_atomic_open(&af, path, err))
-        return false;
-    struct png_sink sink = {.fd = af.fd};
-    if (!png_encode(&sink, width, height, rgb8, is_srgb)) {
-        if (sink.io_errno)
-            mcpt_error_runtime(err, path, "cannot write: %s", strerror(sink.io_errno));
-        else
-            mcpt_error_runtime(err, path, "cannot write PNG: %s", sink.msg);
-        file_atomic_abort(&af);
-        return false;
-    }
-    return file_atomic_commit(&af, err);
+    return file_atomic_open(&af, path, err) &&
+           png_encode_atomic(&af, width, height, rgb8, is_srgb, err) &&
+           file_atomic_rename(&af, err);
 }
 
 /* Checks the size and that width * height * 3 bytes fit in size_t. */
@@ -655,15 +679,18 @@ uint8_t image_srgb8(const struct image_srgb *s, double v)
     return (uint8_t)k;
 }
 
-bool image_write_png_srgb(const char *path, int width, int height, const float *rgb, float exposure,
-                          struct mcpt_error *err)
+bool image_encode_png_srgb(struct file_atomic *af, int width, int height, const float *rgb,
+                           float exposure, struct mcpt_error *err)
 {
-    if (!png_size_is_valid(path, width, height, err))
+    if (!png_size_is_valid(af->path, width, height, err)) {
+        file_atomic_abort(af);
         return false;
+    }
     size_t n_values = (size_t)width * (size_t)height * 3;
     uint8_t *rgb8 = malloc(n_values);
     if (!rgb8) {
-        mcpt_error_runtime(err, path, "cannot write: %s", strerror(ENOMEM));
+        mcpt_error_runtime(err, af->path, "cannot write: %s", strerror(ENOMEM));
+        file_atomic_abort(af);
         return false;
     }
     struct image_srgb srgb;
@@ -671,7 +698,16 @@ bool image_write_png_srgb(const char *path, int width, int height, const float *
     const float scale = exp2f(exposure); /* exposure in stops */
     for (size_t i = 0; i < n_values; i++)
         rgb8[i] = image_srgb8(&srgb, rgb[i] * scale);
-    bool ok = png_write_atomic(path, width, height, rgb8, true, err);
+    bool ok = png_encode_atomic(af, width, height, rgb8, true, err);
     free(rgb8);
     return ok;
+}
+
+bool image_write_png_srgb(const char *path, int width, int height, const float *rgb, float exposure,
+                          struct mcpt_error *err)
+{
+    struct file_atomic af;
+    return png_size_is_valid(path, width, height, err) && file_atomic_open(&af, path, err) &&
+           image_encode_png_srgb(&af, width, height, rgb, exposure, err) &&
+           file_atomic_rename(&af, err);
 }

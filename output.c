@@ -5,6 +5,7 @@
 #include "output.h"
 
 #include <stdlib.h>
+#include <unistd.h>
 
 #include "image.h"
 
@@ -60,26 +61,29 @@ bool output_paths_init(struct output_paths *p, const char *scene_path, const cha
     return !is_adaptive || with_suffix(p->exr, ".samples.png", p->heatmap, sizeof p->heatmap, err);
 }
 
-/* The preview of film at png_path: its means, 2^exposure, sRGB. */
-static bool write_png(const struct film *film, const char *png_path, float exposure,
-                      struct mcpt_error *err)
+/* The preview of film into the temporary af: its means, 2^exposure, sRGB; finished, not
+ * renamed (image_encode_png_srgb). */
+static bool encode_png(struct file_atomic *af, const struct film *film, float exposure,
+                       struct mcpt_error *err)
 {
     size_t n_pixels = (size_t)film->width * (size_t)film->height;
     float *rgb = malloc(sizeof(float) * 3 * n_pixels);
     if (!rgb) {
-        mcpt_error_runtime(err, png_path, "out of memory writing the preview");
+        mcpt_error_runtime(err, af->path, "out of memory writing the preview");
+        file_atomic_abort(af);
         return false;
     }
     for (size_t i = 0; i < n_pixels; i++)
         for (int c = 0; c < 3; c++)
             rgb[3 * i + c] = (float)film_mean(&film->pixels[i], c);
-    bool ok = image_write_png_srgb(png_path, film->width, film->height, rgb, exposure, err);
+    bool ok = image_encode_png_srgb(af, film->width, film->height, rgb, exposure, err);
     free(rgb);
     return ok;
 }
 
-/* The EXR of every render: R, G, B, variance of the mean per channel, sample count. */
-static bool write_exr(const struct film *film, const char *exr_path, struct mcpt_error *err)
+/* The EXR of every render into the temporary af: R, G, B, variance of the mean per channel,
+ * sample count; finished, not renamed. */
+static bool encode_exr(struct file_atomic *af, const struct film *film, struct mcpt_error *err)
 {
     static const char *names[7] = {"R",          "G",          "B",      "variance.R",
                                    "variance.G", "variance.B", "samples"};
@@ -87,7 +91,8 @@ static bool write_exr(const struct film *film, const char *exr_path, struct mcpt
     struct image img = {.width = film->width, .height = film->height, .n_channels = 7};
     float *planes = malloc(sizeof(float) * n_pixels * 7);
     if (!planes) {
-        mcpt_error_runtime(err, exr_path, "out of memory writing the image");
+        mcpt_error_runtime(err, af->path, "out of memory writing the image");
+        file_atomic_abort(af);
         return false;
     }
     for (int c = 0; c < 7; c++) {
@@ -95,16 +100,56 @@ static bool write_exr(const struct film *film, const char *exr_path, struct mcpt
         img.data[c] = planes + (size_t)c * n_pixels;
     }
     film_resolve(film, img.data, img.data + 3, img.data[6]);
-    bool ok = image_write_exr(exr_path, &img, err);
+    bool ok = image_encode_exr(af, &img, err);
     free(planes);
     return ok;
+}
+
+/* The preview alone, at png_path. */
+static bool write_png(const struct film *film, const char *png_path, float exposure,
+                      struct mcpt_error *err)
+{
+    struct file_atomic af;
+    return file_atomic_open(&af, png_path, err) && encode_png(&af, film, exposure, err) &&
+           file_atomic_rename(&af, err);
+}
+
+/* An image and its preview as a pair: both temporaries are written and synced before either
+ * is renamed, so a failure or a kill -9 while writing leaves the old pair (and temporaries
+ * that the next run removes).  When the image is written but its preview cannot be (a disk
+ * full by the PNG), the image is kept, being what the render made, and the old preview is
+ * removed rather than left beside an image it does not show; the message says so.  Between
+ * the two renames (microseconds) a kill -9 can still leave the new image beside the old
+ * preview. */
+static bool write_pair(const char *exr_path, const char *png_path, const struct film *film,
+                       const struct partial_info *part, float exposure, struct mcpt_error *err)
+{
+    struct file_atomic exr, png;
+    if (!file_atomic_open(&exr, exr_path, err) ||
+        !(part ? partial_encode_exr(&exr, film, part, err) : encode_exr(&exr, film, err)))
+        return false; /* nothing replaced */
+    bool is_png_ready = file_atomic_open(&png, png_path, err) &&
+                        encode_png(&png, film, exposure, err);
+    if (!file_atomic_rename(&exr, err)) {
+        if (is_png_ready)
+            file_atomic_abort(&png);
+        return false; /* nothing replaced */
+    }
+    if (is_png_ready && file_atomic_rename(&png, err))
+        return true;
+    unlink(png_path);
+    size_t len = strnlen(err->msg, sizeof err->msg);
+    snprintf(err->msg + len, sizeof err->msg - len,
+             " (the image %.60s was written; the old preview was removed, as it showed an "
+             "older image)",
+             exr_path);
+    return false;
 }
 
 bool output_write_image(const struct output_paths *p, const struct film *film,
                         const struct partial_info *part, float exposure, struct mcpt_error *err)
 {
-    bool ok = part ? partial_write_exr(p->exr, film, part, err) : write_exr(film, p->exr, err);
-    return ok && write_png(film, p->png, exposure, err);
+    return write_pair(p->exr, p->png, film, part, exposure, err);
 }
 
 bool output_write_preview(const struct output_paths *p, const struct film *film, float exposure,
@@ -122,7 +167,7 @@ bool output_write_snapshot(const struct output_paths *p, const struct film *film
     if (!with_suffix(p->exr, suffix, exr_path, sizeof exr_path, err) ||
         !with_suffix(exr_path, ".png", png_path, sizeof png_path, err))
         return false;
-    return write_exr(film, exr_path, err) && write_png(film, png_path, exposure, err);
+    return write_pair(exr_path, png_path, film, NULL, exposure, err);
 }
 
 bool output_write_heatmap(const struct output_paths *p, const struct film *film,

@@ -31,8 +31,11 @@ bool output_paths_init(struct output_paths *p, const char *scene_path, const cha
 
 /* Writes the film as p->exr and p->png: with part NULL the EXR of every render (R, G, B,
  * variance of the mean per channel, sample count), else the partial render's EXR with its
- * sums and ranges (partial_write_exr); the PNG is the preview at exposure (stops).  False with
- * *err (runtime) on failure. */
+ * sums and ranges (partial_write_exr); the PNG is the preview at exposure (stops).  The two
+ * are a pair: both temporaries are written and synced before either is renamed, so a failure
+ * or kill -9 leaves the old pair.  When only the preview cannot be written (a disk full by
+ * it), the new image is kept and the old preview removed, and *err says so.  False with *err
+ * (runtime) on failure. */
 bool output_write_image(const struct output_paths *p, const struct film *film,
                         const struct partial_info *part, float exposure, struct mcpt_error *err);
 

@@ -13,6 +13,7 @@
 #include <float.h>
 #include <stdlib.h>
 
+#include "file.h"
 #include "image.h"
 
 /* The doubles of struct film_pixel, in the order of their channels. */
@@ -149,9 +150,10 @@ static int compare_ranges(const void *a, const void *b)
 
 /* ---- writing ---- */
 
-bool partial_write_exr(const char *path, const struct film *film, const struct partial_info *info,
-                       struct mcpt_error *err)
+bool partial_encode_exr(struct file_atomic *af, const struct film *film,
+                        const struct partial_info *info, struct mcpt_error *err)
 {
+    const char *path = af->path;
     size_t n_pixels = (size_t)film->width * (size_t)film->height;
     struct image *img = calloc(1, sizeof *img);
     float *planes = NULL;
@@ -196,11 +198,21 @@ bool partial_write_exr(const char *path, const struct film *film, const struct p
     snprintf(img->attr_values[0], sizeof img->attr_values[0], "%s", ranges);
     snprintf(img->attr_names[1], sizeof img->attr_names[1], "%s", PARTIAL_ATTR_RENDER);
     snprintf(img->attr_values[1], sizeof img->attr_values[1], "%s", info->render);
-    ok = image_write_exr(path, img, err);
+    ok = image_encode_exr(af, img, err);
 done:
+    if (!ok)
+        file_atomic_abort(af); /* again, after image_encode_exr: harmless */
     free(planes);
     free(img);
     return ok;
+}
+
+bool partial_write_exr(const char *path, const struct film *film, const struct partial_info *info,
+                       struct mcpt_error *err)
+{
+    struct file_atomic af;
+    return file_atomic_open(&af, path, err) && partial_encode_exr(&af, film, info, err) &&
+           file_atomic_rename(&af, err);
 }
 
 /* ---- reading ---- */

@@ -6,15 +6,19 @@
  * most a minute of work lost. */
 #include <criterion/criterion.h>
 
+#include <dirent.h>
+#include <errno.h>
 #include <signal.h>
+#include <sys/statvfs.h>
 #include <time.h>
 
 #include "checkpoint.h"
 #include "sample.h"
 #include "test_util.h"
 
-#define TINY "tests/data/cli/tiny.txt"
-#define ALARM_S 30u /* a run longer than this is a hang */
+#define TINY "tests/data/cli/tiny.txt"      /* black where the camera looks: every image alike */
+#define SMALL "tests/data/resume/small.txt" /* lit and noisy: seeds differ */
+#define ALARM_S 30u                         /* a run longer than this is a hang */
 
 static char tmpdir[256];
 
@@ -320,4 +324,205 @@ Test(restart, existing_checkpoint_refused_until_resume_or_restart, .init = setup
     const char *restart[] = {scene, "--spp", "2", "-o", out, "--restart", "--quiet", NULL};
     cr_assert_eq(run(restart, err, sizeof err), 0, "%s", err);
     cr_assert_not(test_exists(ckpt));
+}
+
+/* ---- a full disk, kill -9: the image and its preview stay a pair ---- */
+
+/* Mounts a tmpfs of size_kib at dir (made here); false when this process may not mount. */
+static bool mount_tmpfs(const char *dir, int size_kib)
+{
+    char cmd[700];
+    cr_assert(mkdir(dir, 0755) == 0 || errno == EEXIST);
+    snprintf(cmd, sizeof cmd, "mount -t tmpfs -o size=%dk tmpfs '%s' 2>/dev/null", size_kib, dir);
+    return system(cmd) == 0;
+}
+
+static void umount_tmpfs(const char *dir)
+{
+    char cmd[700];
+    snprintf(cmd, sizeof cmd, "umount '%s'", dir);
+    cr_assert_eq(system(cmd), 0);
+}
+
+/* Bytes of the file at path, in whole pages of the filesystem at dir. */
+static long long pages_bytes(const char *path, long block)
+{
+    struct stat st;
+    cr_assert_eq(stat(path, &st), 0, "%s", path);
+    return (st.st_size + block - 1) / block * block;
+}
+
+/* Fills the filesystem at dir with the file fill until exactly room bytes are free. */
+static void leave_free(const char *dir, const char *fill, long long room)
+{
+    struct statvfs sv;
+    cr_assert_eq(statvfs(dir, &sv), 0);
+    long long free_bytes = (long long)sv.f_bavail * (long long)sv.f_frsize;
+    cr_assert_geq(free_bytes, room, "only %lld bytes free", free_bytes);
+    FILE *f = fopen(fill, "wb");
+    cr_assert_not_null(f);
+    static char zeros[4096];
+    for (long long n = free_bytes - room; n > 0; n -= (long long)sizeof zeros)
+        cr_assert_eq(fwrite(zeros, 1, n < (long long)sizeof zeros ? (size_t)n : sizeof zeros, f),
+                     n < (long long)sizeof zeros ? (size_t)n : sizeof zeros);
+    cr_assert_eq(fclose(f), 0);
+    cr_assert_eq(statvfs(dir, &sv), 0);
+    cr_assert_eq((long long)sv.f_bavail * (long long)sv.f_frsize, room);
+}
+
+/* No file of the pattern "<anything>.tmp.<pid>.<n>" is left in dir. */
+static void assert_no_temporaries(const char *dir)
+{
+    char cmd[600], out[4096];
+    snprintf(cmd, sizeof cmd, "%s/ls.txt", tmpdir);
+    char ls[700];
+    snprintf(ls, sizeof ls, "ls -a '%s' | grep '\\.tmp\\.' > '%s'", dir, cmd);
+    cr_assert_neq(system(ls), -1);
+    test_read_file(cmd, out, sizeof out);
+    cr_assert_str_eq(out, "", "temporaries left in %s: %s", dir, out);
+}
+
+/* A disk that holds the new image but not its preview: exit 1 with a message saying exactly
+ * what was written (the new image, and the old preview removed, as it showed the old image);
+ * a disk that holds neither: exit 1, the old pair untouched.  No temporary is left in either
+ * case.  A tmpfs of 1 MiB is the disk; skipped, saying so, where this process may not mount. */
+Test(diskfull, image_and_preview_stay_a_pair, .init = setup, .fini = teardown, .timeout = 120)
+{
+    char mnt[300], out[320], png[320], fill[320], new_exr[300], new_png[300], old_exr[300],
+        old_png[300], err[4096];
+    snprintf(mnt, sizeof mnt, "%s/disk", tmpdir);
+    snprintf(out, sizeof out, "%s/out.exr", mnt);
+    snprintf(png, sizeof png, "%s/out.png", mnt);
+    snprintf(fill, sizeof fill, "%s/fill", mnt);
+    snprintf(new_exr, sizeof new_exr, "%s/new.exr", tmpdir);
+    snprintf(new_png, sizeof new_png, "%s/new.png", tmpdir);
+    snprintf(old_exr, sizeof old_exr, "%s/old.exr", tmpdir);
+    snprintf(old_png, sizeof old_png, "%s/old.png", tmpdir);
+    if (!mount_tmpfs(mnt, 1024))
+        cr_skip_test("cannot mount a tmpfs here (not root?): disk-full cases not run");
+    /* the old pair on the small disk, a copy of it, and the new pair's sizes, off it */
+    const char *mk_old[] = {SMALL,    "--width", "96", "--height", "64",      "--spp", "2",
+                            "--seed", "1",       "-o", out,        "--quiet", NULL};
+    const char *mk_new[] = {SMALL,    "--width", "96", "--height", "64",      "--spp", "2",
+                            "--seed", "2",       "-o", new_exr,    "--quiet", NULL};
+    cr_assert_eq(run(mk_old, err, sizeof err), 0, "%s", err);
+    cr_assert_eq(run(mk_new, err, sizeof err), 0, "%s", err);
+    copy_file(out, old_exr);
+    copy_file(png, old_png);
+    struct statvfs sv;
+    cr_assert_eq(statvfs(mnt, &sv), 0);
+    long block = (long)sv.f_frsize;
+    long long exr_bytes = pages_bytes(new_exr, block), png_bytes = pages_bytes(new_png, block);
+
+    /* room for the new image and all but a page of its preview */
+    leave_free(mnt, fill, exr_bytes + png_bytes - block);
+    const char *again[] = {SMALL,    "--width", "96", "--height", "64",      "--spp", "2",
+                           "--seed", "2",       "-o", out,        "--quiet", NULL};
+    int rc = run(again, err, sizeof err);
+    char want[1000];
+    snprintf(want, sizeof want,
+             "%s: error: cannot write: No space left on device (the image %s was written; the "
+             "old preview was removed, as it showed an older image)\n",
+             png, out);
+    cr_assert_eq(rc, 1, "exit %d: %s", rc, err);
+    cr_assert_str_eq(err, want);
+    cr_assert(same_bytes(out, new_exr), "the image is not the new one");
+    cr_assert_not(test_exists(png), "the old preview is still beside the new image");
+    assert_no_temporaries(mnt);
+
+    /* room for neither: the old pair stays */
+    copy_file(old_exr, out);
+    copy_file(old_png, png);
+    unlink(fill);
+    leave_free(mnt, fill, exr_bytes - block);
+    rc = run(again, err, sizeof err);
+    cr_assert_eq(rc, 1, "exit %d: %s", rc, err);
+    snprintf(want, sizeof want, "%s: error: cannot write", out);
+    cr_assert(strncmp(err, want, strlen(want)) == 0, "%s", err);
+    cr_assert(same_bytes(out, old_exr) && same_bytes(png, old_png), "the old pair changed");
+    assert_no_temporaries(mnt);
+    umount_tmpfs(mnt);
+}
+
+/* Whether the files at a and b have the same bytes (cmp). */
+static bool files_equal(const char *a, const char *b)
+{
+    char cmd[800];
+    snprintf(cmd, sizeof cmd, "cmp -s '%s' '%s'", a, b);
+    return system(cmd) == 0;
+}
+
+/* Sets the times of every "*.tmp.*" file in dir to ago_s seconds ago; returns how many. */
+static int age_temporaries(const char *dir, int ago_s)
+{
+    DIR *d = opendir(dir);
+    cr_assert_not_null(d);
+    int n = 0;
+    for (struct dirent *e; (e = readdir(d));) {
+        if (!strstr(e->d_name, ".tmp."))
+            continue;
+        char path[600];
+        snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+        struct timespec times[2];
+        clock_gettime(CLOCK_REALTIME, &times[0]);
+        times[0].tv_sec -= ago_s;
+        times[1] = times[0];
+        cr_assert_eq(utimensat(AT_FDCWD, path, times, 0), 0);
+        n++;
+    }
+    closedir(d);
+    return n;
+}
+
+/* kill -9 while the preview is being written (its temporary has just appeared): the image and
+ * its preview are still a pair, both old or both new, never the new image beside the old
+ * preview; the next run removes the dead process's temporaries (here aged past FILE_STALE_S,
+ * as a later run would find them) and writes the pair. */
+Test(kill9, during_the_preview_leaves_a_pair, .init = setup, .fini = teardown, .timeout = 120)
+{
+    char out[300], png[300], new_exr[300], new_png[300], old_exr[300], old_png[300], err[4096];
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(png, sizeof png, "%s/out.png", tmpdir);
+    snprintf(new_exr, sizeof new_exr, "%s/new/out.exr", tmpdir);
+    snprintf(new_png, sizeof new_png, "%s/new/out.png", tmpdir);
+    snprintf(old_exr, sizeof old_exr, "%s/old.exr", tmpdir);
+    snprintf(old_png, sizeof old_png, "%s/old.png", tmpdir);
+    char new_dir[300];
+    snprintf(new_dir, sizeof new_dir, "%s/new", tmpdir);
+    cr_assert_eq(mkdir(new_dir, 0755), 0);
+    const char *mk_old[] = {SMALL,    "--width", "1200", "--height", "1200",    "--spp", "1",
+                            "--seed", "1",       "-o",   out,        "--quiet", NULL};
+    const char *mk_new[] = {SMALL,    "--width", "1200", "--height", "1200",    "--spp", "1",
+                            "--seed", "2",       "-o",   new_exr,    "--quiet", NULL};
+    cr_assert_eq(run(mk_old, err, sizeof err), 0, "%s", err);
+    cr_assert_eq(run(mk_new, err, sizeof err), 0, "%s", err);
+    cr_assert_not(files_equal(out, new_exr), "seeds 1 and 2 gave one image");
+    char cmd[1300];
+    snprintf(cmd, sizeof cmd, "cp '%s' '%s' && cp '%s' '%s'", out, old_exr, png, old_png);
+    cr_assert_eq(system(cmd), 0);
+
+    const char *again[] = {SMALL,    "--width", "1200", "--height", "1200",    "--spp", "1",
+                           "--seed", "2",       "-o",   out,        "--quiet", NULL};
+    pid_t pid = test_start_mcpt(again, NULL, NULL, ALARM_S);
+    bool caught = false;
+    for (int k = 0; k < 20000 && !caught; k++) { /* up to about 20 s */
+        DIR *d = opendir(tmpdir);
+        for (struct dirent *e; d && (e = readdir(d));)
+            caught |= strncmp(e->d_name, "out.png.tmp.", 12) == 0;
+        closedir(d);
+        if (!caught)
+            nanosleep(&(struct timespec){0, 1000 * 1000}, NULL);
+    }
+    kill(pid, SIGKILL);
+    cr_assert_eq(test_wait(pid), 128 + SIGKILL);
+    bool is_old = files_equal(out, old_exr) && files_equal(png, old_png);
+    bool is_new = files_equal(out, new_exr) && files_equal(png, new_png);
+    cr_assert(is_old || is_new, "a mismatched pair after kill -9 (caught mid-preview: %d)", caught);
+    cr_log_info("kill -9 %s the preview was written: the %s pair", caught ? "while" : "after",
+                is_old ? "old" : "new");
+    int n_tmp = age_temporaries(tmpdir, 60);
+    cr_assert(!caught || n_tmp >= 1, "caught mid-write, yet no temporary left");
+    cr_assert_eq(run(again, err, sizeof err), 0, "%s", err);
+    assert_no_temporaries(tmpdir);
+    cr_assert(files_equal(out, new_exr) && files_equal(png, new_png));
 }
