@@ -8,15 +8,44 @@
 #include <float.h>
 #include <math.h>
 #include <stdlib.h>
+#include <sys/resource.h>
 #include <unistd.h>
+
+/* What is left of limit (bytes, or RLIM_INFINITY) once used bytes are taken. */
+static size_t left_of(rlim_t limit, unsigned long long used)
+{
+    if (limit == RLIM_INFINITY)
+        return SIZE_MAX;
+    return (unsigned long long)limit > used ? (size_t)((unsigned long long)limit - used) : 0;
+}
+
+size_t film_memory_free_bytes(void)
+{
+    long page_bytes = sysconf(_SC_PAGESIZE);
+    unsigned long long vm_pages = 0, data_pages = 0; /* statm: size ... data (pages) */
+    FILE *f = fopen("/proc/self/statm", "r");
+    if (!f || fscanf(f, "%llu %*u %*u %*u %*u %llu", &vm_pages, &data_pages) != 2)
+        vm_pages = data_pages = 0;
+    if (f)
+        fclose(f);
+    unsigned long long page = page_bytes > 0 ? (unsigned long long)page_bytes : 4096;
+    size_t free_bytes = SIZE_MAX;
+    struct rlimit lim;
+    if (getrlimit(RLIMIT_AS, &lim) == 0 && left_of(lim.rlim_cur, vm_pages * page) < free_bytes)
+        free_bytes = left_of(lim.rlim_cur, vm_pages * page);
+    if (getrlimit(RLIMIT_DATA, &lim) == 0 && left_of(lim.rlim_cur, data_pages * page) < free_bytes)
+        free_bytes = left_of(lim.rlim_cur, data_pages * page);
+    return free_bytes;
+}
 
 size_t film_max_bytes(void)
 {
     long pages = sysconf(_SC_PHYS_PAGES);
     long page_bytes = sysconf(_SC_PAGESIZE);
-    if (pages <= 0 || page_bytes <= 0)
-        return (size_t)1 << 32; /* unknown: allow 4 GiB */
-    return (size_t)pages / 2 * (size_t)page_bytes;
+    size_t half_ram = pages <= 0 || page_bytes <= 0 ? (size_t)1 << 32 /* unknown: allow 4 GiB */
+                                                    : (size_t)pages / 2 * (size_t)page_bytes;
+    size_t free_bytes = film_memory_free_bytes();
+    return half_ram < free_bytes ? half_ram : free_bytes;
 }
 
 bool film_init(struct film *film, int width, int height, struct mcpt_error *err)

@@ -26,8 +26,15 @@ struct film {
     struct film_pixel *pixels; /* row-major, y = 0 at the top */
 };
 
-/* Largest film the program will allocate, in bytes, given this machine's physical memory
- * (half of it).  film_init refuses anything larger with a clear message. */
+/* Bytes this process may still allocate under its resource limits: RLIMIT_AS less the address
+ * space in use, RLIMIT_DATA less the data in use (Linux's /proc/self/statm; where it cannot be
+ * read, the whole limit), SIZE_MAX when neither limit is set.  A limit set by `ulimit -v` or a
+ * batch system is met as a failed malloc, so a long job checks it before it starts. */
+size_t film_memory_free_bytes(void);
+
+/* Largest film the program will allocate, in bytes: half this machine's physical memory, and
+ * no more than film_memory_free_bytes.  film_init refuses anything larger with a clear
+ * message. */
 size_t film_max_bytes(void);
 
 /* Allocates a zeroed film.  Fails (err: file/line unset) with a bad-input error saying how

@@ -11,6 +11,7 @@
 #include <getopt.h>
 #include <signal.h>
 #include <stdlib.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
@@ -561,7 +562,7 @@ static bool resume_options(int argc, char **argv, struct run *run, struct mcpt_e
     for (int i = 1; i < argc; i++)
         words[n++] = argv[i];
     words[n] = NULL;
-    int n_stored = n - argc; /* words 1 .. n_stored are the checkpoint's */
+    int n_stored = n - argc;                    /* words 1 .. n_stored are the checkpoint's */
     const char *ckpt_path = run->o.resume_path; /* parse_args clears run->o first */
     bool ok = parse_args(n, words, &run->o, err);
     if (!ok && optind - 1 <= n_stored) { /* a stored value (--spp=0): the checkpoint's fault */
@@ -825,6 +826,45 @@ static void resume_command(const struct run *run, const char *ckpt, char *out, s
     snprintf(out, out_bytes, "%s %s --resume %s", prog, scene, path);
 }
 
+/* Bytes a thread's stack takes: pthread's default, RLIMIT_STACK (glibc), else 8 MiB. */
+static size_t thread_stack_bytes(void)
+{
+    struct rlimit lim;
+    if (getrlimit(RLIMIT_STACK, &lim) == 0 && lim.rlim_cur != RLIM_INFINITY && lim.rlim_cur > 0 &&
+        lim.rlim_cur < ((rlim_t)1 << 30))
+        return (size_t)lim.rlim_cur;
+    return (size_t)8 << 20;
+}
+
+/* Before the render, the memory all of it will need beyond what is allocated now (the film,
+ * the scene, the BVH): the render threads' stacks, a measured run's curve planes (7 floats a
+ * pixel) and second film (--seeds), and the writes' peak (output_peak_bytes), against what the
+ * process may still allocate (film_memory_free_bytes: ulimit -v, RLIMIT_DATA).  A render that
+ * would run out when writing its image is refused now (bad input: a smaller film, fewer
+ * threads or a larger limit fixes it). */
+static bool check_memory(const struct run *run, struct mcpt_error *err)
+{
+    const struct film *film = &run->film;
+    double n_pixels = (double)film->width * (double)film->height;
+    double threads = (double)run->o.n_threads * (double)thread_stack_bytes();
+    double measuring = !run->cv.measuring
+                           ? 0.0
+                           : n_pixels * (7.0 * sizeof(float) + (run->o.n_seeds > 1 ? 64.0 : 0.0));
+    double writes = (double)output_peak_bytes(film->width, film->height, run->o.has_range);
+    double need = threads + measuring + writes;
+    size_t free_bytes = film_memory_free_bytes();
+    if (need <= (double)free_bytes)
+        return true;
+    mcpt_error_set(err, run->o.scene_path, 0, 0,
+                   "expected a render that fits in this process's memory limit (%.0f MiB left "
+                   "beside the %.0f MiB film), got a %dx%d film needing %.0f MiB more (writing "
+                   "the image %.0f, %d threads %.0f, measuring %.0f)",
+                   (double)free_bytes / 1048576.0, n_pixels * 64.0 / 1048576.0, film->width,
+                   film->height, need / 1048576.0, writes / 1048576.0, run->o.n_threads,
+                   threads / 1048576.0, measuring / 1048576.0);
+    return false;
+}
+
 /* Before the render, what would make it fail late or do harm: no output may be an input (the
  * scene, the reference, the checkpoint resumed from unless it is the one to rewrite) or another
  * output, every output must be creatable (output_check), and a checkpoint left by an
@@ -1047,7 +1087,7 @@ static bool render_passes(struct run *run, struct mcpt_error *err)
 static bool render(struct run *run, struct mcpt_error *err)
 {
     const struct options *o = &run->o;
-    if (!render_options(run, err) || !check_outputs(run, err))
+    if (!render_options(run, err) || !check_memory(run, err) || !check_outputs(run, err))
         return false;
     run->prog = (struct progress){.is_tty = isatty(STDERR_FILENO),
                                   .quiet = o->quiet,

@@ -195,7 +195,20 @@ bool output_write_convergence(const struct output_paths *p, const char *curve_pa
            plot_write_contact_sheet(path, sheet, err);
 }
 
-/* ---- before a render: the files it may write, and the harm they could do ---- */
+/* ---- before a render: the memory its writes need, the files it may write and the harm they
+ * could do ---- */
+
+size_t output_peak_bytes(int width, int height, bool is_partial)
+{
+    size_t n_pixels = (size_t)width * (size_t)height;
+    size_t exr_per_pixel = sizeof(float) * (is_partial ? 24 : 7); /* partial.c: 6 + 9 hi + 9 lo */
+    size_t png_per_pixel = 3 * sizeof(float) + 3;                 /* linear RGB, then sRGB bytes */
+    size_t per_pixel = exr_per_pixel > png_per_pixel ? exr_per_pixel : png_per_pixel;
+    /* OpenEXR encodes a chunk of 16 rows at a time (ZIP): the rows, packed, compressed and
+     * scratch, 4 copies; zlib and libpng keep well under a few MiB besides */
+    size_t band = 4 * 16 * (size_t)width * exr_per_pixel;
+    return n_pixels * per_pixel + band + ((size_t)8 << 20);
+}
 
 /* Adds path with role to files[*n]; false with *err when it does not fit. */
 static bool add_file(struct output_file *files, int *n, const char *path, const char *role,

@@ -58,6 +58,12 @@ bool output_write_convergence(const struct output_paths *p, const char *curve_pa
                               const struct stats_curve *c, const struct stats_summary *s,
                               const struct plot_sheet *sheet, struct mcpt_error *err);
 
+/* The most bytes the writes of a film of width x height allocate at any one time, besides the
+ * film: the EXR's planes (7 floats a pixel, or 24 for a partial render's sums), the preview's
+ * (3 floats and 3 bytes a pixel), and the encoders' buffers of a band of rows.  Counted before
+ * a render, so that a memory limit fails it then rather than after hours. */
+size_t output_peak_bytes(int width, int height, bool is_partial);
+
 /* One file a command reads or writes, and what it is, for messages ("the image (-o)"). */
 struct output_file {
     char path[FILE_PATH_BYTES];

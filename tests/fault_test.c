@@ -9,6 +9,7 @@
 #include <dirent.h>
 #include <errno.h>
 #include <signal.h>
+#include <sys/resource.h>
 #include <sys/statvfs.h>
 #include <time.h>
 
@@ -525,4 +526,38 @@ Test(kill9, during_the_preview_leaves_a_pair, .init = setup, .fini = teardown, .
     cr_assert_eq(run(again, err, sizeof err), 0, "%s", err);
     assert_no_temporaries(tmpdir);
     cr_assert(files_equal(out, new_exr) && files_equal(png, new_png));
+}
+
+/* A memory limit (ulimit -v 1 GiB) that holds the film (748 MiB) but not the film and the
+ * writing of its image (341 MiB more): refused before the render, within a second, with a
+ * message giving the sizes; before, it rendered, then failed "out of memory writing the
+ * image".  A sanitizer build cannot run under such a limit: skipped then, saying so. */
+Test(late, memory_limit_fails_before_the_render, .init = setup, .fini = teardown)
+{
+    char out[300], err[4096];
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    struct rlimit old_lim, lim;
+    cr_assert_eq(getrlimit(RLIMIT_AS, &old_lim), 0);
+    lim = old_lim;
+    lim.rlim_cur = (rlim_t)1 << 30;
+    cr_assert_eq(setrlimit(RLIMIT_AS, &lim), 0);
+    const char *version[] = {"--version", NULL};
+    int rc_version = run(version, err, sizeof err);
+    const char *args[] = {SMALL, "--width",   "3500", "--height", "3500", "--spp",
+                          "1",   "--threads", "2",    "-o",       out,    NULL};
+    struct timespec t0, t1;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    int rc = rc_version == 0 ? run(args, err, sizeof err) : -1;
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    cr_assert_eq(setrlimit(RLIMIT_AS, &old_lim), 0);
+    if (rc_version != 0)
+        cr_skip_test("mcpt does not start under a 1 GiB address-space limit (a sanitizer "
+                     "build?): memory-limit case not run");
+    double dt = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
+    cr_assert_eq(rc, 2, "exit %d: %s", rc, err);
+    const char *want = SMALL ": error: expected a render that fits in this process's memory limit";
+    cr_assert(strncmp(err, want, strlen(want)) == 0 && strstr(err, "got a 3500x3500 film needing"),
+              "%s", err);
+    cr_assert_lt(dt, 5.0, "took %.1f s: it rendered first", dt);
+    cr_assert_not(test_exists(out));
 }
