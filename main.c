@@ -9,6 +9,7 @@
  * line and the signal handler, and is the only one that may exit. */
 #include <ctype.h>
 #include <getopt.h>
+#include <stdarg.h>
 #include <signal.h>
 #include <stdlib.h>
 #include <sys/resource.h>
@@ -67,6 +68,9 @@ static const char USAGE[] =
 /* the help is two strings: C11 compilers need only accept 4095 bytes in one */
 static const char USAGE_MORE[] =
     "      --checkpoint CKPT  where an interrupted render saves its state (default OUT.exr.ckpt)\n"
+    "      --checkpoint-every S  save the checkpoint every S seconds while rendering too, so\n"
+    "                         that kill -9 or a power cut loses at most S s (default 60; 0: only\n"
+    "                         on SIGINT/SIGTERM)\n"
     "      --resume CKPT      continue the interrupted render saved in CKPT to its target spp,\n"
     "                         with its options (later options override; render settings must\n"
     "                         match); the result is bit-identical to an uninterrupted run;\n"
@@ -116,6 +120,7 @@ struct options {
     float exposure;
     bool quiet;
     const char *checkpoint_path; /* NULL: OUT.exr.ckpt */
+    double checkpoint_every;     /* --checkpoint-every S, seconds of wall time; 0: never */
     bool snapshots;              /* --snapshots pow2 */
     const char *reference_path;  /* --reference REF.exr, or NULL */
     const char *curve_path;      /* --curve CSV, or NULL */
@@ -180,7 +185,11 @@ struct run {
     struct trace_result res;
     double t_build_s; /* trace_prepare: BVH, camera, light table */
     double t_render_s;
-    int signal; /* SIGINT or SIGTERM, when it stopped the render */
+    double t_cpu_s;               /* CPU time of the render, all threads (SIGSTOP stops it) */
+    double t_checkpoint;          /* now_seconds() of the last periodic checkpoint, or 0 */
+    bool is_checkpoint_failed;    /* a periodic checkpoint could not be written: warned once */
+    bool has_periodic_checkpoint; /* one was written: the checkpoint file is this run's */
+    int signal;                   /* SIGINT or SIGTERM, when it stopped the render */
 };
 
 static bool parse(int argc, char **argv, struct run *run, struct mcpt_error *err);
@@ -221,6 +230,7 @@ enum {
     OPT_CHECKPOINT,
     OPT_RESUME,
     OPT_RESTART,
+    OPT_CHECKPOINT_EVERY,
     OPT_SAMPLER = 512,
     OPT_ADAPTIVE,
     OPT_TOLERANCE,
@@ -271,6 +281,7 @@ static const struct option LONG_OPTS[] = {
     {"checkpoint", required_argument, NULL, OPT_CHECKPOINT},
     {"resume", required_argument, NULL, OPT_RESUME},
     {"restart", no_argument, NULL, OPT_RESTART},
+    {"checkpoint-every", required_argument, NULL, OPT_CHECKPOINT_EVERY},
     {"snapshots", required_argument, NULL, OPT_SNAPSHOTS},
     {"reference", required_argument, NULL, OPT_REFERENCE},
     {"curve", required_argument, NULL, OPT_CURVE},
@@ -427,6 +438,16 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
     case OPT_RESTART:
         o->restart = true;
         return true;
+    case OPT_CHECKPOINT_EVERY: {
+        float s;
+        if (!cmd_parse_float(optarg, 0.0f, 1e9f, &s))
+            return cmd_usage_error(err,
+                                   "expected --checkpoint-every to be seconds in 0..1e9 (0: "
+                                   "never), got '%s'",
+                                   optarg);
+        o->checkpoint_every = s;
+        return true;
+    }
     case OPT_CHECKPOINT:
     case OPT_RESUME:
         *(c == OPT_RESUME ? &o->resume_path : &o->checkpoint_path) = optarg;
@@ -489,6 +510,7 @@ static bool parse_args(int argc, char **argv, struct options *o, struct mcpt_err
     memset(o, 0, sizeof *o);
     o->adaptive_floor = -1.0f;
     o->n_seeds = 1;
+    o->checkpoint_every = 60.0; /* issue 15: kill -9 loses at most a minute */
     long n_cpus = sysconf(_SC_NPROCESSORS_ONLN);
     o->n_threads = n_cpus > 0 ? (int)n_cpus : 1;
     opterr = 0;
@@ -645,6 +667,15 @@ static double now_seconds(void)
 {
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* CPU time of the process, all threads, in seconds: time stopped (SIGSTOP, a suspended job)
+ * or waiting does not count, as it does in wall time. */
+static double cpu_seconds(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
@@ -959,8 +990,12 @@ _Static_assert(ATOMIC_INT_LOCK_FREE == 2, "the signal handler needs a lock-free 
 
 static void on_signal(int sig)
 {
-    if (atomic_exchange(&g_cancel, 1) != 0)
-        _exit(128 + sig); /* the second signal: leave at once (files are renamed into place) */
+    if (atomic_exchange(&g_cancel, 1) != 0) {
+        /* the second signal: leave at once, removing the temporaries being written (a
+         * checkpoint's is the film's size); finished files were renamed into place whole */
+        file_remove_temporaries_now();
+        _exit(128 + sig);
+    }
     g_signal = sig;
 }
 
@@ -1002,6 +1037,37 @@ static bool measure(struct run *run, const struct film *f, uint64_t seed, uint32
            output_write_snapshot(&run->out, f, spp, run->topt.spp, run->o.exposure, err);
 }
 
+/* The fewest samples any pixel of f has taken (kept or dropped). */
+static uint32_t least_count(const struct film *f)
+{
+    size_t n_pixels = (size_t)f->width * (size_t)f->height;
+    uint32_t least = UINT32_MAX;
+    for (size_t i = 0; i < n_pixels; i++) {
+        uint32_t n = f->pixels[i].n + f->pixels[i].n_dropped;
+        least = n < least ? n : least;
+    }
+    return n_pixels ? least : 0;
+}
+
+/* A checkpoint between passes (--checkpoint-every), so that kill -9 loses at most that long:
+ * written atomically like the one of an interrupt.  One that cannot be written is a warning,
+ * printed once; the render goes on. */
+static void save_periodic_checkpoint(struct run *run, const struct film *f)
+{
+    struct checkpoint_info info;
+    struct mcpt_error err = {0};
+    checkpoint_info_of(run, &info);
+    run->t_checkpoint = now_seconds();
+    if (checkpoint_save(run->out.checkpoint, f, &info, &err)) {
+        run->has_periodic_checkpoint = true;
+        return;
+    }
+    if (!run->is_checkpoint_failed)
+        fprintf(stderr, "%s: warning: %s (the render goes on; it is tried again every %g s)\n",
+                err.file, err.msg, run->o.checkpoint_every);
+    run->is_checkpoint_failed = true;
+}
+
 /* Renders seed number k of the run (seed topt.seed + k) into f, in passes: each trace_render
  * call continues every pixel from its count, so the final film is bit-identical to one call.
  * Between passes the film is measured at 1, 2, 4, ... spp and, for the first seed, the preview
@@ -1011,15 +1077,24 @@ static bool render_seed(struct run *run, struct film *f, uint32_t k, struct mcpt
     const struct options *o = &run->o;
     uint32_t spp_final = run->topt.spp;
     bool is_previewed = o->preview_every > 0.0 && k == 0;
+    bool is_checkpointed = o->checkpoint_every > 0.0 && k == 0;
     struct trace_options pass = run->topt;
     pass.seed = run->topt.seed + k;
     if (!pass.adaptive && !pass.sampler_spp)
         pass.sampler_spp = spp_final; /* the strata of the final spp in every pass */
     double seconds = 0.0, seconds_per_spp = 0.0, t_preview = now_seconds();
-    for (uint32_t done_spp = 0; done_spp < spp_final;) {
+    run->t_checkpoint = now_seconds();
+    /* a resumed film starts where its least advanced pixel is */
+    for (uint32_t done_spp = k == 0 ? least_count(f) : 0; done_spp < spp_final;) {
         uint32_t next = run->cv.measuring ? stats_next_pow2(done_spp, spp_final) : spp_final;
-        if (is_previewed) {
-            double step = seconds_per_spp > 0.0 ? o->preview_every / seconds_per_spp : 1.0;
+        /* the pass ends when the next preview or checkpoint is due */
+        double due_s = INFINITY, now = now_seconds();
+        if (is_previewed)
+            due_s = fmin(due_s, t_preview + o->preview_every - now);
+        if (is_checkpointed)
+            due_s = fmin(due_s, run->t_checkpoint + o->checkpoint_every - now);
+        if (due_s < INFINITY) {
+            double step = seconds_per_spp > 0.0 ? due_s / seconds_per_spp : 1.0;
             if (step < (double)(next - done_spp))
                 next = done_spp + (step >= 1.0 ? (uint32_t)step : 1u);
         }
@@ -1030,7 +1105,8 @@ static bool render_seed(struct run *run, struct film *f, uint32_t k, struct mcpt
             return false;
         double dt = now_seconds() - t0;
         seconds += dt;
-        seconds_per_spp = dt / (double)(next - done_spp);
+        if (r.n_samples > 0)
+            seconds_per_spp = dt / (double)(next - done_spp);
         run->prog.base += r.n_samples;
         trace_result_add(&run->res, &r);
         if (r.cancelled)
@@ -1044,6 +1120,9 @@ static bool render_seed(struct run *run, struct film *f, uint32_t k, struct mcpt
                 return false;
             t_preview = now_seconds();
         }
+        if (is_checkpointed && done_spp < spp_final &&
+            now_seconds() - run->t_checkpoint >= o->checkpoint_every)
+            save_periodic_checkpoint(run, f);
     }
     return true;
 }
@@ -1055,7 +1134,7 @@ static bool render_passes(struct run *run, struct mcpt_error *err)
 {
     const struct options *o = &run->o;
     memset(&run->res, 0, sizeof run->res);
-    if (!run->cv.measuring && !(o->preview_every > 0.0))
+    if (!run->cv.measuring && !(o->preview_every > 0.0) && !(o->checkpoint_every > 0.0))
         return trace_render(run->ts, &run->topt, &run->film, &run->res, err);
     uint32_t n_seeds = run->cv.measuring ? o->n_seeds : 1;
     struct progress *prog = &run->prog;
@@ -1106,9 +1185,11 @@ static bool render(struct run *run, struct mcpt_error *err)
                                   .width = run->film.width,
                                   .height = run->film.height};
     stats_curve_init(&run->cv.curve, &info);
+    double t_cpu0 = cpu_seconds();
     if (!render_passes(run, err))
         return false;
     run->t_render_s = now_seconds() - run->prog.t_start;
+    run->t_cpu_s = cpu_seconds() - t_cpu0;
     if (run->res.cancelled) {
         run->signal = g_signal ? g_signal : SIGINT;
         if (run->prog.is_tty && !o->quiet)
@@ -1119,6 +1200,39 @@ static bool render(struct run *run, struct mcpt_error *err)
 
 /* ---- write ---- */
 
+/* Appends fmt's text to err's message, as far as it fits. */
+static void append_msg(struct mcpt_error *err, const char *fmt, ...)
+{
+    size_t len = strnlen(err->msg, sizeof err->msg);
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(err->msg + len, sizeof err->msg - len, fmt, ap);
+    va_end(ap);
+}
+
+/* An interrupted render: the checkpoint, then the partial image, each written whatever became
+ * of the other (a checkpoint's folder removed meanwhile still leaves the partial image).
+ * False with *err (the first failure, saying what was written) when either failed. */
+static bool write_interrupted(struct run *run, struct mcpt_error *err)
+{
+    const struct options *o = &run->o;
+    struct checkpoint_info info;
+    checkpoint_info_of(run, &info);
+    struct mcpt_error image_err = {0};
+    bool is_checkpoint_saved = checkpoint_save(run->out.checkpoint, &run->film, &info, err);
+    bool is_image_written = output_write_image(&run->out, &run->film,
+                                               o->has_range ? &run->part : NULL, o->exposure,
+                                               is_checkpoint_saved ? err : &image_err);
+    if (is_checkpoint_saved)
+        return is_image_written;
+    append_msg(err,
+               is_image_written ? "; the partial image %.60s was written, but the render "
+                                  "cannot be resumed"
+                                : "; nor could the partial image %.60s be written",
+               run->out.exr);
+    return false;
+}
+
 /* write: an interrupted render saves its checkpoint first, then the partial image; a finished
  * one its image, the sample-count map and the convergence files, and removes the checkpoint it
  * was resumed from.  An interrupted render with no new sample writes nothing. */
@@ -1128,17 +1242,20 @@ static bool write_outputs(struct run *run, struct mcpt_error *err)
     bool is_cancelled = run->res.cancelled;
     if (is_cancelled && run->res.n_samples == 0)
         return true;
-    if (is_cancelled) {
-        struct checkpoint_info info;
-        checkpoint_info_of(run, &info);
-        if (!checkpoint_save(run->out.checkpoint, &run->film, &info, err))
-            return false;
-    }
+    if (is_cancelled)
+        return write_interrupted(run, err);
     if (!output_write_image(&run->out, &run->film, o->has_range ? &run->part : NULL, o->exposure,
-                            err))
+                            err)) {
+        if (run->has_periodic_checkpoint)
+            append_msg(err, "; the checkpoint %.60s has the render as of %.0f s before its end",
+                       run->out.checkpoint, now_seconds() - run->t_checkpoint);
         return false;
-    if (o->resume_path && !is_cancelled)
-        unlink(o->resume_path); /* done: the checkpoint has served */
+    }
+    /* done: the checkpoints have served */
+    if (run->has_periodic_checkpoint)
+        unlink(run->out.checkpoint);
+    if (o->resume_path)
+        unlink(o->resume_path);
     if (!output_write_heatmap(&run->out, &run->film, err))
         return false;
     if (!run->cv.measuring || is_cancelled)
@@ -1207,9 +1324,9 @@ static int report(const struct run *run)
         return CMD_EXIT_OK;
     struct bvh_stats bs = trace_bvh_stats(run->ts);
     double t = run->t_render_s;
-    printf("mcpt: %dx%d, %u spp, %d threads: render %.2f s, %.3f Msamples/s, %.2f Mrays/s; BVH "
-           "%u tris in %.1f ms; wrote %s\n",
-           run->film.width, run->film.height, run->topt.spp, o->n_threads, t,
+    printf("mcpt: %dx%d, %u spp, %d threads: render %.2f s wall, %.2f s CPU, %.3f Msamples/s, "
+           "%.2f Mrays/s; BVH %u tris in %.1f ms; wrote %s\n",
+           run->film.width, run->film.height, run->topt.spp, o->n_threads, t, run->t_cpu_s,
            (double)res->n_samples / t * 1e-6, (double)res->n_rays / t * 1e-6, bs.n_tris,
            run->t_build_s * 1e3, run->out.exr);
     if (run->cv.measuring)

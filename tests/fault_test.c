@@ -561,3 +561,80 @@ Test(late, memory_limit_fails_before_the_render, .init = setup, .fini = teardown
     cr_assert_lt(dt, 5.0, "took %.1f s: it rendered first", dt);
     cr_assert_not(test_exists(out));
 }
+
+/* ---- lose at most a minute of work ---- */
+
+/* The inode of path, or 0 when it does not exist: a checkpoint is renamed into place whole, so
+ * each new one has a new inode. */
+static unsigned long long inode_of(const char *path)
+{
+    struct stat st;
+    return stat(path, &st) == 0 ? (unsigned long long)st.st_ino : 0;
+}
+
+/* --checkpoint-every: a render killed by SIGKILL (nothing can catch it: the OOM killer, a power
+ * cut, scancel --signal=KILL) after its third periodic checkpoint resumes from the last one to
+ * the very image an uninterrupted run gives, bit for bit (on another thread count), and the
+ * finished render removes the checkpoint. */
+Test(kill9, periodic_checkpoints_resume_bit_identical, .init = setup, .fini = teardown,
+     .timeout = 240)
+{
+    char full[300], out[300], ckpt[320], err[4096];
+    snprintf(full, sizeof full, "%s/full.exr", tmpdir);
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(ckpt, sizeof ckpt, "%s.ckpt", out);
+    const char *a_full[] = {SMALL, "--spp",   "8192", "--threads", "1", "--checkpoint-every",
+                            "0",   "--quiet", "-o",   full,        NULL};
+    cr_assert_eq(run(a_full, err, sizeof err), 0, "%s", err);
+    const char *a_run[] = {SMALL, "--spp",   "8192", "--threads", "2", "--checkpoint-every",
+                           "0.2", "--quiet", "-o",   out,         NULL};
+    pid_t pid = test_start_mcpt(a_run, NULL, NULL, 120);
+    int n_seen = 0;
+    unsigned long long last = 0;
+    for (int k = 0; k < 60000 && n_seen < 3; k++) { /* up to about a minute */
+        unsigned long long ino = inode_of(ckpt);
+        if (ino && ino != last) {
+            n_seen++;
+            last = ino;
+        }
+        nanosleep(&(struct timespec){0, 1000 * 1000}, NULL);
+    }
+    cr_assert_eq(n_seen, 3, "saw %d periodic checkpoints", n_seen);
+    kill(pid, SIGKILL);
+    cr_assert_eq(test_wait(pid), 128 + SIGKILL);
+    cr_assert_not(test_exists(out), "the render finished before the kill: make it longer");
+    const char *a_resume[] = {"--resume", ckpt, "--threads", "2", "--quiet", NULL};
+    cr_assert_eq(run(a_resume, err, sizeof err), 0, "%s", err);
+    cr_assert(files_equal(out, full), "the resumed image differs from the uninterrupted one");
+    cr_assert_not(test_exists(ckpt), "the finished render left its checkpoint");
+    assert_no_temporaries(tmpdir);
+}
+
+/* A render that ends normally leaves no periodic checkpoint behind, and one whose checkpoint
+ * cannot be written (its folder removed mid-render) warns once and goes on to its image. */
+Test(kill9, periodic_checkpoint_failure_is_a_warning, .init = setup, .fini = teardown,
+     .timeout = 120)
+{
+    char dir[300], out[300], ckpt[340], err[4096];
+    snprintf(dir, sizeof dir, "%s/ck", tmpdir);
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(ckpt, sizeof ckpt, "%s/c.ckpt", dir);
+    cr_assert_eq(mkdir(dir, 0755), 0);
+    const char *args[] = {SMALL, "--spp",        "4096", "--threads", "2", "--checkpoint-every",
+                          "0.1", "--checkpoint", ckpt,   "-o",        out, NULL};
+    char err_path[300];
+    snprintf(err_path, sizeof err_path, "%s/stderr-ck.txt", tmpdir);
+    pid_t pid = test_start_mcpt(args, NULL, err_path, 120);
+    for (int k = 0; k < 30000 && !test_exists(ckpt); k++)
+        nanosleep(&(struct timespec){0, 1000 * 1000}, NULL);
+    cr_assert(test_exists(ckpt), "no periodic checkpoint");
+    char cmd[400];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+    cr_assert_eq(system(cmd), 0);
+    int rc = test_wait(pid);
+    test_read_file(err_path, err, sizeof err);
+    cr_assert_eq(rc, 0, "exit %d: %s", rc, err);
+    cr_assert(test_exists(out));
+    const char *warning = strstr(err, ": warning: cannot write: No such file or directory");
+    cr_assert(warning && !strstr(warning + 1, ": warning: "), "want one warning, got: %s", err);
+}
