@@ -114,8 +114,11 @@ $(FUZZ_BUILD)/%.o: %.c $(FUZZ_STAMP)
 $(FUZZ_BUILD)/fuzz_%: fuzz/fuzz_%.c $(FUZZ_LIB_OBJS) $(FUZZ_STAMP)
 	$(FUZZ_CC) $(FUZZ_CFLAGS) -fsanitize=fuzzer -o $@ $(filter %.c %.o,$^) $(LDLIBS_ALL)
 
-fuzz: $(FUZZ_BUILD)/fuzz_scene $(FUZZ_BUILD)/fuzz_obj
-	fuzz/run.sh $(FUZZ_SECONDS) $(FUZZ_BUILD)
+# the objects are kept between builds (a pattern rule's prerequisites are otherwise removed)
+.SECONDARY: $(FUZZ_LIB_OBJS)
+FUZZ_HARNESSES := scene obj checkpoint partial
+fuzz: $(FUZZ_HARNESSES:%=$(FUZZ_BUILD)/fuzz_%)
+	fuzz/run.sh $(FUZZ_SECONDS) $(FUZZ_BUILD) $(FUZZ_HARNESSES)
 
 # Regenerates the checked-in sobol_matrices.h from Joe & Kuo's direction numbers (only when the
 # table should change; mcpt never reads the direction file).

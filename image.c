@@ -74,8 +74,14 @@ static void exr_stream_error(exr_const_context_t ctxt, exr_result_t code, const 
     if (exr_get_user_data(ctxt, &user) != EXR_ERR_SUCCESS || !user)
         return;
     struct exr_stream *s = user;
-    if (!s->first_msg[0])
-        snprintf(s->first_msg, sizeof s->first_msg, "%s", msg ? msg : "unknown error");
+    if (s->first_msg[0])
+        return;
+    snprintf(s->first_msg, sizeof s->first_msg, "%s", msg ? msg : "unknown error");
+    /* the library quotes names read from the file: its bytes must not reach the terminal as
+     * line breaks or escape sequences (the error is one line) */
+    for (char *c = s->first_msg; *c; c++)
+        if ((unsigned char)*c < 0x20 || (unsigned char)*c >= 0x7f)
+            *c = '?';
 }
 
 /* The error handler of a write context.  It must not read the context's user data:
@@ -380,9 +386,14 @@ static exr_result_t decode_part(exr_context_t ctxt, exr_storage_t storage,
 }
 
 /* Checks the header of part 0 and allocates img's channels; false with *err filled. */
+/* Decoded bytes a file may claim per byte it holds: deflate (ZIP), the compression mcpt writes,
+ * packs at most 1032:1; anything beyond a margin over that is a header that lies. */
+#define EXR_MAX_RATIO 2048
+#define EXR_MIN_CLAIM_BYTES ((uint64_t)64 << 20) /* small files may claim this much */
+
 static bool image_alloc_from_header(const char *path, exr_storage_t storage,
                                     const exr_attr_box2i_t *dw, const exr_attr_chlist_t *chlist,
-                                    struct image *img, struct mcpt_error *err)
+                                    int64_t file_bytes, struct image *img, struct mcpt_error *err)
 {
     if (storage != EXR_STORAGE_SCANLINE && storage != EXR_STORAGE_TILED) {
         mcpt_error_set(err, path, 0, 0, "expected a scanline or tiled image, got deep data");
@@ -401,6 +412,19 @@ static bool image_alloc_from_header(const char *path, exr_storage_t storage,
                        chlist->num_channels);
         return false;
     }
+    /* checked before allocating: a header of a few bytes claimed gigabytes */
+    uint64_t claim_bytes = (uint64_t)width * (uint64_t)height * sizeof(float);
+    uint64_t most_bytes = (uint64_t)file_bytes * EXR_MAX_RATIO;
+    if (claim_bytes > (EXR_MIN_CLAIM_BYTES > most_bytes ? EXR_MIN_CLAIM_BYTES : most_bytes) /
+                          (uint64_t)chlist->num_channels) {
+        mcpt_error_set(err, path, 0, 0,
+                       "expected pixels its %lld bytes can hold, got a header of %lldx%lld pixels "
+                       "and %d channels (%.0f MiB)",
+                       (long long)file_bytes, (long long)width, (long long)height,
+                       chlist->num_channels,
+                       (double)claim_bytes * chlist->num_channels / 1048576.0);
+        return false;
+    }
     img->width = (int)width;
     img->height = (int)height;
     for (int c = 0; c < chlist->num_channels; c++) {
@@ -410,13 +434,16 @@ static bool image_alloc_from_header(const char *path, exr_storage_t storage,
                            sizeof img->names[c] - 1, (int)e->name.length);
             return false;
         }
-        if (e->x_sampling != 1 || e->y_sampling != 1) {
-            mcpt_error_set(err, path, 0, 0, "expected channel '%s' sampled 1 1, got %d %d",
-                           e->name.str, (int)e->x_sampling, (int)e->y_sampling);
-            return false;
-        }
         memcpy(img->names[c], e->name.str, (size_t)e->name.length);
         img->names[c][e->name.length] = '\0';
+        for (char *ch = img->names[c]; *ch; ch++) /* names reach messages: one line, no escapes */
+            if ((unsigned char)*ch < 0x20 || *ch == 0x7f)
+                *ch = '?';
+        if (e->x_sampling != 1 || e->y_sampling != 1) {
+            mcpt_error_set(err, path, 0, 0, "expected channel '%s' sampled 1 1, got %d %d",
+                           img->names[c], (int)e->x_sampling, (int)e->y_sampling);
+            return false;
+        }
         /* calloc: a chunk the file lacks reads as 0, never as stale memory */
         img->data[c] = calloc((size_t)width * (size_t)height, sizeof(float));
         if (!img->data[c]) {
@@ -490,7 +517,7 @@ bool image_read_exr(const char *path, struct image *img, struct mcpt_error *err)
         exr_error_set(err, path, "cannot read OpenEXR header", &s, rv);
         goto fail;
     }
-    if (!image_alloc_from_header(path, storage, &dw, chlist, img, err))
+    if (!image_alloc_from_header(path, storage, &dw, chlist, s.size_bytes, img, err))
         goto fail;
     read_string_attrs(ctxt, img);
     rv = decode_part(ctxt, storage, &dw, img);

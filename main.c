@@ -189,6 +189,7 @@ struct run {
     double t_checkpoint;          /* now_seconds() of the last periodic checkpoint, or 0 */
     bool is_checkpoint_failed;    /* a periodic checkpoint could not be written: warned once */
     bool has_periodic_checkpoint; /* one was written: the checkpoint file is this run's */
+    bool is_preview_failed;       /* a --preview-every preview could not be written: warned */
     int signal;                   /* SIGINT or SIGTERM, when it stopped the render */
 };
 
@@ -1116,8 +1117,14 @@ static bool render_seed(struct run *run, struct film *f, uint32_t k, struct mcpt
             !measure(run, f, pass.seed, done_spp, seconds, k == 0, err))
             return false;
         if (is_previewed && done_spp < spp_final && now_seconds() - t_preview >= o->preview_every) {
-            if (!output_write_preview(&run->out, f, o->exposure, err))
-                return false;
+            /* a preview that cannot be written (a full disk) must not cost the render */
+            struct mcpt_error preview_err = {0};
+            if (!output_write_preview(&run->out, f, o->exposure, &preview_err) &&
+                !run->is_preview_failed) {
+                fprintf(stderr, "%s: warning: %s (the render goes on)\n", preview_err.file,
+                        preview_err.msg);
+                run->is_preview_failed = true;
+            }
             t_preview = now_seconds();
         }
         if (is_checkpointed && done_spp < spp_final &&

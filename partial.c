@@ -217,6 +217,15 @@ bool partial_write_exr(const char *path, const struct film *film, const struct p
 
 /* ---- reading ---- */
 
+/* Whether s holds printable ASCII only (no control bytes, no bytes above 0x7e). */
+static bool is_printable(const char *s)
+{
+    for (; *s; s++)
+        if ((unsigned char)*s < 0x20 || (unsigned char)*s > 0x7e)
+            return false;
+    return true;
+}
+
 bool partial_read_exr(const char *path, struct film *film, struct partial_info *info,
                       struct mcpt_error *err)
 {
@@ -251,6 +260,15 @@ bool partial_read_exr(const char *path, struct film *film, struct partial_info *
                        "expected a partial render (mcpt --sample-range) with "
                        "attribute '%s', got an image without it",
                        !ranges ? PARTIAL_ATTR_RANGES : PARTIAL_ATTR_RENDER);
+        goto done;
+    }
+    const char *unprintable = !is_printable(ranges)   ? PARTIAL_ATTR_RANGES
+                              : !is_printable(render) ? PARTIAL_ATTR_RENDER
+                                                      : NULL;
+    if (unprintable) { /* it would be quoted in messages: no line breaks or escapes there */
+        mcpt_error_set(err, path, 0, 0,
+                       "expected attribute '%s' of printable ASCII characters, got other bytes",
+                       unprintable);
         goto done;
     }
     if (!parse_ranges(ranges, info)) {

@@ -204,6 +204,22 @@ Test(partial, read_refuses_impossible_sums, .init = setup, .fini = teardown)
     film_free(&film);
 }
 
+/* The attributes mcpt quotes in its messages (the render settings, the ranges) must be
+ * printable: a line break or an escape sequence from a file would reach the terminal. */
+Test(partial, read_refuses_unprintable_attributes, .init = setup, .fini = teardown)
+{
+    struct film film, back;
+    random_film(&film, 2, 2, 4);
+    struct partial_info info = one_range(0, 4, "scene=1\n\x1b[2Jspp=4"), info_back;
+    char path[300];
+    struct mcpt_error err;
+    cr_assert(partial_write_exr(scratch(path, sizeof path, "ctl.exr"), &film, &info, &err));
+    cr_assert_not(partial_read_exr(path, &back, &info_back, &err));
+    cr_assert_str_eq(err.msg, "expected attribute 'mcpt.render' of printable ASCII characters, "
+                              "got other bytes");
+    film_free(&film);
+}
+
 /* Merging adds every raw moment (Chan et al. 1979) and joins adjacent ranges; incompatible
  * parts (size, settings, overlapping ranges) are refused with golden messages, changing
  * nothing. */
