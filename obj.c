@@ -44,6 +44,7 @@
 #define OBJ_PATH_BYTES 4096 /* longest resolved MTL path, bytes incl. NUL */
 #define OBJ_SHOW_BYTES 48   /* longest token quoted in a message, bytes incl. NUL */
 #define OBJ_CHUNK_BYTES ((size_t)1 << 18) /* bytes read at a time: 256 KiB, about L2 size */
+#define OBJ_MIN_CHUNK_BYTES ((size_t)1 << 12) /* the chunk of a file smaller than a chunk */
 #define OBJ_MAX_LINE_BYTES ((size_t)1 << 24) /* longest statement, '\' continuations included:
                                                 16 MiB, a face of ~1M corners */
 
@@ -1013,7 +1014,12 @@ static bool join_continuations(struct cursor *c, char *begin, char *end, bool is
  * are read.  Memory: one chunk, grown only for a statement longer than a chunk. */
 static bool read_file(struct reader *r, struct cursor *c, int fd, bool is_mtl)
 {
+    /* a chunk, or less for a small file: loading many small meshes then costs no large
+     * allocations (a file that grows while read is still read whole, in smaller chunks) */
     size_t cap = OBJ_CHUNK_BYTES, n = 0, start = 0;
+    struct stat st;
+    if (fstat(fd, &st) == 0 && st.st_size >= 0 && (uint64_t)st.st_size < cap)
+        cap = (size_t)st.st_size < OBJ_MIN_CHUNK_BYTES ? OBJ_MIN_CHUNK_BYTES : (size_t)st.st_size;
     char *buf = malloc(cap + 1); /* + 1: the NUL after a chunk */
     bool at_eof = false, is_first = true, ok = false;
     if (!buf) {
@@ -1172,7 +1178,8 @@ static bool parse_float_fast(const char *s, const char **end, float *out)
     return true;
 }
 
-/* Reads the token at c->p as a finite float; NaN, Inf and overflowing literals are errors. */
+/* Reads the token at c->p as a finite float; NaN, Inf, hexadecimal and overflowing literals
+ * are errors; one that underflows reads as the 0 or denormal it rounds to. */
 static bool read_float(struct cursor *c, float *out)
 {
     const char *s = c->p;
@@ -1182,7 +1189,10 @@ static bool read_float(struct cursor *c, float *out)
         char *strtof_end = NULL;
         *out = strtof(s, &strtof_end); /* stops at e or before: blanks, '#', '\n' end numbers */
         e = token_end(s);
-        if (strtof_end != e)
+        bool is_hex = false; /* strtof reads C99 hex floats; OBJ numbers are decimal */
+        for (const char *h = s; h < e && !is_hex; h++)
+            is_hex = *h == 'x' || *h == 'X';
+        if (strtof_end != e || is_hex)
             return fail_at(c, s, "expected a number, got '%s'", show_token(s, tok));
         if (!isfinite(*out))
             return fail_at(c, s, "expected a finite number, got '%s'", show_token(s, tok));

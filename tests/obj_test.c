@@ -822,3 +822,19 @@ Test(obj, many_materials_load_in_linear_time, .init = tmp_setup, .fini = tmp_tea
     free(mtl);
     free(obj);
 }
+
+/* Number literals at the edges: a literal that underflows is the 0 or denormal it rounds to
+ * (strtof's ERANGE is not an error); hexadecimal floats, which strtof would read, are not OBJ
+ * numbers (the scene format refuses them too); NaN in any spelling is refused. */
+Test(obj, number_literal_edges, .init = tmp_setup, .fini = tmp_teardown)
+{
+    struct obj_mesh m;
+    load_ok(write_tmp("tiny.obj", "v 1e-50 -1e-50 1e-40\n"), &m);
+    cr_assert(m.positions[0].x == 0.0f && m.positions[0].y == 0.0f && signbit(m.positions[0].y));
+    cr_assert_eq(m.positions[0].z, 1e-40f);
+    obj_free(&m);
+    expect_error(write_tmp("hex.obj", "v 0x1p3 0 0\n"), "hex.obj:1:3: error: expected a number, "
+                                                       "got '0x1p3'");
+    expect_error(write_tmp("nanp.obj", "v 0 nan(0x1) 0\n"), "nanp.obj:1:5: error: expected a "
+                                                           "finite number, got 'nan(0x1)'");
+}
