@@ -1189,9 +1189,8 @@ static bool read_float(struct cursor *c, float *out)
         char *strtof_end = NULL;
         *out = strtof(s, &strtof_end); /* stops at e or before: blanks, '#', '\n' end numbers */
         e = token_end(s);
-        bool is_hex = false; /* strtof reads C99 hex floats; OBJ numbers are decimal */
-        for (const char *h = s; h < e && !is_hex; h++)
-            is_hex = *h == 'x' || *h == 'X';
+        const char *digits = s + (*s == '+' || *s == '-'); /* strtof reads C99 hex floats, */
+        bool is_hex = digits[0] == '0' && (digits[1] == 'x' || digits[1] == 'X'); /* OBJ not */
         if (strtof_end != e || is_hex)
             return fail_at(c, s, "expected a number, got '%s'", show_token(s, tok));
         if (!isfinite(*out))
