@@ -45,6 +45,9 @@ enum camera_fault camera_frame(const struct camera_params *p, vec3 *forward, vec
     int k_view, k_up;
     vec3 view_s = scale_to_unit_range(view, &k_view);
     float len_s = v3_length(view_s);
+    float len = ldexpf(len_s, -k_view); /* exact, unless |view| passes FLT_MAX (sqrt(3) x) */
+    if (!isfinite(len))
+        return CAMERA_NOT_FINITE;
     vec3 f = v3_scale(view_s, 1.0f / len_s);
     vec3 up_s = scale_to_unit_range(p->up, &k_up);
     vec3 r = v3_cross(f, up_s);
@@ -54,7 +57,7 @@ enum camera_fault camera_frame(const struct camera_params *p, vec3 *forward, vec
     *forward = f;
     *right = v3_scale(r, 1.0f / r_len);
     *up = v3_cross(*right, f);
-    *view_len = ldexpf(len_s, -k_view); /* exact: |view| < 2^128 since view is finite */
+    *view_len = len;
     return CAMERA_OK;
 }
 

@@ -32,7 +32,8 @@ struct camera {
 /* Why camera_frame cannot build a frame. */
 enum camera_fault {
     CAMERA_OK,
-    CAMERA_NOT_FINITE,  /* eye, look_at or up not finite, or look_at - eye beyond float range */
+    CAMERA_NOT_FINITE,  /* eye, look_at or up not finite, or look_at - eye or its length
+                           beyond float range */
     CAMERA_SAME_POINT,  /* look_at == eye: no view direction */
     CAMERA_UP_ZERO,     /* up is the zero vector */
     CAMERA_UP_PARALLEL, /* |sin| of the angle between up and the view direction <= 1e-6 */

@@ -84,6 +84,9 @@ Test(camera, degenerate)
     p.eye = v3(-3e38f, 0, 0);
     p.look_at = v3(3e38f, 0, 0); /* look_at - eye overflows */
     cr_assert_eq(camera_frame(&p, &f, &r, &u, &len), CAMERA_NOT_FINITE);
+    p.eye = v3(-1e38f, -1e38f, -1e38f);
+    p.look_at = v3(1e38f, 1e38f, 1e38f); /* finite, but |look_at - eye| = 3.5e38 is not */
+    cr_assert_eq(camera_frame(&p, &f, &r, &u, &len), CAMERA_NOT_FINITE);
 }
 
 /* The frame as camera.c computed it before the scaling (plain float arithmetic). */
