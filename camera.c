@@ -31,8 +31,8 @@ static vec3 normalize_scaled(vec3 v)
     return v3_normalize(scale_to_unit_range(v, &k));
 }
 
-enum camera_fault camera_frame(const struct camera_params *p, vec3 *forward, vec3 *right,
-                               vec3 *up, float *view_len)
+enum camera_fault camera_frame(const struct camera_params *p, vec3 *forward, vec3 *right, vec3 *up,
+                               float *view_len)
 {
     vec3 view = v3_sub(p->look_at, p->eye);
     if (!v3_is_finite(p->eye) || !v3_is_finite(p->look_at) || !v3_is_finite(p->up) ||

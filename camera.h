@@ -10,9 +10,9 @@ struct camera_params {
     vec3 eye;
     vec3 look_at;
     vec3 up;
-    float fov_deg;        /* vertical field of view, (0, 180) */
-    float aperture;       /* lens radius, scene units; 0 = pinhole */
-    float focus_dist;     /* distance to the plane in focus; 0 = |look_at - eye| */
+    float fov_deg;    /* vertical field of view, (0, 180) */
+    float aperture;   /* lens radius, scene units; 0 = pinhole */
+    float focus_dist; /* distance to the plane in focus; 0 = |look_at - eye| */
 };
 
 /* Precomputed camera frame for a film of width x height pixels. */
@@ -45,8 +45,8 @@ enum camera_fault {
  * true direction, and any other gives the bits plain float arithmetic gives.  Returns
  * CAMERA_OK, or the fault with the outputs untouched.  scene.c checks a scene's camera with
  * it, so camera_init never fails on a loaded scene. */
-enum camera_fault camera_frame(const struct camera_params *p, vec3 *forward, vec3 *right,
-                               vec3 *up, float *view_len);
+enum camera_fault camera_frame(const struct camera_params *p, vec3 *forward, vec3 *right, vec3 *up,
+                               float *view_len);
 
 /* Builds the camera; false (and *err filled, without file/line) when camera_frame refuses p. */
 bool camera_init(struct camera *cam, const struct camera_params *p, int width, int height,

@@ -41,11 +41,12 @@
 
 #define OBJ_MAX_COUNT (UINT32_MAX - 1u) /* most positions or triangles one mesh may hold */
 #define OBJ_MAX_ATTRIB_COUNT ((uint32_t)INT32_MAX) /* most vt, vn, materials: int32_t indices */
-#define OBJ_PATH_BYTES 4096 /* longest resolved MTL path, bytes incl. NUL */
-#define OBJ_SHOW_BYTES 48   /* longest token quoted in a message, bytes incl. NUL */
+#define OBJ_PATH_BYTES 4096                        /* longest resolved MTL path, bytes incl. NUL */
+#define OBJ_SHOW_BYTES 48                 /* longest token quoted in a message, bytes incl. NUL */
 #define OBJ_CHUNK_BYTES ((size_t)1 << 18) /* bytes read at a time: 256 KiB, about L2 size */
 #define OBJ_MIN_CHUNK_BYTES ((size_t)1 << 12) /* the chunk of a file smaller than a chunk */
-#define OBJ_MAX_LINE_BYTES ((size_t)1 << 24) /* longest statement, '\' continuations included:
+#define OBJ_MAX_LINE_BYTES                                                                         \
+    ((size_t)1 << 24) /* longest statement, '\' continuations included:
                                                 16 MiB, a face of ~1M corners */
 
 /* Where the parser stands in one NUL-terminated chunk of text. */
@@ -86,8 +87,8 @@ struct reader {
     size_t cap_uvs;
     size_t cap_tris;
     size_t cap_materials;
-    int32_t usemtl_idx;         /* the last usemtl's name in usemtl_names, or -1 */
-    struct obj_names usemtl_names; /* every usemtl name, numbered in order of first use */
+    int32_t usemtl_idx;               /* the last usemtl's name in usemtl_names, or -1 */
+    struct obj_names usemtl_names;    /* every usemtl name, numbered in order of first use */
     struct usemtl_site *usemtl_sites; /* per usemtl name: where it is first used */
     size_t cap_usemtl_sites;
     struct obj_names mtl_names; /* newmtl name -> index into mesh->materials */
@@ -105,8 +106,8 @@ struct reader {
  * NUL, or a '#' comment).  A table, because the parser asks once per byte. */
 enum { CH_BLANK = 1, CH_END = 2 };
 static const unsigned char CHAR_CLASS[256] = {
-    [' '] = CH_BLANK, ['\t'] = CH_BLANK, ['\r'] = CH_BLANK, ['\v'] = CH_BLANK, ['\f'] = CH_BLANK,
-    ['\n'] = CH_END, ['\0'] = CH_END, ['#'] = CH_END,
+    [' '] = CH_BLANK,  ['\t'] = CH_BLANK, ['\r'] = CH_BLANK, ['\v'] = CH_BLANK,
+    ['\f'] = CH_BLANK, ['\n'] = CH_END,   ['\0'] = CH_END,   ['#'] = CH_END,
 };
 
 static bool is_blank(char ch) { return CHAR_CLASS[(unsigned char)ch] & CH_BLANK; }
@@ -234,8 +235,8 @@ static bool fail_oom(const struct cursor *c, const char *at);
 static bool push_vec3(struct cursor *c, const char *at, const char *kw, vec3 **items, uint32_t *n,
                       size_t *cap, uint32_t n_max, vec3 v);
 static bool resolve_usemtl(struct reader *r, struct mcpt_error *err);
-static void add_warning(struct obj_mesh *m, const char *path, int line, int col,
-                        const char *fmt, ...);
+static void add_warning(struct obj_mesh *m, const char *path, int line, int col, const char *fmt,
+                        ...);
 static void note_site(struct warn_site *w, const struct cursor *c, const char *at);
 
 /* ---- public ---- */
@@ -269,7 +270,8 @@ bool obj_load_fd(int fd, const char *path, struct obj_mesh *mesh, struct mcpt_er
                      n_more == 1 ? "" : "s");
         add_warning(mesh, r.spectral.path, r.spectral.line, r.spectral.col,
                     "'%s spectral' ignored: mcpt reads no .rfl spectral curves, so %s keeps its "
-                    "value%s", r.spectral_key, r.spectral_key, more);
+                    "value%s",
+                    r.spectral_key, r.spectral_key, more);
     }
     free(c.joins);
     obj_names_free(&r.usemtl_names);
@@ -368,8 +370,9 @@ static bool read_mtl_text(struct reader *r, struct cursor *c)
         const char *kw = c->p;
         c->p = c->tok_end = token_end(kw);
         size_t len = (size_t)(c->p - kw);
-        struct obj_material *mat =
-            m->n_materials > first_of_file ? &m->materials[m->n_materials - 1] : NULL;
+        struct obj_material *mat = m->n_materials > first_of_file
+                                       ? &m->materials[m->n_materials - 1]
+                                       : NULL;
         char tok[OBJ_SHOW_BYTES];
         vec3 ka;
         float tr;
@@ -426,8 +429,8 @@ static bool read_v(struct reader *r, struct cursor *c, const char *kw)
         return fail_at(c, count_error_at(c, extra_at),
                        "expected 3, 4 or 6 numbers after 'v', got %d", n);
     struct obj_mesh *m = r->mesh;
-    return push_vec3(c, kw, "v", &m->positions, &m->n_positions, &r->cap_positions,
-                     OBJ_MAX_COUNT, v3(x[0], x[1], x[2]));
+    return push_vec3(c, kw, "v", &m->positions, &m->n_positions, &r->cap_positions, OBJ_MAX_COUNT,
+                     v3(x[0], x[1], x[2]));
 }
 
 /* vn x y z */
@@ -441,8 +444,8 @@ static bool read_vn(struct reader *r, struct cursor *c, const char *kw)
     if (n != 3)
         return fail_at(c, count_error_at(c, extra_at), "expected 3 numbers after 'vn', got %d", n);
     struct obj_mesh *m = r->mesh;
-    return push_vec3(c, kw, "vn", &m->normals, &m->n_normals, &r->cap_normals,
-                     OBJ_MAX_ATTRIB_COUNT, v3(x[0], x[1], x[2]));
+    return push_vec3(c, kw, "vn", &m->normals, &m->n_normals, &r->cap_normals, OBJ_MAX_ATTRIB_COUNT,
+                     v3(x[0], x[1], x[2]));
 }
 
 /* vt u [v [w]] */
@@ -571,8 +574,7 @@ static bool read_f(struct reader *r, struct cursor *c)
         n_corners++;
     }
     if (n_corners < 3)
-        return fail_at(c, c->tok_end, "expected at least 3 vertices after 'f', got %zu",
-                       n_corners);
+        return fail_at(c, c->tok_end, "expected at least 3 vertices after 'f', got %zu", n_corners);
     return true;
 }
 
@@ -591,7 +593,6 @@ static size_t read_rest(struct cursor *c, const char **text)
     return (size_t)(e - s);
 }
 
-
 /* usemtl name: later faces get this material.  Names resolve in resolve_usemtl, once every
  * mtllib is read; until then a face holds the index of its usemtl name. */
 static bool read_usemtl(struct reader *r, struct cursor *c)
@@ -607,8 +608,7 @@ static bool read_usemtl(struct reader *r, struct cursor *c)
             return fail_at(c, name, "expected at most %u material names, got more",
                            (unsigned)OBJ_NAMES_MAX);
         if (n == r->cap_usemtl_sites) {
-            struct usemtl_site *grown =
-                grow(r->usemtl_sites, &r->cap_usemtl_sites, sizeof *grown);
+            struct usemtl_site *grown = grow(r->usemtl_sites, &r->cap_usemtl_sites, sizeof *grown);
             if (!grown)
                 return fail_oom(c, name);
             r->usemtl_sites = grown;
@@ -726,14 +726,17 @@ static bool read_newmtl(struct reader *r, struct cursor *c, uint32_t first_of_fi
                        sizeof m->materials[0].name - 1, len);
     int64_t old_idx = obj_names_find(&r->mtl_names, name, len);
     if (old_idx >= 0 && (uint32_t)old_idx >= first_of_file)
-        return fail_at(c, name, "expected a new material name, got '%s' (already defined at "
-                       "line %d)", show_span(name, name + len, tok), m->materials[old_idx].line);
+        return fail_at(c, name,
+                       "expected a new material name, got '%s' (already defined at "
+                       "line %d)",
+                       show_span(name, name + len, tok), m->materials[old_idx].line);
     if (old_idx >= 0)
-        return fail_at(c, name, "expected a new material name, got '%s' (already defined by an "
-                       "earlier mtllib)", show_span(name, name + len, tok));
+        return fail_at(c, name,
+                       "expected a new material name, got '%s' (already defined by an "
+                       "earlier mtllib)",
+                       show_span(name, name + len, tok));
     if (m->n_materials >= OBJ_MAX_ATTRIB_COUNT || m->n_materials >= OBJ_NAMES_MAX)
-        return fail_at(c, name, "expected at most %u materials, got more",
-                       (unsigned)OBJ_NAMES_MAX);
+        return fail_at(c, name, "expected at most %u materials, got more", (unsigned)OBJ_NAMES_MAX);
     if (m->n_materials == r->cap_materials) {
         struct obj_material *grown = grow(m->materials, &r->cap_materials, sizeof *grown);
         if (!grown)
@@ -784,14 +787,18 @@ static bool read_mtl_color(struct reader *r, struct cursor *c, const char *key, 
         c->p = c->tok_end = form_end;
         skip_blanks(c);
         if (is_end(*c->p))
-            return fail_at(c, c->tok_end, "expected an .rfl file name after '%s spectral', got "
-                           "end of line", key);
+            return fail_at(c, c->tok_end,
+                           "expected an .rfl file name after '%s spectral', got "
+                           "end of line",
+                           key);
         c->p = c->tok_end = token_end(c->p);
         if ((n = read_floats(c, x, 1, &extra_at)) < 0)
             return false;
         if (n > 1)
-            return fail_at(c, extra_at, "expected at most a factor after '%s spectral FILE', got "
-                           "%d numbers", key, n);
+            return fail_at(c, extra_at,
+                           "expected at most a factor after '%s spectral FILE', got "
+                           "%d numbers",
+                           key, n);
         if (!r->spectral.is_set)
             snprintf(r->spectral_key, sizeof r->spectral_key, "%s", key);
         note_site(&r->spectral, c, form);
@@ -803,8 +810,10 @@ static bool read_mtl_color(struct reader *r, struct cursor *c, const char *key, 
     if ((n = read_floats(c, x, 3, &extra_at)) < 0)
         return false;
     if (n != 1 && n != 3)
-        return fail_at(c, count_error_at(c, extra_at), "expected 1 or 3 numbers after '%s%s', got "
-                       "%d", key, is_xyz ? " xyz" : "", n);
+        return fail_at(c, count_error_at(c, extra_at),
+                       "expected 1 or 3 numbers after '%s%s', got "
+                       "%d",
+                       key, is_xyz ? " xyz" : "", n);
     if (n == 1)
         x[1] = x[2] = x[0];
     if (!is_xyz) {
@@ -816,9 +825,10 @@ static bool read_mtl_color(struct reader *r, struct cursor *c, const char *key, 
     for (int i = 0; i < 3; i++) {
         rgb[i] = XYZ_TO_SRGB[i][0] * x[0] + XYZ_TO_SRGB[i][1] * x[1] + XYZ_TO_SRGB[i][2] * x[2];
         if (!(fabs(rgb[i]) <= FLT_MAX))
-            return fail_at(c, form, "expected '%s xyz' values whose RGB is within float range "
-                           "(|component| <= %g), got %g for %c", key, (double)FLT_MAX, rgb[i],
-                           "RGB"[i]);
+            return fail_at(c, form,
+                           "expected '%s xyz' values whose RGB is within float range "
+                           "(|component| <= %g), got %g for %c",
+                           key, (double)FLT_MAX, rgb[i], "RGB"[i]);
     }
     *out = v3((float)rgb[0], (float)rgb[1], (float)rgb[2]);
     return true;
@@ -909,8 +919,8 @@ static bool resolve_usemtl(struct reader *r, struct mcpt_error *err)
         const char *key = obj_names_key(&r->usemtl_names, first_undefined);
         show_span(key, key + strlen(key), name);
         if (n_undefined > 1)
-            snprintf(more, sizeof more, " (%u more usemtl name%s undefined too)",
-                     n_undefined - 1, n_undefined == 2 ? " is" : "s are");
+            snprintf(more, sizeof more, " (%u more usemtl name%s undefined too)", n_undefined - 1,
+                     n_undefined == 2 ? " is" : "s are");
         add_warning(m, r->obj_path, r->usemtl_sites[first_undefined].line,
                     r->usemtl_sites[first_undefined].col,
                     "usemtl '%s': no mtllib defines it, so its faces get the default material%s",
@@ -920,8 +930,8 @@ static bool resolve_usemtl(struct reader *r, struct mcpt_error *err)
 }
 
 /* Appends "path:line:col: warning: msg" to the mesh's warnings (counted once they are full). */
-static void add_warning(struct obj_mesh *m, const char *path, int line, int col,
-                        const char *fmt, ...)
+static void add_warning(struct obj_mesh *m, const char *path, int line, int col, const char *fmt,
+                        ...)
 {
     if (m->n_warnings < OBJ_MAX_WARNINGS) {
         char msg[256]; /* as struct mcpt_error.msg */
@@ -929,8 +939,8 @@ static void add_warning(struct obj_mesh *m, const char *path, int line, int col,
         va_start(ap, fmt);
         vsnprintf(msg, sizeof msg, fmt, ap);
         va_end(ap);
-        snprintf(m->warnings[m->n_warnings], OBJ_WARNING_BYTES, "%s:%d:%d: warning: %s", path,
-                 line, col, msg);
+        snprintf(m->warnings[m->n_warnings], OBJ_WARNING_BYTES, "%s:%d:%d: warning: %s", path, line,
+                 col, msg);
     }
     if (m->n_warnings < UINT32_MAX)
         m->n_warnings++;
@@ -1043,8 +1053,10 @@ static bool read_file(struct reader *r, struct cursor *c, int fd, bool is_mtl)
             unsigned char b0 = n > 0 ? (unsigned char)buf[0] : 0;
             unsigned char b1 = n > 1 ? (unsigned char)buf[1] : 0;
             if ((b0 == 0xff && b1 == 0xfe) || (b0 == 0xfe && b1 == 0xff)) {
-                mcpt_error_set(c->err, c->path, 1, 1, "expected UTF-8 text, got UTF-16 (byte "
-                               "order mark 0x%02x 0x%02x)", b0, b1);
+                mcpt_error_set(c->err, c->path, 1, 1,
+                               "expected UTF-8 text, got UTF-16 (byte "
+                               "order mark 0x%02x 0x%02x)",
+                               b0, b1);
                 goto done;
             }
             if (n >= 3 && memcmp(buf, "\xef\xbb\xbf", 3) == 0)
@@ -1058,8 +1070,10 @@ static bool read_file(struct reader *r, struct cursor *c, int fd, bool is_mtl)
             c->p = c->line_start = buf + start;
             c->n_joins = c->join_idx = 0;
             if (cap >= OBJ_MAX_LINE_BYTES) {
-                fail_at(c, c->p, "expected a statement of at most %zu bytes ('\\' continuation "
-                        "lines included), got a longer one", OBJ_MAX_LINE_BYTES);
+                fail_at(c, c->p,
+                        "expected a statement of at most %zu bytes ('\\' continuation "
+                        "lines included), got a longer one",
+                        OBJ_MAX_LINE_BYTES);
                 goto done;
             }
             char *grown = realloc(buf, 2 * cap + 1);
@@ -1390,8 +1404,10 @@ bool obj_names_add(struct obj_names *t, const char *key, size_t key_bytes, uint3
     }
     uint64_t h = fnv1a_64(key, key_bytes);
     struct obj_name_entry *en = &t->entries[t->n_entries];
-    *en = (struct obj_name_entry){.hash = h, .key_offset = t->n_key_bytes,
-                                  .key_bytes = (uint32_t)key_bytes, .value = value};
+    *en = (struct obj_name_entry){.hash = h,
+                                  .key_offset = t->n_key_bytes,
+                                  .key_bytes = (uint32_t)key_bytes,
+                                  .value = value};
     memcpy(t->keys + t->n_key_bytes, key, key_bytes);
     t->keys[t->n_key_bytes + key_bytes] = '\0';
     t->n_key_bytes += key_bytes + 1;

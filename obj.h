@@ -29,10 +29,10 @@ struct obj_tri {
     int32_t vn[3];   /* indices into normals, or -1 */
     int32_t mat_idx; /* index into materials of the active usemtl, or -1 (none or unknown) */
     uint32_t line;   /* line of the face statement, for messages */
-}; /* 44 bytes */
+};                   /* 44 bytes */
 
-#define OBJ_MAX_WARNINGS 4      /* warnings kept per load; n_warnings counts them all */
-#define OBJ_WARNING_BYTES 400   /* one warning line, "file:line:col: warning: ...", with NUL */
+#define OBJ_MAX_WARNINGS 4    /* warnings kept per load; n_warnings counts them all */
+#define OBJ_WARNING_BYTES 400 /* one warning line, "file:line:col: warning: ...", with NUL */
 
 struct obj_mesh {
     vec3 *positions; /* v */
@@ -94,7 +94,7 @@ struct obj_name_entry {
 }; /* 24 bytes */
 
 struct obj_names {
-    uint32_t *slots; /* n_slots: entry index + 1, or 0 for an empty slot */
+    uint32_t *slots;  /* n_slots: entry index + 1, or 0 for an empty slot */
     uint32_t n_slots; /* 2^slot_bits, or 0 before the first name */
     unsigned slot_bits;
     struct obj_name_entry *entries;

@@ -37,15 +37,16 @@
 #define MAX_PARAMS 20             /* most distinct parameters any statement accepts */
 #define SHOW_BYTES 40             /* longest piece of user text quoted in a message, bytes */
 #define SHOW_OUT_BYTES (4 * SHOW_BYTES + 4) /* show()'s output: every byte as \xNN, "..." */
-#define PARALLEL_SIN 1e-6         /* |sin angle| below which two directions count as parallel */
+#define PARALLEL_SIN 1e-6 /* |sin angle| below which two directions count as parallel */
 /* Largest |coordinate| of any point of the scene (scene units).  Two such points differ by at
  * most 2e18 per component, so a squared distance, or the area two such differences span, is at
  * most 1.2e37: finite in single precision (largest 3.4e38), with room for the products of the
  * ray-triangle test.  The Cornell box scaled by 1e15 reaches 4e15. */
 #define SCENE_MAX_COORD 1e18
 #define COORD_WHY "squared distances and areas must stay finite in single precision"
-#define UNDERFLOW_WHY " (it rounds to 0 in single precision, whose smallest positive number is " \
-                      "1.4e-45)"
+#define UNDERFLOW_WHY                                                                              \
+    " (it rounds to 0 in single precision, whose smallest positive number is "                     \
+    "1.4e-45)"
 
 /* ---- the statement table ---------------------------------------------------------------- */
 
@@ -81,7 +82,8 @@ enum value_range {
     RANGE_1K,       /* 1..1024 */
 };
 
-#define ALL_TYPES 0xffu /* allowed_mask / required_mask bit t stands for type t; bit 0 when the
+#define ALL_TYPES                                                                                  \
+    0xffu /* allowed_mask / required_mask bit t stands for type t; bit 0 when the
                            statement has no 'type' parameter */
 
 struct param_spec {
@@ -108,9 +110,9 @@ enum stmt_kind {
 
 struct stmt_spec {
     const char *keyword;
-    bool is_once;                          /* may appear at most once */
-    const char *types[8];                  /* words of the 'type' parameter; none: no 'type' */
-    struct param_spec params[MAX_PARAMS];  /* in the order the reference lists them */
+    bool is_once;                         /* may appear at most once */
+    const char *types[8];                 /* words of the 'type' parameter; none: no 'type' */
+    struct param_spec params[MAX_PARAMS]; /* in the order the reference lists them */
 };
 
 /* type bits: material */
@@ -127,92 +129,123 @@ struct stmt_spec {
 #define T_GRADIENT 2u
 
 static const struct stmt_spec stmt_specs[STMT_COUNT] = {
-    [STMT_CAMERA] = {"camera", true, {NULL}, {
-        {"eye", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
-        {"look-at", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
-        {"up", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
-        {"fov", VAL_NUMBER, RANGE_FOV, ALL_TYPES, ALL_TYPES},
-        {"aperture", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
-        {"focus-dist", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
-    }},
-    [STMT_FILM] = {"film", true, {NULL}, {
-        {"width", VAL_INT, RANGE_FILM, ALL_TYPES, ALL_TYPES},
-        {"height", VAL_INT, RANGE_FILM, ALL_TYPES, ALL_TYPES},
-    }},
-    [STMT_RENDER] = {"render", true, {NULL}, {
-        {"spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
-        {"max-depth", VAL_DEPTH, RANGE_ANY, ALL_TYPES, 0},
-        {"sampler", VAL_SAMPLER, RANGE_ANY, ALL_TYPES, 0},
-        {"adaptive", VAL_BOOL, RANGE_ANY, ALL_TYPES, 0},
-        {"tolerance", VAL_NUMBER, RANGE_POSITIVE, ALL_TYPES, 0},
-        {"adaptive-floor", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
-        {"batch", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
-        {"min-spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
-        {"max-spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
-        {"direct", VAL_DIRECT, RANGE_ANY, ALL_TYPES, 0},
-        {"light-samples", VAL_INT, RANGE_1K, ALL_TYPES, 0},
-        {"split", VAL_SPLIT, RANGE_ANY, ALL_TYPES, 0},
-        {"rr", VAL_RR, RANGE_ANY, ALL_TYPES, 0},
-        {"rr-depth", VAL_INT, RANGE_1K, ALL_TYPES, 0},
-    }},
-    [STMT_MATERIAL] = {"material", false, {"diffuse", "mirror", "dielectric", "diffuse-uniform",
-                                           "conductor", "plastic", "unity", NULL}, {
-        {"name", VAL_NAME, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"type", VAL_TYPE, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"albedo", VAL_VEC3, RANGE_UNIT, T_ALBEDO, T_ALBEDO},
-        {"specular", VAL_VEC3, RANGE_UNIT, T_MIRROR | T_DIELECTRIC | T_CONDUCTOR | T_UNITY, 0},
-        {"ior", VAL_NUMBER, RANGE_POSITIVE, T_DIELECTRIC | T_UNITY, 0},
-        {"emission", VAL_VEC3, RANGE_NONNEG, ALL_TYPES, 0},
-        {"two-sided", VAL_BOOL, RANGE_ANY, ALL_TYPES, 0},
-        {"roughness", VAL_NUMBER, RANGE_UNIT, T_CONDUCTOR | T_PLASTIC, 0},
-        {"metallic", VAL_NUMBER, RANGE_UNIT, T_PLASTIC, 0},
-        {"reflectance", VAL_NUMBER, RANGE_UNIT, T_PLASTIC, 0},
-        {"smoothness", VAL_NUMBER, RANGE_UNIT, T_UNITY, 0},
-        {"specular-prob", VAL_NUMBER, RANGE_UNIT, T_UNITY, 0},
-        {"glass", VAL_BOOL, RANGE_ANY, T_UNITY, 0},
-        {"checker", VAL_CHECKER, RANGE_UNIT, T_ALBEDO, 0},
-        {"checker-scale", VAL_NUMBER, RANGE_POSITIVE, T_ALBEDO, 0},
-        {"checker-uv", VAL_BOOL, RANGE_ANY, T_ALBEDO, 0},
-    }},
-    [STMT_MESH] = {"mesh", false, {NULL}, {
-        {"file", VAL_PATH, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, 0},
-        {"translate", VAL_VEC3, RANGE_ANY, ALL_TYPES, 0},
-        {"rotate", VAL_ROTATION, RANGE_ANY, ALL_TYPES, 0},
-        {"scale", VAL_SCALE, RANGE_NONZERO, ALL_TYPES, 0},
-    }},
-    [STMT_SPHERE] = {"sphere", false, {NULL}, {
-        {"center", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
-        {"radius", VAL_NUMBER, RANGE_POSITIVE, ALL_TYPES, ALL_TYPES},
-        {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"translate", VAL_VEC3, RANGE_ANY, ALL_TYPES, 0},
-        {"scale", VAL_SCALE, RANGE_NONZERO, ALL_TYPES, 0},
-    }},
-    [STMT_QUAD] = {"quad", false, {NULL}, {
-        {"corner", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
-        {"edge1", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
-        {"edge2", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
-        {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"translate", VAL_VEC3, RANGE_ANY, ALL_TYPES, 0},
-        {"rotate", VAL_ROTATION, RANGE_ANY, ALL_TYPES, 0},
-        {"scale", VAL_SCALE, RANGE_NONZERO, ALL_TYPES, 0},
-    }},
-    [STMT_PLANE] = {"plane", false, {NULL}, {
-        {"point", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
-        {"normal", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
-        {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-    }},
-    [STMT_LIGHT] = {"light", false, {"point", NULL}, {
-        {"type", VAL_TYPE, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"position", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
-        {"intensity", VAL_VEC3, RANGE_NONNEG, ALL_TYPES, ALL_TYPES},
-    }},
-    [STMT_SKY] = {"sky", true, {"constant", "gradient", NULL}, {
-        {"type", VAL_TYPE, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"radiance", VAL_VEC3, RANGE_NONNEG, T_CONSTANT, T_CONSTANT},
-        {"horizon", VAL_VEC3, RANGE_NONNEG, T_GRADIENT, T_GRADIENT},
-        {"zenith", VAL_VEC3, RANGE_NONNEG, T_GRADIENT, T_GRADIENT},
-    }},
+    [STMT_CAMERA] = {"camera",
+                     true,
+                     {NULL},
+                     {
+                         {"eye", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
+                         {"look-at", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
+                         {"up", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
+                         {"fov", VAL_NUMBER, RANGE_FOV, ALL_TYPES, ALL_TYPES},
+                         {"aperture", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
+                         {"focus-dist", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
+                     }},
+    [STMT_FILM] = {"film",
+                   true,
+                   {NULL},
+                   {
+                       {"width", VAL_INT, RANGE_FILM, ALL_TYPES, ALL_TYPES},
+                       {"height", VAL_INT, RANGE_FILM, ALL_TYPES, ALL_TYPES},
+                   }},
+    [STMT_RENDER] = {"render",
+                     true,
+                     {NULL},
+                     {
+                         {"spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
+                         {"max-depth", VAL_DEPTH, RANGE_ANY, ALL_TYPES, 0},
+                         {"sampler", VAL_SAMPLER, RANGE_ANY, ALL_TYPES, 0},
+                         {"adaptive", VAL_BOOL, RANGE_ANY, ALL_TYPES, 0},
+                         {"tolerance", VAL_NUMBER, RANGE_POSITIVE, ALL_TYPES, 0},
+                         {"adaptive-floor", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
+                         {"batch", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
+                         {"min-spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
+                         {"max-spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
+                         {"direct", VAL_DIRECT, RANGE_ANY, ALL_TYPES, 0},
+                         {"light-samples", VAL_INT, RANGE_1K, ALL_TYPES, 0},
+                         {"split", VAL_SPLIT, RANGE_ANY, ALL_TYPES, 0},
+                         {"rr", VAL_RR, RANGE_ANY, ALL_TYPES, 0},
+                         {"rr-depth", VAL_INT, RANGE_1K, ALL_TYPES, 0},
+                     }},
+    [STMT_MATERIAL] = {"material",
+                       false,
+                       {"diffuse", "mirror", "dielectric", "diffuse-uniform", "conductor",
+                        "plastic", "unity", NULL},
+                       {
+                           {"name", VAL_NAME, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+                           {"type", VAL_TYPE, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+                           {"albedo", VAL_VEC3, RANGE_UNIT, T_ALBEDO, T_ALBEDO},
+                           {"specular", VAL_VEC3, RANGE_UNIT,
+                            T_MIRROR | T_DIELECTRIC | T_CONDUCTOR | T_UNITY, 0},
+                           {"ior", VAL_NUMBER, RANGE_POSITIVE, T_DIELECTRIC | T_UNITY, 0},
+                           {"emission", VAL_VEC3, RANGE_NONNEG, ALL_TYPES, 0},
+                           {"two-sided", VAL_BOOL, RANGE_ANY, ALL_TYPES, 0},
+                           {"roughness", VAL_NUMBER, RANGE_UNIT, T_CONDUCTOR | T_PLASTIC, 0},
+                           {"metallic", VAL_NUMBER, RANGE_UNIT, T_PLASTIC, 0},
+                           {"reflectance", VAL_NUMBER, RANGE_UNIT, T_PLASTIC, 0},
+                           {"smoothness", VAL_NUMBER, RANGE_UNIT, T_UNITY, 0},
+                           {"specular-prob", VAL_NUMBER, RANGE_UNIT, T_UNITY, 0},
+                           {"glass", VAL_BOOL, RANGE_ANY, T_UNITY, 0},
+                           {"checker", VAL_CHECKER, RANGE_UNIT, T_ALBEDO, 0},
+                           {"checker-scale", VAL_NUMBER, RANGE_POSITIVE, T_ALBEDO, 0},
+                           {"checker-uv", VAL_BOOL, RANGE_ANY, T_ALBEDO, 0},
+                       }},
+    [STMT_MESH] = {"mesh",
+                   false,
+                   {NULL},
+                   {
+                       {"file", VAL_PATH, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+                       {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, 0},
+                       {"translate", VAL_VEC3, RANGE_ANY, ALL_TYPES, 0},
+                       {"rotate", VAL_ROTATION, RANGE_ANY, ALL_TYPES, 0},
+                       {"scale", VAL_SCALE, RANGE_NONZERO, ALL_TYPES, 0},
+                   }},
+    [STMT_SPHERE] = {"sphere",
+                     false,
+                     {NULL},
+                     {
+                         {"center", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
+                         {"radius", VAL_NUMBER, RANGE_POSITIVE, ALL_TYPES, ALL_TYPES},
+                         {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+                         {"translate", VAL_VEC3, RANGE_ANY, ALL_TYPES, 0},
+                         {"scale", VAL_SCALE, RANGE_NONZERO, ALL_TYPES, 0},
+                     }},
+    [STMT_QUAD] = {"quad",
+                   false,
+                   {NULL},
+                   {
+                       {"corner", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
+                       {"edge1", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
+                       {"edge2", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
+                       {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+                       {"translate", VAL_VEC3, RANGE_ANY, ALL_TYPES, 0},
+                       {"rotate", VAL_ROTATION, RANGE_ANY, ALL_TYPES, 0},
+                       {"scale", VAL_SCALE, RANGE_NONZERO, ALL_TYPES, 0},
+                   }},
+    [STMT_PLANE] = {"plane",
+                    false,
+                    {NULL},
+                    {
+                        {"point", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
+                        {"normal", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
+                        {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+                    }},
+    [STMT_LIGHT] = {"light",
+                    false,
+                    {"point", NULL},
+                    {
+                        {"type", VAL_TYPE, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+                        {"position", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
+                        {"intensity", VAL_VEC3, RANGE_NONNEG, ALL_TYPES, ALL_TYPES},
+                    }},
+    [STMT_SKY] = {"sky",
+                  true,
+                  {"constant", "gradient", NULL},
+                  {
+                      {"type", VAL_TYPE, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+                      {"radiance", VAL_VEC3, RANGE_NONNEG, T_CONSTANT, T_CONSTANT},
+                      {"horizon", VAL_VEC3, RANGE_NONNEG, T_GRADIENT, T_GRADIENT},
+                      {"zenith", VAL_VEC3, RANGE_NONNEG, T_GRADIENT, T_GRADIENT},
+                  }},
 };
 
 /* One parameter of the statement being read; key == NULL when the line does not give it. */
@@ -221,38 +254,38 @@ struct param {
     const char *text; /* the value as written */
     int key_col;      /* 1-based byte columns */
     int val_col;
-    float f[4];       /* the numbers of VAL_NUMBER, VAL_VEC3, VAL_ROTATION, VAL_SCALE */
-    int n_f;          /* how many numbers were written */
+    float f[4];        /* the numbers of VAL_NUMBER, VAL_VEC3, VAL_ROTATION, VAL_SCALE */
+    int n_f;           /* how many numbers were written */
     bool is_underflow; /* a number written nonzero was read as 0 (below 1.4e-45) */
-    uint32_t u;       /* VAL_INT, VAL_DEPTH; type index; material index of VAL_MATERIAL */
-    bool b;           /* VAL_BOOL */
+    uint32_t u;        /* VAL_INT, VAL_DEPTH; type index; material index of VAL_MATERIAL */
+    bool b;            /* VAL_BOOL */
 };
 
 struct stmt {
     enum stmt_kind kind;
     const struct stmt_spec *spec;
     int kw_col;
-    uint32_t type_idx;               /* index into spec->types; 0 without types */
-    struct param p[MAX_PARAMS];      /* parallel to spec->params */
+    uint32_t type_idx;          /* index into spec->types; 0 without types */
+    struct param p[MAX_PARAMS]; /* parallel to spec->params */
 };
 
 struct parser {
-    const char *path;  /* the scene path as given, for messages */
-    char *dir;         /* the scene file's folder with its trailing '/', or "" */
+    const char *path; /* the scene path as given, for messages */
+    char *dir;        /* the scene file's folder with its trailing '/', or "" */
     struct scene *scene;
     struct mcpt_error *err;
-    int line;          /* 1-based line being read */
-    int fd;            /* the scene file */
-    char *in;          /* SCENE_READ_BYTES read from it; in_pos..in_len not yet used */
+    int line; /* 1-based line being read */
+    int fd;   /* the scene file */
+    char *in; /* SCENE_READ_BYTES read from it; in_pos..in_len not yet used */
     size_t in_pos, in_len;
     bool at_eof;
-    int pending[3];    /* bytes read ahead and given back (a BOM that was not one) */
+    int pending[3]; /* bytes read ahead and given back (a BOM that was not one) */
     int n_pending;
-    int seen_line[STMT_COUNT];      /* line of the first statement of each kind, 0 = none */
+    int seen_line[STMT_COUNT]; /* line of the first statement of each kind, 0 = none */
     int *mat_def_line; /* per material: the scene-file line defining it, 0 = not referable */
-    struct obj_names mat_names;     /* referable material name -> index into materials */
-    int64_t default_mat_idx;        /* the meshes' "default" material, -1 until needed */
-    struct light *points;           /* point lights, in file order */
+    struct obj_names mat_names; /* referable material name -> index into materials */
+    int64_t default_mat_idx;    /* the meshes' "default" material, -1 until needed */
+    struct light *points;       /* point lights, in file order */
     uint32_t n_points;
     uint32_t cap_materials, cap_def_lines, cap_positions, cap_normals, cap_uvs, cap_tris;
     uint32_t cap_spheres, cap_quads, cap_planes, cap_points;
@@ -334,8 +367,7 @@ static const char *show(const char *s, char *out)
 }
 
 /* "a, b, c": the statement keywords, or the parameters a statement of type bit type_bit takes. */
-static void list_words(char *out, size_t out_bytes, const struct stmt_spec *spec,
-                       unsigned type_bit)
+static void list_words(char *out, size_t out_bytes, const struct stmt_spec *spec, unsigned type_bit)
 {
     size_t used = 0;
     out[0] = '\0';
@@ -396,7 +428,7 @@ static void *grow(struct parser *ps, void *arr, uint32_t *cap, uint64_t need, si
 }
 
 /* Grows the array arr (an lvalue) of capacity cap; false (array freed, error filled) on failure. */
-#define RESERVE(ps, arr, cap, need)                                                              \
+#define RESERVE(ps, arr, cap, need)                                                                \
     (((arr) = grow((ps), (arr), &(cap), (need), sizeof *(arr))) != NULL)
 
 /* Appends m to the material table; def_line > 0 makes it referable by name. */
@@ -504,8 +536,10 @@ static bool parse_name(struct parser *ps, const struct param *p)
         bool ok = is_digit(c) || (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || c == '_' ||
                   c == '-' || c == '.';
         if (!ok)
-            return fail(ps, p->val_col, "expected a material name of letters, digits, '_', '-' "
-                                        "and '.', got '%s'", show(p->text, buf));
+            return fail(ps, p->val_col,
+                        "expected a material name of letters, digits, '_', '-' "
+                        "and '.', got '%s'",
+                        show(p->text, buf));
     }
     if (n >= sizeof ps->scene->materials[0].name)
         return fail(ps, p->val_col, "expected a material name of at most %zu bytes, got %zu",
@@ -554,14 +588,14 @@ static bool check_range(struct parser *ps, const struct param_spec *sp, const st
             return fail(ps, p->val_col, "expected nonzero '%s' components, got %s%s", sp->key, v,
                         why_zero);
         if (sp->kind == VAL_VEC3 && all_zero)
-            return fail(ps, p->val_col, "expected a nonzero '%s', got %s%s", sp->key, v,
-                        why_zero);
+            return fail(ps, p->val_col, "expected a nonzero '%s', got %s%s", sp->key, v, why_zero);
         break;
     case RANGE_POINT:
         for (int i = 0; i < 3; i++)
             if (!(fabsf(p->f[i]) <= SCENE_MAX_COORD))
-                return fail(ps, p->val_col, "expected '%s' components in [-1e18, 1e18] (" COORD_WHY
-                            "), got %s", sp->key, v);
+                return fail(ps, p->val_col,
+                            "expected '%s' components in [-1e18, 1e18] (" COORD_WHY "), got %s",
+                            sp->key, v);
         break;
     case RANGE_FOV:
         if (!(p->f[0] > 0.0f && p->f[0] < 180.0f))
@@ -646,8 +680,8 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
             return true;
         }
         if (!parse_integer(p->text, &u, &is_negative))
-            return fail(ps, p->val_col, "expected an integer or 'inf' for '%s', got '%s'",
-                        sp->key, v);
+            return fail(ps, p->val_col, "expected an integer or 'inf' for '%s', got '%s'", sp->key,
+                        v);
         if (is_negative || u > UINT32_MAX)
             return fail(ps, p->val_col, "expected '%s' in 0..%u or 'inf', got %s", sp->key,
                         UINT32_MAX, v);
@@ -663,8 +697,10 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
             return false;
         int64_t idx = find_material(ps, p->text);
         if (idx >= 0)
-            return fail(ps, p->val_col, "expected a new material name, got '%s' (defined on "
-                                        "line %d)", v, ps->mat_def_line[idx]);
+            return fail(ps, p->val_col,
+                        "expected a new material name, got '%s' (defined on "
+                        "line %d)",
+                        v, ps->mat_def_line[idx]);
         return true;
     }
     case VAL_MATERIAL: {
@@ -672,24 +708,30 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
             return false;
         int64_t idx = find_material(ps, p->text);
         if (idx < 0)
-            return fail(ps, p->val_col, "expected a material defined on an earlier line, got "
-                                        "'%s'", v);
+            return fail(ps, p->val_col,
+                        "expected a material defined on an earlier line, got "
+                        "'%s'",
+                        v);
         p->u = (uint32_t)idx;
         return true;
     }
     case VAL_SAMPLER: {
         enum sampler_kind kind;
         if (!sample_sampler_parse(p->text, &kind))
-            return fail(ps, p->val_col, "expected independent, stratified or sobol for '%s', "
-                                        "got '%s'", sp->key, v);
+            return fail(ps, p->val_col,
+                        "expected independent, stratified or sobol for '%s', "
+                        "got '%s'",
+                        sp->key, v);
         p->u = (uint32_t)kind;
         return true;
     }
     case VAL_DIRECT: {
         enum render_direct direct;
         if (!scene_direct_parse(p->text, &direct))
-            return fail(ps, p->val_col, "expected mis, light, bsdf, cosine or hemisphere for "
-                                        "'%s', got '%s'", sp->key, v);
+            return fail(ps, p->val_col,
+                        "expected mis, light, bsdf, cosine or hemisphere for "
+                        "'%s', got '%s'",
+                        sp->key, v);
         p->u = (uint32_t)direct;
         return true;
     }
@@ -706,8 +748,10 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
         if (strcmp(p->text, "throughput") != 0 &&
             (parse_number(p->text, strlen(p->text), &prob) != NUMBER_OK ||
              !(prob > 0.0f && prob <= 1.0f)))
-            return fail(ps, p->val_col, "expected 'throughput' or a probability in (0, 1] for "
-                                        "'%s', got '%s'", sp->key, v);
+            return fail(ps, p->val_col,
+                        "expected 'throughput' or a probability in (0, 1] for "
+                        "'%s', got '%s'",
+                        sp->key, v);
         p->f[0] = prob;
         p->n_f = 1;
         return true;
@@ -722,8 +766,10 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
         for (const char *c = p->text; *c; c++)
             n_commas += *c == ',';
         if (n_commas != 2)
-            return fail(ps, p->val_col, "expected true, false or 3 comma-separated numbers for "
-                                        "'%s', got '%s'", sp->key, v);
+            return fail(ps, p->val_col,
+                        "expected true, false or 3 comma-separated numbers for "
+                        "'%s', got '%s'",
+                        sp->key, v);
         struct param_spec colour = *sp;
         colour.kind = VAL_VEC3;
         p->b = true;
@@ -814,8 +860,10 @@ static int read_line(struct parser *ps, char *buf)
             return -1;
         }
         if (len == SCENE_MAX_LINE_BYTES) {
-            fail(ps, SCENE_MAX_LINE_BYTES + 1, "expected a line of at most %d bytes, got a "
-                                               "longer one", SCENE_MAX_LINE_BYTES);
+            fail(ps, SCENE_MAX_LINE_BYTES + 1,
+                 "expected a line of at most %d bytes, got a "
+                 "longer one",
+                 SCENE_MAX_LINE_BYTES);
             return -1;
         }
         buf[len++] = (char)c;
@@ -1025,9 +1073,11 @@ static bool do_camera(struct parser *ps, const struct stmt *st)
     case CAMERA_OK:
         break;
     case CAMERA_SAME_POINT:
-        return fail(ps, look_at->val_col, "expected 'look-at' different from 'eye', got %s for "
-                    "both%s", show(look_at->text, buf), strcmp(eye->text, look_at->text) != 0
-                                                          ? " (the same point in single precision)"
+        return fail(ps, look_at->val_col,
+                    "expected 'look-at' different from 'eye', got %s for "
+                    "both%s",
+                    show(look_at->text, buf),
+                    strcmp(eye->text, look_at->text) != 0 ? " (the same point in single precision)"
                                                           : "");
     case CAMERA_UP_PARALLEL:
         return fail(ps, up->val_col, "expected 'up' not parallel to the view direction, got %s",
@@ -1037,11 +1087,15 @@ static bool do_camera(struct parser *ps, const struct stmt *st)
     }
     /* the lens and the plane of focus are places in the scene */
     if (aperture->key && !(c->aperture <= SCENE_MAX_COORD))
-        return fail(ps, aperture->val_col, "expected 'aperture' <= 1e18 (the lens lies in the "
-                    "scene: " COORD_WHY "), got %s", show(aperture->text, buf));
+        return fail(ps, aperture->val_col,
+                    "expected 'aperture' <= 1e18 (the lens lies in the "
+                    "scene: " COORD_WHY "), got %s",
+                    show(aperture->text, buf));
     if (focus->key && !(c->focus_dist <= SCENE_MAX_COORD))
-        return fail(ps, focus->val_col, "expected 'focus-dist' <= 1e18 (the plane of focus lies "
-                    "in the scene: " COORD_WHY "), got %s", show(focus->text, buf));
+        return fail(ps, focus->val_col,
+                    "expected 'focus-dist' <= 1e18 (the plane of focus lies "
+                    "in the scene: " COORD_WHY "), got %s",
+                    show(focus->text, buf));
     if (c->aperture > 0.0f) {
         /* a lens ray aims at eye + focus_dist d from a lens point; both are rounded to a few
          * ulps of the eye's coordinates and the aperture (2^-23 relative), so focus_dist must
@@ -1051,13 +1105,17 @@ static bool do_camera(struct parser *ps, const struct stmt *st)
         double fd_min = ldexp(m, -20);
         double fd = c->focus_dist > 0.0f ? c->focus_dist : view_len;
         if (fd < fd_min && c->focus_dist > 0.0f)
-            return fail(ps, focus->val_col, "expected 'focus-dist' >= %g (2^-20 of the largest "
+            return fail(ps, focus->val_col,
+                        "expected 'focus-dist' >= %g (2^-20 of the largest "
                         "'eye' component or 'aperture': a plane of focus nearer the lens rounds "
-                        "onto it in single precision), got %s", fd_min, show(focus->text, buf));
+                        "onto it in single precision), got %s",
+                        fd_min, show(focus->text, buf));
         if (fd < fd_min)
-            return fail(ps, look_at->val_col, "expected 'look-at' at least %g from 'eye' (the "
+            return fail(ps, look_at->val_col,
+                        "expected 'look-at' at least %g from 'eye' (the "
                         "plane of focus when 'aperture' > 0 and no 'focus-dist' is given: 2^-20 "
-                        "of the largest 'eye' component or 'aperture'), got %g", fd_min, fd);
+                        "of the largest 'eye' component or 'aperture'), got %g",
+                        fd_min, fd);
     }
     return true;
 }
@@ -1152,9 +1210,10 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
     if ((uint64_t)sc->n_positions + mesh.n_positions > UINT32_MAX ||
         (uint64_t)sc->n_normals + mesh.n_normals > INT32_MAX ||
         (uint64_t)sc->n_uvs + mesh.n_uvs > INT32_MAX) {
-        fail(ps, file->val_col, "expected at most %u vertices and %d normals and uvs in the "
-                                "scene, got more with '%s'", UINT32_MAX, INT32_MAX,
-             show(file->text, buf));
+        fail(ps, file->val_col,
+             "expected at most %u vertices and %d normals and uvs in the "
+             "scene, got more with '%s'",
+             UINT32_MAX, INT32_MAX, show(file->text, buf));
         goto done;
     }
     if (!RESERVE(ps, sc->positions, ps->cap_positions,
@@ -1179,8 +1238,10 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
         for (uint32_t i = 0; i < mesh.n_tris; i++)
             needs_default |= mesh.tris[i].mat_idx < 0;
         if (needs_default && ps->default_mat_idx < 0) {
-            struct material m = {.name = "default", .kind = MAT_DIFFUSE,
-                                 .albedo = v3_splat(0.8f), .ior = 1.0f};
+            struct material m = {.name = "default",
+                                 .kind = MAT_DIFFUSE,
+                                 .albedo = v3_splat(0.8f),
+                                 .ior = 1.0f};
             ps->default_mat_idx = sc->n_materials;
             if (!add_material(ps, &m, 0))
                 goto done;
@@ -1196,9 +1257,11 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
         double p[3];
         xform_point_d(&xf, mesh.positions[i], p);
         if (!in_scene_range_d(p)) {
-            fail(ps, st->kw_col, "expected vertices of '%s' inside [-1e18, 1e18]%s (" COORD_WHY
-                 "), got %g,%g,%g (vertex %u)", show(file->text, buf),
-                 is_moved ? " after the transform" : "", p[0], p[1], p[2], i + 1);
+            fail(ps, st->kw_col,
+                 "expected vertices of '%s' inside [-1e18, 1e18]%s (" COORD_WHY
+                 "), got %g,%g,%g (vertex %u)",
+                 show(file->text, buf), is_moved ? " after the transform" : "", p[0], p[1], p[2],
+                 i + 1);
             goto done;
         }
         sc->positions[sc->n_positions + i] = xform_point(&xf, mesh.positions[i]);
@@ -1216,8 +1279,7 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
         bool has_vn = true, has_vt = true;
         for (int k = 0; k < 3; k++) {
             assert(t->v[k] < mesh.n_positions);
-            has_vn &= t->vn[k] >= 0 &&
-                      !v3_is_zero(sc->normals[sc->n_normals + (uint32_t)t->vn[k]]);
+            has_vn &= t->vn[k] >= 0 && !v3_is_zero(sc->normals[sc->n_normals + (uint32_t)t->vn[k]]);
             has_vt &= t->vt[k] >= 0;
         }
         for (int k = 0; k < 3; k++) {
@@ -1227,9 +1289,9 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
             out->vt[k] = has_vt ? (int32_t)sc->n_uvs + t->vt[j] : -1;
         }
         assert(t->mat_idx < (int32_t)mesh.n_materials);
-        out->mat_idx = mat->key            ? mat->u
-                       : t->mat_idx >= 0   ? mtl_base + (uint32_t)t->mat_idx
-                                           : (uint32_t)ps->default_mat_idx;
+        out->mat_idx = mat->key          ? mat->u
+                       : t->mat_idx >= 0 ? mtl_base + (uint32_t)t->mat_idx
+                                         : (uint32_t)ps->default_mat_idx;
     }
     sc->n_positions += mesh.n_positions;
     sc->n_normals += mesh.n_normals;
@@ -1264,9 +1326,11 @@ static bool do_sphere(struct parser *ps, const struct stmt *st)
     xform_point_d(&xf, center, c);
     double extent[3] = {fabs(c[0]) + r, fabs(c[1]) + r, fabs(c[2]) + r};
     if (!in_scene_range_d(extent))
-        return fail(ps, st->kw_col, "expected the sphere inside [-1e18, 1e18]%s (" COORD_WHY
-                    "), got center %g,%g,%g and radius %g", scale->key || get(st, "translate")->key
-                    ? " after its transform" : "", c[0], c[1], c[2], r);
+        return fail(ps, st->kw_col,
+                    "expected the sphere inside [-1e18, 1e18]%s (" COORD_WHY
+                    "), got center %g,%g,%g and radius %g",
+                    scale->key || get(st, "translate")->key ? " after its transform" : "", c[0],
+                    c[1], c[2], r);
     if (!(s.radius > 0.0f))
         return fail(ps, scale->val_col, "expected 'radius' times 'scale' > 0, got %g" UNDERFLOW_WHY,
                     r);
@@ -1308,15 +1372,17 @@ static bool do_quad(struct parser *ps, const struct stmt *st)
         extent[i] = fabs(c[i]) + fabs(a[i]) + fabs(b[i]);
     bool is_moved = get(st, "translate")->key || get(st, "rotate")->key || get(st, "scale")->key;
     if (!in_scene_range_d(extent))
-        return fail(ps, st->kw_col, "expected the quad's corners inside [-1e18, 1e18]%s ("
-                    COORD_WHY "), got corner %g,%g,%g and edges %g,%g,%g and %g,%g,%g",
+        return fail(ps, st->kw_col,
+                    "expected the quad's corners inside [-1e18, 1e18]%s (" COORD_WHY
+                    "), got corner %g,%g,%g and edges %g,%g,%g and %g,%g,%g",
                     is_moved ? " after its transform" : "", c[0], c[1], c[2], a[0], a[1], a[2],
                     b[0], b[1], b[2]);
     double q1[3] = {q.e1.x, q.e1.y, q.e1.z}, q2[3] = {q.e2.x, q.e2.y, q.e2.z};
     if (is_parallel(q1, q2)) /* only a 'scale' can underflow the edges */
-        return fail(ps, get(st, "scale")->val_col, "expected the quad's edges not parallel after "
-                    "'scale', got %g,%g,%g and %g,%g,%g (rounded to single precision)", q1[0],
-                    q1[1], q1[2], q2[0], q2[1], q2[2]);
+        return fail(ps, get(st, "scale")->val_col,
+                    "expected the quad's edges not parallel after "
+                    "'scale', got %g,%g,%g and %g,%g,%g (rounded to single precision)",
+                    q1[0], q1[1], q1[2], q2[0], q2[1], q2[2]);
     struct scene *sc = ps->scene;
     if (!RESERVE(ps, sc->quads, ps->cap_quads, (uint64_t)sc->n_quads + 1))
         return false;
@@ -1329,8 +1395,10 @@ static bool do_plane(struct parser *ps, const struct stmt *st)
     struct scene *sc = ps->scene;
     const struct param *mat = get(st, "material");
     if (is_emissive(&sc->materials[mat->u]))
-        return fail(ps, mat->val_col, "expected a non-emissive material for 'plane' (an "
-                                      "infinite emitter), got '%s'", mat->text);
+        return fail(ps, mat->val_col,
+                    "expected a non-emissive material for 'plane' (an "
+                    "infinite emitter), got '%s'",
+                    mat->text);
     /* normalise in double: a tiny or huge float normal has no float-safe length */
     vec3 n = get_vec3(st, "normal", v3_splat(0));
     double len = sqrt((double)n.x * n.x + (double)n.y * n.y + (double)n.z * n.z);
@@ -1420,10 +1488,11 @@ static bool do_material(struct parser *ps, const struct stmt *st)
     const struct param *ck_uv = get(st, "checker-uv");
     if (ck->key && ck->b) {
         if (is_glass)
-            return fail(ps, ck->key_col, "expected no 'checker' with 'glass=true' (glass has no "
-                                         "albedo), got 'checker=%s'", ck->text);
-        vec3 second = ck->n_f == 3 ? v3(ck->f[0], ck->f[1], ck->f[2])
-                                   : v3_scale(albedo, 0.5f);
+            return fail(ps, ck->key_col,
+                        "expected no 'checker' with 'glass=true' (glass has no "
+                        "albedo), got 'checker=%s'",
+                        ck->text);
+        vec3 second = ck->n_f == 3 ? v3(ck->f[0], ck->f[1], ck->f[2]) : v3_scale(albedo, 0.5f);
         /* a plastic's texture is its base colour, of which the diffuse keeps 1 - metallic */
         float diffuse_share = st->type_idx == 5 ? 1.0f - get_number(st, "metallic", 0.0f) : 1.0f;
         m.checker_albedo = v3_scale(second, diffuse_share);
@@ -1437,7 +1506,7 @@ static bool do_material(struct parser *ps, const struct stmt *st)
 }
 
 static const char *const DIRECT_NAMES[RENDER_DIRECT_COUNT] = {"mis", "light", "bsdf", "cosine",
-                                                               "hemisphere"};
+                                                              "hemisphere"};
 static const char *const SPLIT_NAMES[RENDER_SPLIT_COUNT] = {"full", "direct", "indirect"};
 
 const char *scene_direct_name(enum render_direct direct)
@@ -1507,8 +1576,8 @@ static bool do_render(struct parser *ps, const struct stmt *st)
         if (p->u < 2)
             return fail(ps, p->val_col, "expected 'min-spp' >= 2, got %s", p->text);
         if (r->max_spp && p->u > r->max_spp)
-            return fail(ps, p->val_col, "expected 'min-spp' <= 'max-spp' (%u), got %s",
-                        r->max_spp, p->text);
+            return fail(ps, p->val_col, "expected 'min-spp' <= 'max-spp' (%u), got %s", r->max_spp,
+                        p->text);
         r->min_spp = p->u;
     }
     return true;
@@ -1537,7 +1606,8 @@ static bool do_statement(struct parser *ps, const struct stmt *st)
     case STMT_PLANE:
         return do_plane(ps, st);
     case STMT_LIGHT: {
-        struct light l = {.kind = LIGHT_POINT, .prim_idx = ps->n_points,
+        struct light l = {.kind = LIGHT_POINT,
+                          .prim_idx = ps->n_points,
                           .position = get_vec3(st, "position", v3_splat(0)),
                           .intensity = get_vec3(st, "intensity", v3_splat(0))};
         if (!RESERVE(ps, ps->points, ps->cap_points, (uint64_t)ps->n_points + 1))
@@ -1578,8 +1648,10 @@ static bool parse_line(struct parser *ps, char *line)
     st.kind = (enum stmt_kind)kind;
     st.spec = &stmt_specs[kind];
     if (st.spec->is_once && ps->seen_line[kind])
-        return fail(ps, st.kw_col, "expected at most one '%s' statement, got a second (the "
-                                   "first is on line %d)", kw, ps->seen_line[kind]);
+        return fail(ps, st.kw_col,
+                    "expected at most one '%s' statement, got a second (the "
+                    "first is on line %d)",
+                    kw, ps->seen_line[kind]);
     ps->seen_line[kind] = ps->line;
 
     /* every word: key=value, a key of this statement, given once */
@@ -1591,8 +1663,7 @@ static bool parse_line(struct parser *ps, char *line)
             return fail(ps, col, "expected 'key=value', got '%s'", show(w, buf));
         *eq = '\0';
         int i = 0;
-        while (i < MAX_PARAMS && st.spec->params[i].key &&
-               strcmp(st.spec->params[i].key, w) != 0)
+        while (i < MAX_PARAMS && st.spec->params[i].key && strcmp(st.spec->params[i].key, w) != 0)
             i++;
         if (i == MAX_PARAMS || !st.spec->params[i].key) {
             list_words(list, sizeof list, st.spec, ALL_TYPES);
@@ -1601,7 +1672,9 @@ static bool parse_line(struct parser *ps, char *line)
         }
         if (st.p[i].key)
             return fail(ps, col, "expected '%s' at most once, got it twice", w);
-        st.p[i] = (struct param){.key = w, .text = eq + 1, .key_col = col,
+        st.p[i] = (struct param){.key = w,
+                                 .text = eq + 1,
+                                 .key_col = col,
                                  .val_col = col + (int)(eq - w) + 1};
         order[n_given++] = i;
     }
@@ -1668,8 +1741,8 @@ static bool build_lights(struct parser *ps)
         return fail(ps, 0, "expected at most %u lights, got %llu", UINT32_MAX,
                     (unsigned long long)n_max);
     if ((size_t)n_max > SIZE_MAX / sizeof *sc->lights)
-        return fail(ps, 0, "expected at most %zu lights, got %llu",
-                    SIZE_MAX / sizeof *sc->lights, (unsigned long long)n_max);
+        return fail(ps, 0, "expected at most %zu lights, got %llu", SIZE_MAX / sizeof *sc->lights,
+                    (unsigned long long)n_max);
     sc->lights = malloc((size_t)n_max * sizeof *sc->lights);
     if (!sc->lights)
         return fail(ps, 0, "expected memory for %llu lights, got an allocation failure",
@@ -1697,14 +1770,18 @@ static bool build_lights(struct parser *ps)
 bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err)
 {
     struct mcpt_error err_local;
-    struct parser ps = {.path = path, .scene = scene, .err = err ? err : &err_local,
-                        .fd = -1, .default_mat_idx = -1};
+    struct parser ps = {.path = path,
+                        .scene = scene,
+                        .err = err ? err : &err_local,
+                        .fd = -1,
+                        .default_mat_idx = -1};
     char *line = NULL;
     bool ok = false;
     memset(scene, 0, sizeof *scene);
     scene->width = 512;
     scene->height = 512;
-    scene->render = (struct render_settings){.spp = 64, .max_depth = UINT32_MAX,
+    scene->render = (struct render_settings){.spp = 64,
+                                             .max_depth = UINT32_MAX,
                                              .sampler = SAMPLER_DEFAULT,
                                              .adaptive_floor = -1.0f};
 

@@ -113,7 +113,9 @@ static void render_a_little(const struct scene *scene)
             abort();
         return;
     }
-    struct trace_options opt = {.spp = 1, .seed = 1, .sampler = SAMPLER_INDEPENDENT,
+    struct trace_options opt = {.spp = 1,
+                                .seed = 1,
+                                .sampler = SAMPLER_INDEPENDENT,
                                 .n_threads = 1};
     opt.max_depth = scene->render.max_depth < 16 ? scene->render.max_depth : 16;
     uint64_t n_rays = 0;

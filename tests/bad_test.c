@@ -119,8 +119,7 @@ Test(bad, corpus, .init = setup, .fini = teardown, .timeout = 600)
     cr_assert(n_scene >= 40 && n_obj >= 15 && n_mtl >= 10 && n_ckpt >= 8,
               "scene %d, obj %d, mtl %d, ckpt %d", n_scene, n_obj, n_mtl, n_ckpt);
     cr_log_info("bad corpus: %d cases (%d scene, %d OBJ, %d MTL, %d checkpoint, %d options)",
-                n_cases, n_scene, n_obj, n_mtl, n_ckpt,
-                n_cases - n_scene - n_obj - n_mtl - n_ckpt);
+                n_cases, n_scene, n_obj, n_mtl, n_ckpt, n_cases - n_scene - n_obj - n_mtl - n_ckpt);
 }
 
 /* Every malformed file in tests/bad/ has a case: a file added without an expectation is an
@@ -188,7 +187,7 @@ Test(bad, fifo_inputs_refused_at_once, .init = setup, .fini = teardown, .timeout
         cr_assert_eq(status, 2, "%s: exit %d: %s", scenes[i], status, err);
         char want[600];
         snprintf(want, sizeof want, "%s/%s", tmpdir, wants[i]);
-        cr_assert(strncmp(err, want, strlen(want)) == 0, "%s:\n  want: %s\n  got:  %s",
-                  scenes[i], want, err);
+        cr_assert(strncmp(err, want, strlen(want)) == 0, "%s:\n  want: %s\n  got:  %s", scenes[i],
+                  want, err);
     }
 }

@@ -9,8 +9,11 @@
 
 static struct camera make_cam(int w, int h, float aperture)
 {
-    struct camera_params p = {.eye = v3(0, 1, 3.9f), .look_at = v3(0, 1, 0), .up = v3(0, 1, 0),
-                              .fov_deg = 40.0f, .aperture = aperture};
+    struct camera_params p = {.eye = v3(0, 1, 3.9f),
+                              .look_at = v3(0, 1, 0),
+                              .up = v3(0, 1, 0),
+                              .fov_deg = 40.0f,
+                              .aperture = aperture};
     struct camera cam;
     struct mcpt_error err;
     cr_assert(camera_init(&cam, &p, w, h, &err));
@@ -69,7 +72,9 @@ Test(camera, degenerate)
 {
     struct camera cam;
     struct mcpt_error err;
-    struct camera_params p = {.eye = v3(1, 1, 1), .look_at = v3(1, 1, 1), .up = v3(0, 1, 0),
+    struct camera_params p = {.eye = v3(1, 1, 1),
+                              .look_at = v3(1, 1, 1),
+                              .up = v3(0, 1, 0),
                               .fov_deg = 40.0f};
     vec3 f, r, u;
     float len;
@@ -116,8 +121,10 @@ Test(camera, frame_bits_equal_plain_float)
             state = state * 6364136223846793005u + 1442695040888963407u;
             x[k] = (float)((double)(state >> 11) / 9007199254740992.0 * 200.0 - 100.0);
         }
-        struct camera_params p = {.eye = v3(x[0], x[1], x[2]), .look_at = v3(x[3], x[4], x[5]),
-                                  .up = v3(x[6], x[7], x[8]), .fov_deg = 40.0f};
+        struct camera_params p = {.eye = v3(x[0], x[1], x[2]),
+                                  .look_at = v3(x[3], x[4], x[5]),
+                                  .up = v3(x[6], x[7], x[8]),
+                                  .fov_deg = 40.0f};
         vec3 f, r, u, f0, r0, u0;
         float len, len0;
         if (camera_frame(&p, &f, &r, &u, &len) != CAMERA_OK)
@@ -132,8 +139,10 @@ Test(camera, frame_bits_equal_plain_float)
  * 3e38 or a denormal; plain float arithmetic gave no frame at all (|v|^2 under- or overflows). */
 Test(camera, frame_of_tiny_and_huge_vectors)
 {
-    struct camera_params p = {.eye = v3(0, 0, 0), .look_at = v3(1e-30f, 0, 0),
-                              .up = v3(0, 1, 0), .fov_deg = 40.0f};
+    struct camera_params p = {.eye = v3(0, 0, 0),
+                              .look_at = v3(1e-30f, 0, 0),
+                              .up = v3(0, 1, 0),
+                              .fov_deg = 40.0f};
     vec3 f, r, u;
     float len;
     cr_assert_eq(camera_frame(&p, &f, &r, &u, &len), CAMERA_OK);
@@ -146,8 +155,8 @@ Test(camera, frame_of_tiny_and_huge_vectors)
         p.up = ups[i];
         cr_assert_eq(camera_frame(&p, &f, &r, &u, &len), CAMERA_OK, "up %d", i);
         cr_assert(same_value(f, v3(0, 0, -1)) && same_value(r, v3(1, 0, 0)) &&
-                      same_value(u, v3(0, 1, 0)), "up %d: r (%g %g %g) u (%g %g %g)", i, r.x, r.y,
-                  r.z, u.x, u.y, u.z);
+                      same_value(u, v3(0, 1, 0)),
+                  "up %d: r (%g %g %g) u (%g %g %g)", i, r.x, r.y, r.z, u.x, u.y, u.z);
         cr_assert_eq(len, 2.0f);
     }
 }
@@ -157,8 +166,10 @@ Test(camera, frame_of_tiny_and_huge_vectors)
  * 1e19, whose square overflows: the lens ray is normalised after scaling). */
 Test(camera, extreme_rays_are_unit)
 {
-    struct camera_params p = {.eye = v3(1e18f, 0, 0), .look_at = v3(0, 0, 0),
-                              .up = v3(0, 1, 0), .fov_deg = 179.9999f};
+    struct camera_params p = {.eye = v3(1e18f, 0, 0),
+                              .look_at = v3(0, 0, 0),
+                              .up = v3(0, 1, 0),
+                              .fov_deg = 179.9999f};
     struct camera cam;
     struct mcpt_error err;
     cr_assert(camera_init(&cam, &p, 65535, 1, &err));
@@ -174,6 +185,7 @@ Test(camera, extreme_rays_are_unit)
         vec2 u = {(float)(i % 4) / 4.0f + 0.1f, (float)(i / 4) / 4.0f + 0.1f};
         struct ray ray = camera_ray(&cam, 64.0f * u.y, 64.0f * u.x, u);
         cr_assert(v3_is_finite(ray.o) && v3_is_finite(ray.d) &&
-                      fabsf(v3_length(ray.d) - 1.0f) < 1e-6f, "sample %d", i);
+                      fabsf(v3_length(ray.d) - 1.0f) < 1e-6f,
+                  "sample %d", i);
     }
 }

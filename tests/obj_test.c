@@ -223,9 +223,9 @@ Test(obj, floats_match_strtof)
             uint64_t sign = next_u64(&state) % 3;
             if (sign != 2)
                 s[n++] = sign ? '-' : '+';
-            int n_int = (int)(next_u64(&state) % 4); /* 0..3 digits */
+            int n_int = (int)(next_u64(&state) % 4);                          /* 0..3 digits */
             int n_frac = next_u64(&state) % 4 ? (int)(next_u64(&state) % 8)   /* 0..7 */
-                                               : (int)(next_u64(&state) % 13); /* 0..12 */
+                                              : (int)(next_u64(&state) % 13); /* 0..12 */
             for (int d = 0; d < n_int; d++)
                 s[n++] = (char)('0' + next_u64(&state) % 10);
             if (n_int == 0 && n_frac == 0)
@@ -712,8 +712,9 @@ Test(obj, chunks_join_and_stop_at_the_first_nul, .init = tmp_setup, .fini = tmp_
     char *text = malloc(cap);
     cr_assert_not_null(text);
     for (int i = 0; i < N_VERTS; i++)
-        n += (size_t)snprintf(text + n, cap - n, i % 1000 == 7 ? "v %d.5 -%d \\\n %d\n"
-                                                                : "v %d.5 -%d %d\n", i, i, i % 7);
+        n += (size_t)snprintf(text + n, cap - n,
+                              i % 1000 == 7 ? "v %d.5 -%d \\\n %d\n" : "v %d.5 -%d %d\n", i, i,
+                              i % 7);
     n += (size_t)snprintf(text + n, cap - n, "f 1 2 3\n");
     struct obj_mesh m;
     load_ok(write_tmp_n("big.obj", text, n), &m);
@@ -726,8 +727,7 @@ Test(obj, chunks_join_and_stop_at_the_first_nul, .init = tmp_setup, .fini = tmp_
     text[at] = '\0';
     int n_lines = N_VERTS + N_VERTS / 1000 + 1; /* + the joined lines: the face's line */
     char golden[200];
-    snprintf(golden, sizeof golden, "big.obj:%d:4: error: expected text, got a NUL byte",
-             n_lines);
+    snprintf(golden, sizeof golden, "big.obj:%d:4: error: expected text, got a NUL byte", n_lines);
     expect_error(write_tmp_n("big.obj", text, n), golden);
     free(text);
 }
@@ -735,8 +735,7 @@ Test(obj, chunks_join_and_stop_at_the_first_nul, .init = tmp_setup, .fini = tmp_
 /* A 3 GiB sparse file of NUL bytes (no disk used): the error comes at 1:1 after reading one
  * chunk, and the process holds far less than the file (it held 3.1 GB when the reader read
  * whole files). */
-Test(obj, sparse_3gib_of_nuls_stops_at_once, .init = tmp_setup, .fini = tmp_teardown,
-     .timeout = 20)
+Test(obj, sparse_3gib_of_nuls_stops_at_once, .init = tmp_setup, .fini = tmp_teardown, .timeout = 20)
 {
     char path[400];
     snprintf(path, sizeof path, "%s/zeros.obj", tmp_dir);
@@ -834,7 +833,7 @@ Test(obj, number_literal_edges, .init = tmp_setup, .fini = tmp_teardown)
     cr_assert_eq(m.positions[0].z, 1e-40f);
     obj_free(&m);
     expect_error(write_tmp("hex.obj", "v 0x1p3 0 0\n"), "hex.obj:1:3: error: expected a number, "
-                                                       "got '0x1p3'");
+                                                        "got '0x1p3'");
     expect_error(write_tmp("nanp.obj", "v 0 nan(0x1) 0\n"), "nanp.obj:1:5: error: expected a "
-                                                           "finite number, got 'nan(0x1)'");
+                                                            "finite number, got 'nan(0x1)'");
 }
