@@ -1,8 +1,8 @@
 /* checkpoint.c - an interrupted render on disk, to be resumed bit-identically: its film's raw
  * pixel records and the settings of the run, written atomically (file.h), checksummed with
  * FNV-1a 64 (Fowler, Noll, Vo), and checked field by field before a resumed run trusts it.
- * Also the scene hash that ties a checkpoint to its scene file, and the comparison of a
- * resumed run's settings with the saved ones.  Format: docs/reliability.md. */
+ * Also the comparison of a resumed run's settings with the saved ones (the scene by the hash
+ * of its bytes, scene.file_hash).  Format: docs/reliability.md. */
 #include "checkpoint.h"
 
 #include <errno.h>
@@ -19,46 +19,7 @@
  *   | u64 FNV-1a 64 of every byte before it. */
 
 static const char CKPT_MAGIC[8] = {'M', 'C', 'P', 'T', 'C', 'K', 'P', 'T'};
-#define CKPT_BYTE_ORDER 0x01020304u      /* reads back as 0x04030201 on the other byte order */
-#define FNV_OFFSET 0xcbf29ce484222325ull /* FNV-1a 64 (Fowler, Noll, Vo): offset basis */
-#define FNV_PRIME 0x100000001b3ull       /* FNV-1a 64 prime */
-
-static uint64_t fnv1a(uint64_t h, const void *data, size_t n_bytes)
-{
-    const unsigned char *p = data;
-    for (size_t i = 0; i < n_bytes; i++) {
-        h ^= p[i];
-        h *= FNV_PRIME;
-    }
-    return h;
-}
-
-bool checkpoint_hash_file(const char *path, uint64_t *hash, struct mcpt_error *err)
-{
-    const char *not_regular;
-    int fd = file_open_input(path, false, &not_regular);
-    FILE *f = fd >= 0 ? fdopen(fd, "rb") : NULL;
-    if (!f) {
-        if (not_regular)
-            mcpt_error_set(err, path, 0, 0, "expected a regular file, got %s", not_regular);
-        else
-            mcpt_error_set(err, path, 0, 0, "expected a readable file, got '%s'", strerror(errno));
-        if (fd >= 0)
-            close(fd);
-        return false;
-    }
-    uint64_t h = FNV_OFFSET;
-    unsigned char buf[65536];
-    size_t n;
-    while ((n = fread(buf, 1, sizeof buf, f)) > 0)
-        h = fnv1a(h, buf, n);
-    bool ok = !ferror(f);
-    fclose(f);
-    if (!ok)
-        mcpt_error_runtime(err, path, "expected a readable file, got a read error");
-    *hash = h;
-    return ok;
-}
+#define CKPT_BYTE_ORDER 0x01020304u /* reads back as 0x04030201 on the other byte order */
 
 /* A checkpoint being written or read: the running checksum of the bytes so far. */
 struct ckpt_file {
@@ -72,7 +33,7 @@ static void put(struct ckpt_file *cf, const void *data, size_t n_bytes)
 {
     if (cf->ok && fwrite(data, 1, n_bytes, cf->f) != n_bytes)
         cf->ok = false;
-    cf->hash = fnv1a(cf->hash, data, n_bytes);
+    cf->hash = file_fnv1a64(cf->hash, data, n_bytes);
     cf->n_bytes += n_bytes;
 }
 
@@ -84,7 +45,7 @@ static bool get(struct ckpt_file *cf, void *data, size_t n_bytes)
     if (cf->ok && fread(data, 1, n_bytes, cf->f) != n_bytes)
         cf->ok = false;
     if (cf->ok) {
-        cf->hash = fnv1a(cf->hash, data, n_bytes);
+        cf->hash = file_fnv1a64(cf->hash, data, n_bytes);
         cf->n_bytes += n_bytes;
     }
     return cf->ok;
@@ -108,7 +69,7 @@ bool checkpoint_save(const char *path, const struct film *film, const struct che
                      struct mcpt_error *err)
 {
     struct file_atomic af;
-    struct ckpt_file cf = {.hash = FNV_OFFSET, .ok = true};
+    struct ckpt_file cf = {.hash = FILE_FNV_OFFSET, .ok = true};
     if (!file_atomic_open(&af, path, err) || !(cf.f = file_atomic_stream(&af, err)))
         return false;
     size_t n_pixels = (size_t)film->width * (size_t)film->height;
@@ -225,7 +186,7 @@ bool checkpoint_load(const char *path, struct film *film, struct checkpoint_info
 {
     memset(film, 0, sizeof *film);
     memset(info, 0, sizeof *info);
-    struct ckpt_file cf = {.hash = FNV_OFFSET, .ok = true};
+    struct ckpt_file cf = {.hash = FILE_FNV_OFFSET, .ok = true};
     struct stat st;
     uint32_t width, height;
     const char *not_regular;

@@ -14,7 +14,7 @@
 
 /* The render parameters a resumed run must reproduce exactly. */
 struct checkpoint_info {
-    uint64_t scene_hash;    /* FNV-1a 64 of the scene file's bytes (checkpoint_hash_file) */
+    uint64_t scene_hash;    /* FNV-1a 64 of the scene file's bytes (scene.file_hash) */
     uint64_t seed;          /* render seed */
     uint32_t spp;           /* target samples per pixel */
     uint32_t max_depth;     /* most bounces, TRACE_DEPTH_INFINITE allowed */
@@ -24,11 +24,6 @@ struct checkpoint_info {
     uint32_t args_bytes;                    /* bytes of args in use */
     char args[CHECKPOINT_ARGS_BYTES];       /* options of the run, each word NUL-ended */
 };
-
-/* FNV-1a 64 (Fowler, Noll, Vo) of the bytes of the file at path: how a checkpoint recognises
- * the scene it was made from.  False with *err (file = path) when it cannot be read: bad input
- * when it cannot be opened, a runtime error on a read error. */
-bool checkpoint_hash_file(const char *path, uint64_t *hash, struct mcpt_error *err);
 
 /* Writes film and info to path atomically (file.h), so a reader sees the old file or the new
  * one, never a mix.  Layout: magic "MCPTCKPT", version, byte-order mark, pixel record size,

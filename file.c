@@ -283,6 +283,18 @@ int file_open_regular(const char *path, struct mcpt_error *err)
     return -1;
 }
 
+/* ---- hashing ---- */
+
+uint64_t file_fnv1a64(uint64_t h, const void *data, size_t n_bytes)
+{
+    const unsigned char *p = data;
+    for (size_t i = 0; i < n_bytes; i++) {
+        h ^= p[i];
+        h *= 0x100000001b3ull; /* FNV-1a 64 prime, 2^40 + 2^8 + 0xb3 */
+    }
+    return h;
+}
+
 /* ---- identity ---- */
 
 /* Normalises the absolute path abs in place: "//" and "/./" become "/", "x/.." goes. */

@@ -80,6 +80,12 @@ int file_open_input(const char *path, bool allow_pipe, const char **not_regular)
  * I/O error).  Returns the descriptor, or -1. */
 int file_open_regular(const char *path, struct mcpt_error *err);
 
+/* FNV-1a 64 (Fowler, Noll, Vo, "The FNV Non-Cryptographic Hash Algorithm"): h updated with
+ * n_bytes of data; start from FILE_FNV_OFFSET.  What ties a checkpoint to its scene file's
+ * bytes, checksums the checkpoint, and keys obj.c's name table. */
+#define FILE_FNV_OFFSET 0xcbf29ce484222325ull /* offset basis */
+uint64_t file_fnv1a64(uint64_t h, const void *data, size_t n_bytes);
+
 /* What a path names, to tell whether two paths are one file: the device and inode of an
  * existing file (hard links, symbolic links, "./x" and "x" alike), else the absolute path
  * with its existing folder resolved (realpath) and "." and ".." removed. */

@@ -653,8 +653,7 @@ static bool load(struct run *run, struct mcpt_error *err)
         return false;
     run->has_scene = true;
     print_scene_warnings(&run->scene, o->quiet);
-    if (!checkpoint_hash_file(o->scene_path, &run->scene_hash, err))
-        return false;
+    run->scene_hash = run->scene.file_hash; /* of the bytes read: a pipe cannot be read again */
     if (o->width)
         run->scene.width = o->width;
     if (o->height)
@@ -912,14 +911,15 @@ static bool check_memory(const struct run *run, struct mcpt_error *err)
 }
 
 /* Before the render, what would make it fail late or do harm: no output may be an input (the
- * scene, the reference, the checkpoint resumed from unless it is the one to rewrite) or another
- * output, every output must be creatable (output_check), and a checkpoint left by an
+ * scene, the meshes and MTL files it loaded, the reference, the checkpoint resumed from unless
+ * it is the one to rewrite) or another output, every output must be creatable (output_check), and a checkpoint left by an
  * interrupted render of this output is not overwritten unless --restart says so (it is then
  * removed here). */
 static bool check_outputs(struct run *run, struct mcpt_error *err)
 {
     const struct options *o = &run->o;
-    struct output_file *files = malloc(sizeof *files * (OUTPUT_MAX_FILES + 3));
+    size_t n_files = OUTPUT_MAX_FILES + 3 + (size_t)run->scene.n_loaded;
+    struct output_file *files = malloc(sizeof *files * n_files);
     if (!files) {
         mcpt_error_runtime(err, NULL, "out of memory checking the output files");
         return false;
@@ -942,6 +942,10 @@ static bool check_outputs(struct run *run, struct mcpt_error *err)
             snprintf(in[n_in].path, sizeof in[n_in].path, "%s", in_paths[k]);
             in[n_in++].role = in_roles[k];
         }
+    for (uint32_t i = 0; i < run->scene.n_loaded; i++) {
+        snprintf(in[n_in].path, sizeof in[n_in].path, "%s", run->scene.loaded_paths[i]);
+        in[n_in++].role = "a file the scene loads";
+    }
     bool ok = n_out > 0 && output_check(files, n_out, in, n_in, err);
     free(files);
     if (!ok)

@@ -1,8 +1,7 @@
 /* tests/checkpoint_test.c - checkpoint.c: an interrupted render's file.  Save then load is the
  * identity on the pixel records and settings; every kind of damage (a flipped bit, a truncation,
  * a count no run could make, sums no samples could give under a valid checksum) is refused
- * naming the file; a failed write leaves nothing; the
- * scene hash is FNV-1a 64 (Fowler, Noll, Vo) of the file's bytes; a resumed run whose settings
+ * naming the file; a failed write leaves nothing; a resumed run whose settings
  * differ from the saved ones is refused naming the first difference.  The resume itself, through
  * the binary, is tests/resume_test.c's. */
 #include <criterion/criterion.h>
@@ -107,30 +106,6 @@ Test(checkpoint, round_trip_and_damage, .init = setup, .fini = teardown)
     cr_assert(strncmp(err.msg, "cannot write: ", 14) == 0, "%s", err.msg);
     cr_assert_eq(err.kind, MCPT_ERROR_RUNTIME);
     film_free(&film);
-}
-
-/* FNV-1a 64 of the published test vectors (Fowler, Noll, Vo, "FNV-1a 64" reference): "" is the
- * offset basis cbf29ce484222325 and "a" gives af63dc4c8601ec8c; a missing file is bad input. */
-Test(checkpoint, scene_hash_is_fnv1a_64, .init = setup, .fini = teardown)
-{
-    char path[300];
-    snprintf(path, sizeof path, "%s/s.txt", tmpdir);
-    struct mcpt_error err;
-    uint64_t hash = 0;
-    FILE *f = fopen(path, "wb");
-    cr_assert_not_null(f);
-    fclose(f);
-    cr_assert(checkpoint_hash_file(path, &hash, &err), "%s", err.msg);
-    cr_assert_eq(hash, 0xcbf29ce484222325ull, "%016llx", (unsigned long long)hash);
-    f = fopen(path, "wb");
-    fputc('a', f);
-    fclose(f);
-    cr_assert(checkpoint_hash_file(path, &hash, &err), "%s", err.msg);
-    cr_assert_eq(hash, 0xaf63dc4c8601ec8cull, "%016llx", (unsigned long long)hash);
-    snprintf(path, sizeof path, "%s/missing.txt", tmpdir);
-    cr_assert_not(checkpoint_hash_file(path, &hash, &err));
-    cr_assert_eq(err.kind, MCPT_ERROR_INPUT);
-    cr_assert_str_eq(err.msg, "expected a readable file, got 'No such file or directory'");
 }
 
 /* Each setting a resumed run must repeat is compared, the scene first, and the message names

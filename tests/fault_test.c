@@ -15,6 +15,7 @@
 
 #include "checkpoint.h"
 #include "sample.h"
+#include "scene.h"
 #include "test_util.h"
 
 #define TINY "tests/data/cli/tiny.txt"      /* black where the camera looks: every image alike */
@@ -88,6 +89,29 @@ Test(hang, fifo_inputs_refused_at_once, .init = setup, .fini = teardown)
     }
 }
 
+/* A scene read from a pipe (a FIFO with its writer, as `mcpt <(generate)` gives) renders: the
+ * scene is read once, and its hash, which a checkpoint records, is of the bytes read. */
+Test(hang, scene_from_a_pipe_renders, .init = setup, .fini = teardown)
+{
+    char fifo[300], out[300], err[4096];
+    snprintf(fifo, sizeof fifo, "%s/scene.fifo", tmpdir);
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    cr_assert_eq(mkfifo(fifo, 0644), 0);
+    pid_t writer = fork();
+    cr_assert_geq(writer, 0);
+    if (writer == 0) { /* the generator: writes the scene into the pipe, then ends */
+        char text[4096];
+        long n = test_read_file(SMALL, text, sizeof text);
+        int fd = open(fifo, O_WRONLY);
+        _exit(fd >= 0 && n > 0 && write(fd, text, (size_t)n) == n ? 0 : 1);
+    }
+    const char *args[] = {fifo, "--spp", "2", "-o", out, "--quiet", NULL};
+    int rc = run(args, err, sizeof err);
+    cr_assert_eq(test_wait(writer), 0);
+    cr_assert_eq(rc, 0, "exit %d: %s", rc, err);
+    cr_assert(test_exists(out));
+}
+
 /* ---- outputs that would destroy a file ---- */
 
 /* Copies the file at from to to. */
@@ -111,7 +135,10 @@ static void save_checkpoint(const char *path, const char *scene, uint32_t spp, c
     struct mcpt_error err;
     cr_assert(film_init(&film, 16, 12, &err)); /* the tiny scene's film */
     struct checkpoint_info info = {.spp = spp, .max_depth = 3, .sampler = SAMPLER_SOBOL};
-    cr_assert(checkpoint_hash_file(scene, &info.scene_hash, &err), "%s", err.msg);
+    struct scene sc;
+    cr_assert(scene_load(scene, &sc, &err), "%s", err.msg);
+    info.scene_hash = sc.file_hash;
+    scene_free(&sc);
     snprintf(info.scene_path, sizeof info.scene_path, "%s", scene);
     int n = snprintf(info.args, sizeof info.args, "--spp=%u", spp) + 1;
     n += snprintf(info.args + n, sizeof info.args - (size_t)n, "--output=%s", out) + 1;
@@ -225,6 +252,47 @@ Test(clobber, outputs_never_overwrite_inputs, .init = setup, .fini = teardown)
                           "as the image (-o)"),
               "%s", err);
     cr_assert_not(test_exists(png));
+}
+
+/* The files a scene loads are inputs too: -o naming its OBJ or the OBJ's MTL, by another
+ * spelling of the path, is refused and both keep their bytes. */
+Test(clobber, outputs_never_overwrite_meshes, .init = setup, .fini = teardown)
+{
+    char scene[300], obj[300], mtl[300], obj_alias[300], err[4096], want[900];
+    snprintf(scene, sizeof scene, "%s/mesh.txt", tmpdir);
+    snprintf(obj, sizeof obj, "%s/m.obj", tmpdir);
+    snprintf(mtl, sizeof mtl, "%s/m.mtl", tmpdir);
+    snprintf(obj_alias, sizeof obj_alias, "%s/../%s/m.obj", tmpdir, strrchr(tmpdir, '/') + 1);
+    const char *obj_text = "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl w\nf 1 2 3\n";
+    const char *mtl_text = "newmtl w\nKd 0.5 0.5 0.5\n";
+    FILE *f = fopen(obj, "w");
+    fputs(obj_text, f);
+    fclose(f);
+    f = fopen(mtl, "w");
+    fputs(mtl_text, f);
+    fclose(f);
+    f = fopen(scene, "w");
+    fputs("camera eye=0,0,3 look-at=0,0,0 up=0,1,0 fov=45\nmesh file=m.obj\n", f);
+    fclose(f);
+    const char *victims[][2] = {{obj, "the image (-o)"},
+                                {obj_alias, "the image (-o)"},
+                                {mtl, "the image (-o)"}};
+    for (int k = 0; k < 3; k++) {
+        const char *args[] = {scene, "--spp", "1", "-o", victims[k][0], NULL};
+        int rc = run(args, err, sizeof err);
+        snprintf(want, sizeof want,
+                 "%s: error: expected %s to be a file of its own, got the same file as a file the "
+                 "scene loads",
+                 victims[k][0], victims[k][1]);
+        cr_assert_eq(rc, 2, "case %d: exit %d: %s", k, rc, err);
+        cr_assert(strncmp(err, want, strlen(want)) == 0, "case %d:\n  want %s\n  got  %s", k, want,
+                  err);
+        char buf[256];
+        test_read_file(obj, buf, sizeof buf);
+        cr_assert_str_eq(buf, obj_text);
+        test_read_file(mtl, buf, sizeof buf);
+        cr_assert_str_eq(buf, mtl_text);
+    }
 }
 
 /* ---- failing late ---- */

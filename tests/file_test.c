@@ -351,3 +351,15 @@ Test(file, check_creatable, .init = setup, .fini = teardown)
     cr_assert_str_eq(err.msg, "expected a regular file or a new name to write, got a character "
                               "device");
 }
+
+/* FNV-1a 64 against its published vectors (Fowler, Noll, Vo, draft-eastlake-fnv): "" is the
+ * offset basis cbf29ce484222325, "a" gives af63dc4c8601ec8c, "foobar" 85944171f73967e8; and a
+ * hash fed in pieces is the hash of the whole. */
+Test(file, fnv1a64_vectors)
+{
+    cr_assert_eq(file_fnv1a64(FILE_FNV_OFFSET, "", 0), 0xcbf29ce484222325ull);
+    cr_assert_eq(file_fnv1a64(FILE_FNV_OFFSET, "a", 1), 0xaf63dc4c8601ec8cull);
+    cr_assert_eq(file_fnv1a64(FILE_FNV_OFFSET, "foobar", 6), 0x85944171f73967e8ull);
+    cr_assert_eq(file_fnv1a64(file_fnv1a64(FILE_FNV_OFFSET, "foo", 3), "bar", 3),
+                 0x85944171f73967e8ull);
+}
