@@ -8,13 +8,14 @@
 
 #include "film.h"
 
-#define CHECKPOINT_VERSION 1u
+#define CHECKPOINT_VERSION 2u      /* 2: the scene hash covers the meshes and MTL files too */
 #define CHECKPOINT_PATH_BYTES 1024 /* scene path stored for messages, incl. NUL */
 #define CHECKPOINT_ARGS_BYTES 4096 /* the run's options, NUL-separated words */
 
 /* The render parameters a resumed run must reproduce exactly. */
 struct checkpoint_info {
-    uint64_t scene_hash;    /* FNV-1a 64 of the scene file's bytes (scene.file_hash) */
+    uint64_t scene_hash;    /* FNV-1a 64 of the scene file's bytes, then of every mesh and MTL
+                               file it loads, in load order (main.c) */
     uint64_t seed;          /* render seed */
     uint32_t spp;           /* target samples per pixel */
     uint32_t max_depth;     /* most bounces, TRACE_DEPTH_INFINITE allowed */

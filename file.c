@@ -295,6 +295,27 @@ uint64_t file_fnv1a64(uint64_t h, const void *data, size_t n_bytes)
     return h;
 }
 
+bool file_hash_file(const char *path, uint64_t *h, struct mcpt_error *err)
+{
+    int fd = file_open_regular(path, err);
+    if (fd < 0)
+        return false;
+    unsigned char buf[65536];
+    ssize_t n;
+    while ((n = read(fd, buf, sizeof buf)) != 0) {
+        if (n < 0 && errno == EINTR)
+            continue;
+        if (n < 0) {
+            mcpt_error_runtime(err, path, "cannot read: %s", strerror(errno));
+            close(fd);
+            return false;
+        }
+        *h = file_fnv1a64(*h, buf, (size_t)n);
+    }
+    close(fd);
+    return true;
+}
+
 /* ---- identity ---- */
 
 /* Normalises the absolute path abs in place: "//" and "/./" become "/", "x/.." goes. */

@@ -86,6 +86,11 @@ int file_open_regular(const char *path, struct mcpt_error *err);
 #define FILE_FNV_OFFSET 0xcbf29ce484222325ull /* offset basis */
 uint64_t file_fnv1a64(uint64_t h, const void *data, size_t n_bytes);
 
+/* Updates *h (file_fnv1a64) with every byte of the regular file at path.  False with *err
+ * (file = path: bad input when it cannot be opened or is not a regular file, runtime on a read
+ * error). */
+bool file_hash_file(const char *path, uint64_t *h, struct mcpt_error *err);
+
 /* What a path names, to tell whether two paths are one file: the device and inode of an
  * existing file (hard links, symbolic links, "./x" and "x" alike), else the absolute path
  * with its existing folder resolved (realpath) and "." and ".." removed. */

@@ -653,7 +653,12 @@ static bool load(struct run *run, struct mcpt_error *err)
         return false;
     run->has_scene = true;
     print_scene_warnings(&run->scene, o->quiet);
-    run->scene_hash = run->scene.file_hash; /* of the bytes read: a pipe cannot be read again */
+    /* a checkpoint names its scene by the bytes of the scene file (as read: a pipe cannot be
+     * read again) and of every mesh and MTL file it loaded, so an edited OBJ is noticed */
+    run->scene_hash = run->scene.file_hash;
+    for (uint32_t i = 0; i < run->scene.n_loaded; i++)
+        if (!file_hash_file(run->scene.loaded_paths[i], &run->scene_hash, err))
+            return false;
     if (o->width)
         run->scene.width = o->width;
     if (o->height)

@@ -147,5 +147,6 @@ Test(checkpoint, matches_names_the_first_difference)
     run.scene_hash = 0xff; /* the scene is compared before everything else */
     cr_assert_not(checkpoint_matches("c.ckpt", &saved, &run, &err));
     cr_assert_str_eq(err.msg, "expected the scene the checkpoint was made from ('scenes/x.txt', "
-                              "FNV-1a 0000000000000001), got a file with hash 00000000000000ff");
+                              "FNV-1a 0000000000000001), got files with hash 00000000000000ff "
+                              "(the scene, or a mesh or MTL file it loads, changed)");
 }

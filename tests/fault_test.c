@@ -63,7 +63,7 @@ Test(hang, stratified_set_of_2_32_minus_1, .init = setup, .fini = teardown)
  * merge's parts, --reference), is refused at once as bad input naming it: open() of a FIFO
  * blocks until a writer comes, so inputs are opened without blocking and must be regular
  * files. */
-Test(hang, fifo_inputs_refused_at_once, .init = setup, .fini = teardown)
+Test(hang, fifo_checkpoint_images_and_parts_refused_at_once, .init = setup, .fini = teardown)
 {
     char fifo[300], out[300], img[300], err[4096], want[400];
     snprintf(fifo, sizeof fifo, "%s/fifo", tmpdir);
@@ -705,4 +705,57 @@ Test(kill9, periodic_checkpoint_failure_is_a_warning, .init = setup, .fini = tea
     cr_assert(test_exists(out));
     const char *warning = strstr(err, ": warning: cannot write: No such file or directory");
     cr_assert(warning && !strstr(warning + 1, ": warning: "), "want one warning, got: %s", err);
+}
+
+/* ---- trusting a checkpoint ---- */
+
+/* A checkpoint names its scene by the bytes of the scene file and of every mesh and MTL file
+ * it loads: resuming after the MTL was edited is refused (an image of two scenes, otherwise),
+ * and accepted again once the MTL is as it was. */
+Test(trust, checkpoint_notices_an_edited_mtl, .init = setup, .fini = teardown, .timeout = 120)
+{
+    char scene[300], obj[300], mtl[300], out[300], ckpt[320], err[4096];
+    snprintf(scene, sizeof scene, "%s/mesh.txt", tmpdir);
+    snprintf(obj, sizeof obj, "%s/m.obj", tmpdir);
+    snprintf(mtl, sizeof mtl, "%s/m.mtl", tmpdir);
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(ckpt, sizeof ckpt, "%s.ckpt", out);
+    FILE *f = fopen(obj, "w");
+    fputs("mtllib m.mtl\nv -1 0 -1\nv 1 0 -1\nv 0 0 1\nusemtl w\nf 1 2 3\n", f);
+    fclose(f);
+    f = fopen(mtl, "w");
+    fputs("newmtl w\nKd 0.5 0.5 0.5\n", f);
+    fclose(f);
+    f = fopen(scene, "w");
+    fputs("camera eye=0,1,3 look-at=0,0,0 up=0,1,0 fov=45\nfilm width=16 height=12\n"
+          "sky type=constant radiance=1,1,1\nmesh file=m.obj\n",
+          f);
+    fclose(f);
+    const char *args[] = {scene, "--spp", "1000000", "--checkpoint-every", "0.1", "-o", out, NULL};
+    pid_t pid = test_start_mcpt(args, NULL, NULL, 120);
+    for (int k = 0; k < 30000 && !test_exists(ckpt); k++)
+        nanosleep(&(struct timespec){0, 1000 * 1000}, NULL);
+    kill(pid, SIGKILL);
+    test_wait(pid);
+    cr_assert(test_exists(ckpt), "no periodic checkpoint");
+    f = fopen(mtl, "a");
+    fputs("# edited\n", f);
+    fclose(f);
+    const char *resume[] = {"--resume", ckpt, NULL};
+    int rc = run(resume, err, sizeof err);
+    cr_assert_eq(rc, 2, "exit %d: %s", rc, err);
+    cr_assert(strstr(err, "error: expected the scene the checkpoint was made from") &&
+                  strstr(err, "(the scene, or a mesh or MTL file it loads, changed)"),
+              "%s", err);
+    f = fopen(mtl, "w"); /* as it was: the resume starts */
+    fputs("newmtl w\nKd 0.5 0.5 0.5\n", f);
+    fclose(f);
+    char err_path[300];
+    snprintf(err_path, sizeof err_path, "%s/stderr-resume.txt", tmpdir);
+    pid = test_start_mcpt(resume, NULL, err_path, 120);
+    nanosleep(&(struct timespec){1, 0}, NULL);
+    int status;
+    cr_assert_eq(waitpid(pid, &status, WNOHANG), 0, "the resume ended at once");
+    kill(pid, SIGKILL);
+    test_wait(pid);
 }

@@ -117,7 +117,7 @@ int main(void)
     uint32_t v = 99;
     memcpy(b + 8, &v, 4); /* version */
     spill(DIR "version-99.ckpt", b, n);
-    v = 1;
+    v = CHECKPOINT_VERSION;
     memcpy(b + 8, &v, 4);
     v = 0;
     memcpy(b + 20, &v, 4); /* width */
