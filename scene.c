@@ -1436,13 +1436,17 @@ static bool build_lights(struct parser *ps)
 
 /* ---- public API --------------------------------------------------------------------------- */
 
-bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err)
+/* Parses the scene from f (NULL: open path), named path in messages; the files it names are
+ * relative to the first n_dir bytes of path (0: the working directory). */
+static bool load(FILE *f, const char *path, size_t n_dir, struct scene *scene,
+                 struct mcpt_error *err)
 {
     struct mcpt_error err_local;
     struct parser ps = {.path = path, .scene = scene, .err = err ? err : &err_local,
                         .default_mat_idx = -1};
     char *line = NULL;
     bool ok = false;
+    bool is_opened = !f;
     memset(scene, 0, sizeof *scene);
     scene->width = 512;
     scene->height = 512;
@@ -1450,14 +1454,11 @@ bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err)
                                              .sampler = SAMPLER_DEFAULT,
                                              .adaptive_floor = -1.0f};
 
-    FILE *f = fopen(path, "rb");
-    if (!f) {
+    if (is_opened && !(f = fopen(path, "rb"))) {
         mcpt_error_set(ps.err, path, 0, 0, "expected a readable file, got '%s'",
                        strerror(errno));
         goto done;
     }
-    const char *slash = strrchr(path, '/');
-    size_t n_dir = slash ? (size_t)(slash - path) + 1 : 0;
     ps.dir = malloc(n_dir + 1);
     line = malloc(SCENE_MAX_LINE_BYTES + 1);
     if (!ps.dir || !line) {
@@ -1488,7 +1489,7 @@ bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err)
     }
     ok = build_lights(&ps);
 done:
-    if (f)
+    if (f && is_opened)
         fclose(f);
     free(line);
     free(ps.dir);
@@ -1497,6 +1498,17 @@ done:
     if (!ok)
         scene_free(scene);
     return ok;
+}
+
+bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err)
+{
+    const char *slash = strrchr(path, '/');
+    return load(NULL, path, slash ? (size_t)(slash - path) + 1 : 0, scene, err);
+}
+
+bool scene_load_stream(FILE *f, const char *name, struct scene *scene, struct mcpt_error *err)
+{
+    return load(f, name, 0, scene, err);
 }
 
 void scene_free(struct scene *scene)

@@ -128,6 +128,11 @@ struct scene {
  * with *scene zeroed and *err naming file:line:col and what was expected. */
 bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err);
 
+/* As scene_load, from the open stream f (read to its end, not closed), e.g. standard input:
+ * name stands for the file in error messages ("<stdin>"), and the OBJ/MTL files it names are
+ * relative to the working directory. */
+bool scene_load_stream(FILE *f, const char *name, struct scene *scene, struct mcpt_error *err);
+
 /* Frees everything scene_load allocated and zeroes *scene.  Safe on a zeroed scene. */
 void scene_free(struct scene *scene);
 
