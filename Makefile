@@ -31,7 +31,8 @@ LDLIBS_ALL = $(EXR_LIBS) $(PNG_LIBS) -lpthread -lm
 
 BUILD ?= build
 LIB_SRCS := $(filter-out main.c,$(wildcard *.c))
-TEST_SRCS := $(wildcard tests/*_test.c)
+# tests/report.c: the list of skipped tests, with their reasons, at the end of the run
+TEST_SRCS := $(wildcard tests/*_test.c) tests/report.c
 LIB_OBJS := $(LIB_SRCS:%.c=$(BUILD)/%.o)
 TEST_OBJS := $(TEST_SRCS:%.c=$(BUILD)/%.o)
 
