@@ -7,9 +7,11 @@
  * written by output.c; an interrupted render's checkpoint is checkpoint.c's.  This file holds
  * the run's options and state, the render passes (snapshots, curves, previews), the progress
  * line and the signal handler, and is the only one that may exit. */
+#include <errno.h>
 #include <getopt.h>
 #include <signal.h>
 #include <stdlib.h>
+#include <sys/ioctl.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -733,6 +735,93 @@ static bool render_options(struct run *run, struct mcpt_error *err)
 
 /* ---- render: progress, signals, passes ---- */
 
+/* A duration as m:ss, or h:mm:ss from an hour on; "--:--" when unknown. */
+static void format_duration(double seconds, char *out, size_t out_bytes)
+{
+    if (!(seconds >= 0.0) || seconds > 3.6e7) { /* NaN, negative, or past 10000 hours */
+        snprintf(out, out_bytes, "--:--");
+        return;
+    }
+    unsigned long s = (unsigned long)(seconds + 0.5);
+    if (s < 3600)
+        snprintf(out, out_bytes, "%lu:%02lu", s / 60, s % 60);
+    else
+        snprintf(out, out_bytes, "%lu:%02lu:%02lu", s / 3600, s / 60 % 60, s % 60);
+}
+
+/* The terminal's width in columns: TIOCGWINSZ on stderr, else $COLUMNS, else 80. */
+static int terminal_columns(void)
+{
+    struct winsize ws;
+    if (ioctl(STDERR_FILENO, TIOCGWINSZ, &ws) == 0 && ws.ws_col > 0)
+        return ws.ws_col;
+    uint64_t v;
+    const char *env = getenv("COLUMNS");
+    return env && cmd_parse_u64(env, 1, 10000, &v) ? (int)v : 80;
+}
+
+#define PROGRESS_BAR_MAX 30 /* characters of the bar between its brackets, at most */
+#define PROGRESS_BAR_MIN 10 /* and at least, or no bar */
+
+/* The progress bar's line for a terminal `columns` wide, padded with spaces to columns - 1
+ * characters: the last column is never written, so no terminal wraps it.  Its fields, most
+ * important first: percent, ETA, elapsed time, the bar, speed, sample counts; the least
+ * important are dropped until the rest fits, then the bar takes the room left. */
+static void format_progress(char *out, size_t out_bytes, int columns, double frac, uint64_t done,
+                            uint64_t total, double rate, double elapsed, double eta)
+{
+    enum { F_ETA, F_ELAPSED, F_BAR, F_RATE, F_COUNT, N_FIELDS };
+    char eta_s[24], elapsed_s[24], field[N_FIELDS][64];
+    format_duration(eta, eta_s, sizeof eta_s);
+    format_duration(elapsed, elapsed_s, sizeof elapsed_s);
+    snprintf(field[F_ETA], sizeof field[0], "ETA %s", eta_s);
+    snprintf(field[F_ELAPSED], sizeof field[0], "elapsed %s", elapsed_s);
+    field[F_BAR][0] = '\0';
+    snprintf(field[F_RATE], sizeof field[0], "%.2f Msamples/s", rate * 1e-6);
+    snprintf(field[F_COUNT], sizeof field[0], "%.3g/%.3g Msamples", (double)done * 1e-6,
+             (double)total * 1e-6);
+    int room = columns - 1 < (int)out_bytes - 1 ? columns - 1 : (int)out_bytes - 1;
+    if (room < 1) {
+        out[0] = '\0';
+        return;
+    }
+    char pct[16];
+    int len = snprintf(pct, sizeof pct, "%5.1f%%", 100.0 * frac);
+    int n_fields = N_FIELDS; /* keep fields 0 .. n_fields-1, the bar as PROGRESS_BAR_MIN */
+    for (; n_fields > 0; n_fields--) {
+        int need = len;
+        for (int k = 0; k < n_fields; k++)
+            need += 2 + (k == F_BAR ? PROGRESS_BAR_MIN + 2 : (int)strlen(field[k]));
+        if (need <= room)
+            break;
+    }
+    int bar_w = 0;
+    if (n_fields > F_BAR) { /* the bar grows into what is left, up to its most */
+        int used = len;
+        for (int k = 0; k < n_fields; k++)
+            used += 2 + (k == F_BAR ? 2 : (int)strlen(field[k]));
+        bar_w = room - used < PROGRESS_BAR_MAX ? room - used : PROGRESS_BAR_MAX;
+    }
+    /* shown: the bar, percent, elapsed time, ETA, speed, sample counts */
+    int n = 0;
+    if (bar_w > 0) {
+        int filled = (int)(frac * bar_w);
+        out[n++] = '[';
+        for (int i = 0; i < bar_w; i++)
+            out[n++] = i < filled ? '#' : '.';
+        out[n++] = ']';
+        out[n++] = ' ';
+    }
+    n += snprintf(out + n, out_bytes - (size_t)n, "%.*s", room - n, pct);
+    static const int SHOWN[N_FIELDS] = {F_ELAPSED, F_ETA, F_RATE, F_COUNT}; /* reading order */
+    for (int i = 0; i < N_FIELDS - 1; i++)
+        if (SHOWN[i] < n_fields)
+            n += snprintf(out + n, out_bytes - (size_t)n, "  %s", field[SHOWN[i]]);
+    while (n < room)
+        out[n++] = ' ';
+    out[n] = '\0';
+}
+
 static void report_progress(void *user, uint64_t done, uint64_t total)
 {
     struct progress *p = user;
@@ -745,23 +834,23 @@ static void report_progress(void *user, uint64_t done, uint64_t total)
     double frac = (double)done / (double)total;
     double elapsed = now_seconds() - p->t_start;
     double rate = elapsed > 0.0 ? (double)done / elapsed : 0.0;
-    double eta = rate > 0.0 ? (double)(total - done) / rate : 0.0;
+    double eta = rate > 0.0 ? (double)(total - done) / rate : NAN;
     if (p->is_tty) {
-        char bar[31];
-        int filled = (int)(frac * 30.0);
-        for (int i = 0; i < 30; i++)
-            bar[i] = i < filled ? '#' : '.';
-        bar[30] = '\0';
-        fprintf(stderr, "\r[%s] %5.1f%%  %.3g/%.3g Msamples  %.2f Msamples/s  ETA %4.0f s ", bar,
-                100.0 * frac, (double)done * 1e-6, (double)total * 1e-6, rate * 1e-6, eta);
+        char line[512];
+        format_progress(line, sizeof line, terminal_columns(), frac, done, total, rate, elapsed,
+                        eta);
+        fprintf(stderr, "\r%s", line);
         if (done == total)
             fputc('\n', stderr);
     } else {
         int quarter = (int)(frac * 4.0);
         if (quarter > p->quarters_printed) {
+            char eta_s[24], elapsed_s[24];
+            format_duration(eta, eta_s, sizeof eta_s);
+            format_duration(elapsed, elapsed_s, sizeof elapsed_s);
             p->quarters_printed = quarter;
-            fprintf(stderr, "progress: %3.0f%%  %.2f Msamples/s  ETA %.0f s\n", 100.0 * frac,
-                    rate * 1e-6, eta);
+            fprintf(stderr, "progress: %3.0f%%  elapsed %s  ETA %s  %.2f Msamples/s\n",
+                    100.0 * frac, elapsed_s, eta_s, rate * 1e-6);
         }
     }
 }
