@@ -145,6 +145,8 @@ static void svg_ideal(FILE *f, const struct panel *p, const double *lx, const do
     svg_series(f, p, ends_x, ends_y, 2, "#666", "2,4", 0.0);
 }
 
+#define UNCORRECTED_DASH "5,3" /* SVG stroke-dasharray of the uncorrected RMSE curve */
+
 /* The summary's rows as drawn, in log10 units: one value per row in each array (NAN where a
  * value cannot be drawn), and the ranges they cover. */
 struct svg_data {
@@ -286,6 +288,10 @@ static void svg_panel_spp(FILE *f, const struct stats_summary *s, const struct s
                     panel_x(p1, d->lspp[r]), panel_y(p1, d->llo[r]), panel_x(p1, d->lspp[r]),
                     panel_y(p1, d->lhi[r]));
     svg_series(f, p1, d->lspp, d->lrmse, n, "#1f77b4", NULL, 3.0);
+    /* the uncorrected curve often lies on the corrected one (where the reference's noise is
+     * small): drawn dashed, on top, with smaller markers, so both stay visible */
+    if (d->corrected)
+        svg_series(f, p1, d->lspp, d->lraw, n, "#ff7f0e", UNCORRECTED_DASH, 1.8);
     char line[160];
     int row = 0;
     double lx = p1->x0 - 40, ly = p1->y1 + 62; /* legends below the panels */
@@ -307,7 +313,7 @@ static void svg_panel_spp(FILE *f, const struct stats_summary *s, const struct s
     }
     svg_legend(f, lx, ly, row++, "#666", "2,4", "ideal N^-1/2 through the points");
     if (d->corrected) {
-        svg_legend(f, lx, ly, row++, "#ff7f0e", NULL, "uncorrected RMSE vs reference");
+        svg_legend(f, lx, ly, row++, "#ff7f0e", UNCORRECTED_DASH, "uncorrected RMSE vs reference");
         svg_legend(f, lx, ly, row++, "#d62728", "8,4", "reference noise floor");
     }
 }
