@@ -25,6 +25,8 @@
 #include "stats.h"
 #include "trace.h"
 
+#define STDIN_NAME "<stdin>" /* the scene "-" in messages and in the EXR header */
+
 static const char USAGE[] =
     "usage: mcpt SCENE [options]\n"
     "       mcpt compare A.exr REF.exr [--heatmap ERR.png] [--json]   (mcpt compare --help)\n"
@@ -111,6 +113,9 @@ struct options {
     int width;                /* 0: from the scene */
     int height;               /* 0: from the scene */
     float exposure;
+    enum image_tonemap tonemap; /* --tonemap: the PNG's tone curve */
+    float scale;                /* --scale F: film size times F; 0: none */
+    bool no_preview;            /* --no-preview: no PNG beside the EXR */
     bool quiet;
     const char *checkpoint_path; /* NULL: OUT.exr.ckpt */
     bool snapshots;              /* --snapshots pow2 */
@@ -235,6 +240,9 @@ enum {
     OPT_RR,
     OPT_RR_DEPTH,
     OPT_SAMPLE_RANGE = 1280,
+    OPT_TONEMAP = 1536,
+    OPT_SCALE,
+    OPT_NO_PREVIEW,
 };
 
 static const struct option LONG_OPTS[] = {
@@ -271,6 +279,9 @@ static const struct option LONG_OPTS[] = {
     {"target-rmse", required_argument, NULL, OPT_TARGET_RMSE},
     {"preview-every", required_argument, NULL, OPT_PREVIEW_EVERY},
     {"sample-range", required_argument, NULL, OPT_SAMPLE_RANGE},
+    {"tonemap", required_argument, NULL, OPT_TONEMAP},
+    {"scale", required_argument, NULL, OPT_SCALE},
+    {"no-preview", no_argument, NULL, OPT_NO_PREVIEW},
     {NULL, 0, NULL, 0},
 };
 
@@ -417,6 +428,16 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
     case OPT_QUIET:
         o->quiet = true;
         return true;
+    case OPT_TONEMAP:
+        return image_tonemap_parse(optarg, &o->tonemap) ||
+               cmd_usage_error(err, "expected --tonemap to be clamp, reinhard or aces, got '%s'",
+                               optarg);
+    case OPT_SCALE:
+        return (cmd_parse_float(optarg, 0.0f, 64.0f, &o->scale) && o->scale > 0.0f) ||
+               cmd_usage_error(err, "expected --scale to be a number in (0, 64], got '%s'", optarg);
+    case OPT_NO_PREVIEW:
+        o->no_preview = true;
+        return true;
     case OPT_CHECKPOINT:
     case OPT_RESUME:
         *(c == OPT_RESUME ? &o->resume_path : &o->checkpoint_path) = optarg;
@@ -553,6 +574,70 @@ static bool load_reference(const char *path, const struct film *film, struct con
     return true;
 }
 
+/* The scene and the FNV-1a hash of its bytes (a checkpoint or a partial render records it).
+ * The scene "-" is standard input, copied once to a temporary file so that it can be both
+ * hashed and parsed; it is named <stdin> in messages, and its meshes are found relative to the
+ * working directory. */
+static bool load_scene(struct run *run, struct mcpt_error *err)
+{
+    const char *path = run->o.scene_path;
+    if (strcmp(path, "-") != 0) {
+        run->has_scene = scene_load(path, &run->scene, err);
+        return run->has_scene && checkpoint_hash_file(path, &run->scene_hash, err);
+    }
+    FILE *tmp = tmpfile();
+    if (!tmp) {
+        mcpt_error_runtime(err, STDIN_NAME, "cannot make a temporary copy: %s", strerror(errno));
+        return false;
+    }
+    char buf[65536];
+    size_t n;
+    bool ok = true;
+    while (ok && (n = fread(buf, 1, sizeof buf, stdin)) > 0)
+        ok = fwrite(buf, 1, n, tmp) == n;
+    if (ferror(stdin) || !ok || fflush(tmp) != 0) {
+        mcpt_error_runtime(err, STDIN_NAME, "cannot %s: %s", ok ? "read" : "copy", strerror(errno));
+        ok = false;
+    }
+    rewind(tmp);
+    ok = ok && checkpoint_hash_stream(tmp, STDIN_NAME, &run->scene_hash, err);
+    rewind(tmp);
+    run->has_scene = ok && scene_load_stream(tmp, STDIN_NAME, &run->scene, err);
+    fclose(tmp);
+    return run->has_scene;
+}
+
+/* The film size: --width and --height as given; one of them alone keeps the scene film's
+ * aspect ratio (the other side rounded), as renderers do when given one side; then --scale F
+ * multiplies both sides (rounded), keeping the framing.  Each side at least 1; bad usage
+ * when one passes 65535. */
+static bool film_size(const struct options *o, struct scene *sc, struct mcpt_error *err)
+{
+    double w = sc->width, h = sc->height; /* the scene's film, >= 1 each */
+    if (o->width && o->height) {
+        w = o->width;
+        h = o->height;
+    } else if (o->width) {
+        h = round(o->width * h / w);
+        w = o->width;
+    } else if (o->height) {
+        w = round(o->height * w / h);
+        h = o->height;
+    }
+    if (o->scale > 0.0f) {
+        w = round(w * o->scale);
+        h = round(h * o->scale);
+    }
+    w = w < 1.0 ? 1.0 : w;
+    h = h < 1.0 ? 1.0 : h;
+    if (w > 65535.0 || h > 65535.0)
+        return cmd_usage_error(err, "expected a film of at most 65535x65535 pixels, got %.0fx%.0f",
+                               w, h);
+    sc->width = (int)w;
+    sc->height = (int)h;
+    return true;
+}
+
 /* load: the scene (with the film size the command line asks for) and its hash, the names of
  * the outputs, the film (a resumed run has the checkpoint's), and the reference of a measured
  * run. */
@@ -560,18 +645,17 @@ static bool load(struct run *run, struct mcpt_error *err)
 {
     const struct options *o = &run->o;
     struct convergence *cv = &run->cv;
-    if (!scene_load(o->scene_path, &run->scene, err))
+    if (!load_scene(run, err))
         return false;
-    run->has_scene = true;
-    if (!checkpoint_hash_file(o->scene_path, &run->scene_hash, err))
+    bool is_stdin = strcmp(o->scene_path, "-") == 0; /* outputs named stdin.exr, ... */
+    if (!film_size(o, &run->scene, err) ||
+        !output_paths_init(&run->out, is_stdin ? "stdin" : o->scene_path, o->output,
+                           o->checkpoint_path, o->heatmap_path,
+                           o->adaptive || run->scene.render.adaptive, !o->no_preview, err))
         return false;
-    if (o->width)
-        run->scene.width = o->width;
-    if (o->height)
-        run->scene.height = o->height;
-    if (!output_paths_init(&run->out, o->scene_path, o->output, o->checkpoint_path, o->heatmap_path,
-                           o->adaptive || run->scene.render.adaptive, err))
-        return false;
+    if (!run->out.exr[0] && (o->has_range || o->no_preview)) /* they are about the EXR */
+        return cmd_usage_error(err, "expected -o OUT.exr with %s, got '%s'",
+                               o->has_range ? "--sample-range" : "--no-preview", o->output);
     if (!o->resume_path && !film_init(&run->film, run->scene.width, run->scene.height, err)) {
         snprintf(err->file, sizeof err->file, "%s", o->scene_path); /* its film statement */
         return false;
@@ -889,6 +973,25 @@ static void integrator_name(const struct trace_options *topt, char *out, size_t 
         snprintf(out + n, out_bytes - (size_t)n, "-ls%u", topt->light_samples);
 }
 
+/* What the PNGs show: --exposure, --tonemap. */
+static struct image_look look_of(const struct options *o)
+{
+    return (struct image_look){.exposure = o->exposure, .tonemap = o->tonemap};
+}
+
+/* What an EXR's header records of this run (output.h), seconds into the render; the render
+ * time is left out where SOURCE_DATE_EPOCH is set, the reproducible-builds convention, so that
+ * two runs write the same bytes. */
+static struct output_meta meta_of(const struct run *run, double seconds)
+{
+    const char *path = run->o.scene_path;
+    return (struct output_meta){.scene = strcmp(path, "-") == 0 ? STDIN_NAME : path,
+                                .sampler = sample_sampler_name(run->topt.sampler),
+                                .seed = run->topt.seed,
+                                .max_depth = run->topt.max_depth,
+                                .render_s = getenv("SOURCE_DATE_EPOCH") ? -1.0 : seconds};
+}
+
 /* A point of the convergence curve for film f at spp; for the first seed of a run with
  * --snapshots also a thumbnail for the contact sheet and the snapshot OUT-sppN.exr/.png. */
 static bool measure(struct run *run, const struct film *f, uint64_t seed, uint32_t spp,
@@ -902,8 +1005,10 @@ static bool measure(struct run *run, const struct film *f, uint64_t seed, uint32
     if (!run->o.snapshots || !is_first_seed)
         return true;
     const struct stats_point *p = &cv->curve.points[cv->curve.n_points - 1];
-    return plot_sheet_add(&cv->sheet, &img, spp, p->psnr_db, p->source, run->o.exposure, err) &&
-           output_write_snapshot(&run->out, f, spp, run->topt.spp, run->o.exposure, err);
+    struct image_look look = look_of(&run->o);
+    struct output_meta meta = meta_of(run, seconds);
+    return plot_sheet_add(&cv->sheet, &img, spp, p->psnr_db, p->source, &look, err) &&
+           output_write_snapshot(&run->out, f, spp, run->topt.spp, &meta, &look, err);
 }
 
 /* Renders seed number k of the run (seed topt.seed + k) into f, in passes: each trace_render
@@ -944,7 +1049,8 @@ static bool render_seed(struct run *run, struct film *f, uint32_t k, struct mcpt
             !measure(run, f, pass.seed, done_spp, seconds, k == 0, err))
             return false;
         if (is_previewed && done_spp < spp_final && now_seconds() - t_preview >= o->preview_every) {
-            if (!output_write_preview(&run->out, f, o->exposure, err))
+            struct image_look look = look_of(o);
+            if (!output_write_preview(&run->out, f, &look, err))
                 return false;
             t_preview = now_seconds();
         }
@@ -993,6 +1099,8 @@ static bool render(struct run *run, struct mcpt_error *err)
     const struct options *o = &run->o;
     if (!render_options(run, err))
         return false;
+    run->cv.sheet.seed = run->topt.seed; /* the contact sheet shows the first seed's images */
+    run->cv.sheet.n_seeds = o->n_seeds;
     run->prog = (struct progress){.is_tty = isatty(STDERR_FILENO),
                                   .quiet = o->quiet,
                                   .t_start = now_seconds()};
@@ -1038,7 +1146,9 @@ static bool write_outputs(struct run *run, struct mcpt_error *err)
         if (!checkpoint_save(run->out.checkpoint, &run->film, &info, err))
             return false;
     }
-    if (!output_write_image(&run->out, &run->film, o->has_range ? &run->part : NULL, o->exposure,
+    struct image_look look = look_of(o);
+    struct output_meta meta = meta_of(run, run->t_render_s);
+    if (!output_write_image(&run->out, &run->film, o->has_range ? &run->part : NULL, &meta, &look,
                             err))
         return false;
     if (o->resume_path && !is_cancelled)
@@ -1103,18 +1213,22 @@ static int report(const struct run *run)
                 "mcpt: interrupted by %s: wrote the partial %s (its 'samples' channel "
                 "counts each pixel's samples) and the checkpoint %s; continue with: mcpt %s "
                 "--resume %s\n",
-                signal_name, run->out.exr, run->out.checkpoint, o->scene_path, run->out.checkpoint);
+                signal_name, output_image_path(&run->out), run->out.checkpoint, o->scene_path,
+                run->out.checkpoint);
         return 128 + run->signal;
     }
     if (o->quiet)
         return CMD_EXIT_OK;
     struct bvh_stats bs = trace_bvh_stats(run->ts);
     double t = run->t_render_s;
+    const struct output_paths *out = &run->out;
     printf("mcpt: %dx%d, %u spp, %d threads: render %.2f s, %.3f Msamples/s, %.2f Mrays/s; BVH "
-           "%u tris in %.1f ms; wrote %s\n",
+           "%u tris in %.1f ms; wrote %s%s%s\n",
            run->film.width, run->film.height, run->topt.spp, o->n_threads, t,
            (double)res->n_samples / t * 1e-6, (double)res->n_rays / t * 1e-6, bs.n_tris,
-           run->t_build_s * 1e3, run->out.exr);
+           run->t_build_s * 1e3, out->exr[0] ? out->exr : out->png,
+           out->exr[0] && out->png[0] ? " and " : "",
+           !out->exr[0] ? " (8-bit sRGB only: -o OUT.exr keeps the float image)" : out->png);
     if (run->cv.measuring)
         stats_print_summary(stdout, &run->cv.curve, &run->cv.summary);
     if (run->topt.adaptive)

@@ -540,7 +540,7 @@ Test(image, write_into_missing_folder_fails)
     cr_assert_not(image_write_png_rgb8(path, 2, 2, rgb8, &err));
     cr_assert_str_eq(err.msg, "cannot write: No such file or directory");
     const float rgb[12] = {0};
-    cr_assert_not(image_write_png_srgb(path, 2, 2, rgb, 0.0f, &err));
+    cr_assert_not(image_write_png_srgb(path, 2, 2, rgb, NULL, &err));
     cr_assert_str_eq(err.msg, "cannot write: No such file or directory");
     cr_assert_eq(count_entries(), 0);
     free(img.data[0]);
@@ -559,7 +559,7 @@ Test(image, refused_write_keeps_existing_file)
     cr_assert_not(image_write_png_rgb8(path, 0, 2, rgb8, &err));
     cr_assert_str_eq(err.msg, "expected a positive image size, got 0x2");
     const float rgb[3 * 6] = {0};
-    cr_assert_not(image_write_png_srgb(path, 3, -1, rgb, 0.0f, &err));
+    cr_assert_not(image_write_png_srgb(path, 3, -1, rgb, NULL, &err));
     size_t n_after;
     unsigned char *after = read_bytes(path, &n_after);
     cr_assert_eq(n_after, n_before);
@@ -621,7 +621,7 @@ Test(image, failed_write_midway_keeps_existing_file)
     cr_assert_str_eq(err.msg, efbig);
     cr_assert_not(image_write_png_rgb8(png_path, w, h, rgb8, &err));
     cr_assert_str_eq(err.msg, efbig);
-    cr_assert_not(image_write_png_srgb(png_path, w, h, rgb, 0.0f, &err));
+    cr_assert_not(image_write_png_srgb(png_path, w, h, rgb, NULL, &err));
     cr_assert_str_eq(err.msg, efbig);
     cr_assert_eq(setrlimit(RLIMIT_FSIZE, &old_lim), 0);
     signal(SIGXFSZ, old_handler);
@@ -690,7 +690,7 @@ Test(image, png_srgb_known_values)
             rgb[3 * i + c] = in[i];
     char path[256];
     struct mcpt_error err;
-    cr_assert(image_write_png_srgb(scratch_path(path, sizeof path, "k.png"), n, 1, rgb, 0.0f, &err),
+    cr_assert(image_write_png_srgb(scratch_path(path, sizeof path, "k.png"), n, 1, rgb, NULL, &err),
               "%s", err.msg);
     int w;
     int h;
@@ -728,7 +728,8 @@ Test(image, png_srgb_exposure_scales_by_powers_of_two)
     for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
         const float rgb[3] = {cases[k].v, cases[k].v, cases[k].v};
         struct mcpt_error err;
-        cr_assert(image_write_png_srgb(path, 1, 1, rgb, cases[k].exposure, &err), "%s", err.msg);
+        struct image_look look = {.exposure = cases[k].exposure};
+        cr_assert(image_write_png_srgb(path, 1, 1, rgb, &look, &err), "%s", err.msg);
         int w;
         int h;
         uint8_t *px = read_png_rgb8(path, &w, &h);
@@ -758,7 +759,8 @@ Test(image, png_srgb_matches_reference_on_ramp)
     scratch_path(path, sizeof path, "ramp.png");
     for (int e = 0; e < 3; e++) {
         struct mcpt_error err;
-        cr_assert(image_write_png_srgb(path, w, h, rgb, exposures[e], &err), "%s", err.msg);
+        struct image_look look = {.exposure = exposures[e]};
+        cr_assert(image_write_png_srgb(path, w, h, rgb, &look, &err), "%s", err.msg);
         int rw;
         int rh;
         uint8_t *px = read_png_rgb8(path, &rw, &rh);

@@ -100,8 +100,8 @@ Test(plot, error_heatmap_size)
 }
 
 /* Three thumbnails of an 8 x 8 film, each repeated up by 160 / 8 = 20 to 160 x 160, tile in one
- * row: width 8 + 3 (160 + 8) = 512, height 8 + 160 + 2 (7 + 3) 2 + 8 = 216.  No thumbnail: no
- * sheet. */
+ * row: width 8 + 3 (160 + 8) = 512, height 8 + 160 + 3 (7 + 3) 2 + 8 = 236 (three label lines:
+ * spp, PSNR, seed).  No thumbnail: no sheet. */
 Test(plot, contact_sheet_layout)
 {
     char dir[256], path[300];
@@ -115,15 +115,17 @@ Test(plot, contact_sheet_layout)
     cr_assert_str_eq(err.msg, "expected snapshots for the contact sheet, got none");
     cr_assert_eq(err.kind, MCPT_ERROR_RUNTIME);
     cr_assert_not(test_exists(path));
-    cr_assert(plot_sheet_add(&sheet, &fx.img, 1, 20.0, STATS_ERR_REFERENCE, 0.0f, &err));
-    cr_assert(plot_sheet_add(&sheet, &fx.img, 2, NAN, STATS_ERR_REFERENCE_CORRECTED, 0.0f, &err));
-    cr_assert(plot_sheet_add(&sheet, &fx.img, 4, INFINITY, STATS_ERR_OWN_VARIANCE, 1.0f, &err));
+    const struct image_look plain = {0}, brighter = {.exposure = 1.0f};
+    cr_assert(plot_sheet_add(&sheet, &fx.img, 1, 20.0, STATS_ERR_REFERENCE, &plain, &err));
+    cr_assert(plot_sheet_add(&sheet, &fx.img, 2, NAN, STATS_ERR_REFERENCE_CORRECTED, &plain, &err));
+    cr_assert(
+        plot_sheet_add(&sheet, &fx.img, 4, INFINITY, STATS_ERR_OWN_VARIANCE, &brighter, &err));
     cr_assert_eq(sheet.n_thumbs, 3);
     cr_assert(sheet.thumbs[0].width == 160 && sheet.thumbs[0].height == 160);
     cr_assert(plot_write_contact_sheet(path, &sheet, &err), "%s", err.msg);
     uint32_t w, h;
     png_size(path, &w, &h);
-    cr_assert(w == 512 && h == 216, "%ux%u", w, h);
+    cr_assert(w == 512 && h == 236, "%ux%u", w, h);
     plot_sheet_free(&sheet);
     film_free(&fx.film);
     test_remove_dir(dir);
