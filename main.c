@@ -28,14 +28,16 @@
 #define STDIN_NAME "<stdin>" /* the scene "-" in messages and in the EXR header */
 
 static const char USAGE[] =
-    "usage: mcpt SCENE [options]\n"
+    "usage: mcpt SCENE [options]         (SCENE -: read it from standard input)\n"
     "       mcpt compare A.exr REF.exr [--heatmap ERR.png] [--json]   (mcpt compare --help)\n"
     "       mcpt integrate FUNCTION [--sampler S] [--spp N] [--seeds K]  (mcpt integrate --help)\n"
     "       mcpt merge PART.exr... -o OUT.exr   (mcpt merge --help)\n"
+    "       mcpt convert IN.exr OUT.png [--exposure E] [--tonemap T]  (mcpt convert --help)\n"
     "Render SCENE (see docs/scene-format.md) to OUT.exr (linear float RGB, with per-pixel\n"
     "variance of the mean and sample count) and OUT.png (sRGB preview).\n"
     "\n"
-    "  -o, --output OUT.exr   output image (default: the scene's name with .exr, here)\n"
+    "  -o, --output OUT       OUT.exr: the float image and its preview OUT.png; OUT.png: an\n"
+    "                         8-bit sRGB image only (default: the scene's name with .exr)\n"
     "      --spp N            samples per pixel (default: the scene's render spp, else 64)\n"
     "      --max-depth D      most bounces per path; 0 = emission only, 1 = direct light,\n"
     "                         inf = until Russian roulette ends it (default: scene, else inf)\n"
@@ -61,9 +63,13 @@ static const char USAGE[] =
     "      --max-spp N        adaptive: most samples per pixel (default: the spp)\n"
     "      --heatmap PNG      write a false-colour map of the samples per pixel with a legend\n"
     "                         (adaptive default: OUT.samples.png)\n"
-    "      --width W          film width in pixels (default: the scene's film)\n"
-    "      --height H         film height in pixels (default: the scene's film)\n"
-    "      --exposure E       PNG preview exposure in stops (default 0)\n"
+    "      --width W          film width in pixels (default: the scene's film); alone, the\n"
+    "                         height keeps the film's aspect ratio\n"
+    "      --height H         film height in pixels (likewise)\n"
+    "      --scale F          both sides times F, in (0, 64]: the same framing\n"
+    "      --exposure E       PNG exposure in stops (default 0)\n"
+    "      --tonemap T        PNG tone curve: clamp (default), reinhard or aces\n"
+    "      --no-preview       no PNG beside OUT.exr\n"
     "      --quiet            print errors only\n";
 /* the help is two strings: C11 compilers need only accept 4095 bytes in one */
 static const char USAGE_MORE[] =
@@ -147,6 +153,7 @@ struct progress {
     bool quiet;
     double t_start;
     int quarters_printed;
+    bool is_finished;   /* the 100% line is out: later reports of it print nothing */
     uint64_t base;      /* render passes: samples of the passes before this one */
     uint64_t total_all; /* render passes: samples of all of them; 0: one trace_render call */
 };
@@ -913,8 +920,9 @@ static void report_progress(void *user, uint64_t done, uint64_t total)
         done += p->base;
         total = p->total_all > done ? p->total_all : done;
     }
-    if (p->quiet || total == 0)
+    if (p->quiet || total == 0 || p->is_finished)
         return;
+    p->is_finished = done == total;
     double frac = (double)done / (double)total;
     double elapsed = now_seconds() - p->t_start;
     double rate = elapsed > 0.0 ? (double)done / elapsed : 0.0;
