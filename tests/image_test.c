@@ -815,3 +815,45 @@ Test(image, srgb8_matches_reference_on_doubles)
     cr_assert_eq(image_srgb8(&s, -INFINITY), 0);
     cr_assert_eq(image_srgb8(&s, INFINITY), 255);
 }
+
+/* The tone curves on known inputs (image.h): clamp passes values through; reinhard is
+ * Reinhard et al. 2002's eq. 3, L / (1 + L), on the Rec. 709 luminance Y, every channel scaled
+ * by 1 / (1 + Y) (grey 1 -> 0.5, red 3 -> 3 / 1.6378, blue 4 -> 4 / 1.2888); aces is
+ * Narkowicz 2016's fit x (2.51 x + 0.03) / (x (2.43 x + 0.59) + 0.14) per channel, clamped to
+ * [0, 1] (1 -> 2.54 / 3.16, 0.18 -> 0.086724 / 0.324932, 10 -> 1, -1 -> 0, inf -> 1); NaN
+ * stays NaN. */
+Test(image, tone_curves_on_known_values)
+{
+    const struct {
+        enum image_tonemap t;
+        double in[3];
+        double out[3];
+    } cases[] = {
+        {IMAGE_TONEMAP_CLAMP, {2.0, 0.5, -1.0}, {2.0, 0.5, -1.0}},
+        {IMAGE_TONEMAP_REINHARD, {1.0, 1.0, 1.0}, {0.5, 0.5, 0.5}},
+        {IMAGE_TONEMAP_REINHARD, {3.0, 0.0, 0.0}, {3.0 / 1.6378, 0.0, 0.0}},
+        {IMAGE_TONEMAP_REINHARD, {0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}},
+        {IMAGE_TONEMAP_REINHARD, {0.0, 0.0, 4.0}, {0.0, 0.0, 4.0 / 1.2888}},
+        {IMAGE_TONEMAP_ACES, {1.0, 0.18, 0.0}, {2.54 / 3.16, 0.086724 / 0.324932, 0.0}},
+        {IMAGE_TONEMAP_ACES, {10.0, -1.0, INFINITY}, {1.0, 0.0, 1.0}},
+    };
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        double out[3];
+        image_tonemap_rgb(cases[k].t, cases[k].in, out);
+        for (int c = 0; c < 3; c++)
+            cr_assert(fabs(out[c] - cases[k].out[c]) <= 1e-12 * fmax(1.0, fabs(cases[k].out[c])),
+                      "case %zu channel %d: %.17g, expected %.17g", k, c, out[c], cases[k].out[c]);
+    }
+    const enum image_tonemap all[] = {IMAGE_TONEMAP_CLAMP, IMAGE_TONEMAP_REINHARD,
+                                      IMAGE_TONEMAP_ACES};
+    for (int k = 0; k < 3; k++) {
+        double out[3];
+        image_tonemap_rgb(all[k], (const double[3]){NAN, 0.5, 0.5}, out);
+        cr_assert(isnan(out[0]), "%s: NaN in, %g out", image_tonemap_name(all[k]), out[0]);
+        enum image_tonemap back;
+        cr_assert(image_tonemap_parse(image_tonemap_name(all[k]), &back) && back == all[k]);
+    }
+    enum image_tonemap t;
+    cr_assert_not(image_tonemap_parse("filmic", &t));
+    cr_assert_not(image_tonemap_parse("ACES", &t));
+}
