@@ -247,7 +247,7 @@ static void render_on_pty(int columns, struct screen *s)
             _exit(127);
         close(master);
         alarm(60);
-        execl(mcpt_abs(), "mcpt", "scenes/cornell-box.txt", "--width", "96", "--spp", "48",
+        execl(mcpt_abs(), "mcpt", "tests/data/cli/tiny.txt", "--width", "64", "--spp", "256",
               "--threads", "1", "-o", out, (char *)NULL);
         _exit(127);
     }
@@ -279,7 +279,8 @@ Test(ux, progress_line_fits_80_and_60_columns_on_a_pty, .init = setup, .fini = t
         cr_assert_eq(s.n_wraps, 0, "%d columns: %d wraps", w, s.n_wraps);
         cr_assert_leq(s.max_col, w - 1, "%d columns: a line of %d", w, s.max_col);
         cr_assert_eq(s.n_newlines, 1, "%d columns: %d line feeds", w, s.n_newlines);
-        cr_assert_geq(s.n_redraws, 3, "%d columns: %d redraws", w, s.n_redraws);
+        /* trace_render reports every 100 ms and at the end; the render takes about 1 s here */
+        cr_assert_geq(s.n_redraws, 2, "%d columns: %d redraws", w, s.n_redraws);
         cr_assert(strstr(s.last, "100.0%"), "%d columns: last line '%s'", w, s.last);
         if (w >= 60)
             cr_assert(strstr(s.last, "elapsed ") && strstr(s.last, "ETA "), "%d: '%s'", w, s.last);
@@ -302,7 +303,7 @@ Test(ux, progress_line_fits_80_and_60_columns_in_tmux, .init = setup, .fini = te
         snprintf(sock, sizeof sock, "mcpt-ux-%d-%d", (int)getpid(), widths[i]);
         scratch(screen_path, sizeof screen_path, "screen.txt");
         cr_assert_eq(shell("TERM=xterm tmux -L %s -f /dev/null new-session -d -x %d -y 12 "
-                           "\"'%s' scenes/cornell-box.txt --width 96 --spp 48 --threads 1 -o "
+                           "\"'%s' tests/data/cli/tiny.txt --width 64 --spp 256 --threads 1 -o "
                            "%s/t.exr >/dev/null; echo mcpt-exit=\\$?; sleep 60\"",
                            sock, widths[i], mcpt_abs(), tmpdir),
                      0);
@@ -623,7 +624,9 @@ Test(ux, install_renders_the_installed_scene_and_uninstall_removes_all, .init = 
 {
     char dest[300], path[600], text[1 << 16];
     scratch(dest, sizeof dest, "dest");
-    const char *make = "make -s %s DESTDIR=%s PREFIX=/opt/mcpt INSTALL_BIN='%s' > /dev/null";
+    /* a make of its own: not the jobserver of a make that may have started this suite */
+    const char *make = "env -u MAKEFLAGS -u MFLAGS -u MAKELEVEL make -s %s DESTDIR=%s "
+                       "PREFIX=/opt/mcpt INSTALL_BIN='%s' > /dev/null";
     cr_assert_eq(shell(make, "install", dest, mcpt_abs()), 0);
     const char *files[] = {"bin/mcpt",
                            "share/man/man1/mcpt.1",
