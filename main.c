@@ -190,6 +190,19 @@ struct run {
     int signal; /* SIGINT or SIGTERM, when it stopped the render */
 };
 
+/* The parsers' warnings (file:line:col: warning: ...), one line each, unless --quiet. */
+static void print_scene_warnings(const struct scene *scene, bool quiet)
+{
+    if (quiet)
+        return;
+    uint32_t n_kept = scene->n_warnings < SCENE_MAX_WARNINGS ? scene->n_warnings
+                                                             : SCENE_MAX_WARNINGS;
+    for (uint32_t i = 0; i < n_kept; i++)
+        fprintf(stderr, "%s\n", scene->warnings[i]);
+    if (scene->n_warnings > n_kept)
+        fprintf(stderr, "mcpt: warning: %u more warnings not shown\n", scene->n_warnings - n_kept);
+}
+
 static bool parse(int argc, char **argv, struct run *run, struct mcpt_error *err);
 static bool load(struct run *run, struct mcpt_error *err);
 static bool build(struct run *run, struct mcpt_error *err);
@@ -654,6 +667,7 @@ static bool load(struct run *run, struct mcpt_error *err)
     struct convergence *cv = &run->cv;
     if (!load_scene(run, err))
         return false;
+    print_scene_warnings(&run->scene, o->quiet);
     bool is_stdin = strcmp(o->scene_path, "-") == 0; /* outputs named stdin.exr, ... */
     if (!film_size(o, &run->scene, err) ||
         !output_paths_init(&run->out, is_stdin ? "stdin" : o->scene_path, o->output,
