@@ -5,6 +5,7 @@
 #include "output.h"
 
 #include <stdlib.h>
+#include <strings.h>
 #include <unistd.h>
 
 #include "image.h"
@@ -34,12 +35,32 @@ static bool with_suffix(const char *path, const char *suffix, char *out, size_t 
     return copy_path(out, out_bytes, name, err);
 }
 
+/* Whether path's extension (after the last dot of its last component, not a leading one) is
+ * ext, in any case. */
+static bool has_extension(const char *path, const char *ext)
+{
+    const char *slash = strrchr(path, '/');
+    const char *base = slash ? slash + 1 : path;
+    const char *dot = strrchr(base, '.');
+    return dot && dot > base && strcasecmp(dot + 1, ext) == 0;
+}
+
 bool output_paths_init(struct output_paths *p, const char *scene_path, const char *output,
                        const char *checkpoint_path, const char *heatmap_path, bool is_adaptive,
-                       struct mcpt_error *err)
+                       bool has_preview, struct mcpt_error *err)
 {
     memset(p, 0, sizeof *p);
-    if (output) {
+    if (output && has_extension(output, "png")) {
+        if (!copy_path(p->png, sizeof p->png, output, err))
+            return false;
+    } else if (output) {
+        if (!has_extension(output, "exr")) {
+            mcpt_error_set(err, "mcpt", 0, 0,
+                           "expected an output name ending in .exr (float image and PNG "
+                           "preview) or .png (8-bit sRGB only), got '%.200s'",
+                           output);
+            return false;
+        }
         if (!copy_path(p->exr, sizeof p->exr, output, err))
             return false;
     } else { /* "dir/name.txt" -> "name.exr", here */
@@ -49,22 +70,25 @@ bool output_paths_init(struct output_paths *p, const char *scene_path, const cha
         int len = dot && dot != base ? (int)(dot - base) : (int)strlen(base);
         snprintf(p->exr, sizeof p->exr, "%.*s.exr", len, base);
     }
-    if (!with_suffix(p->exr, ".png", p->png, sizeof p->png, err))
+    if (p->exr[0] && has_preview && !with_suffix(p->exr, ".png", p->png, sizeof p->png, err))
         return false;
+    const char *image = output_image_path(p);
     char name[FILE_PATH_BYTES + 8];
-    snprintf(name, sizeof name, "%s.ckpt", p->exr);
+    snprintf(name, sizeof name, "%s.ckpt", image);
     if (!copy_path(p->checkpoint, sizeof p->checkpoint, checkpoint_path ? checkpoint_path : name,
                    err))
         return false;
     if (heatmap_path)
         return copy_path(p->heatmap, sizeof p->heatmap, heatmap_path, err);
-    return !is_adaptive || with_suffix(p->exr, ".samples.png", p->heatmap, sizeof p->heatmap, err);
+    return !is_adaptive || with_suffix(image, ".samples.png", p->heatmap, sizeof p->heatmap, err);
 }
 
-/* The preview of film into the temporary af: its means, 2^exposure, sRGB; finished, not
- * renamed (image_encode_png_srgb). */
-static bool encode_png(struct file_atomic *af, const struct film *film, float exposure,
-                       struct mcpt_error *err)
+const char *output_image_path(const struct output_paths *p) { return p->exr[0] ? p->exr : p->png; }
+
+/* The PNG of film into the temporary af: its means as look says; finished, not renamed
+ * (image_encode_png_srgb). */
+static bool encode_png(struct file_atomic *af, const struct film *film,
+                       const struct image_look *look, struct mcpt_error *err)
 {
     size_t n_pixels = (size_t)film->width * (size_t)film->height;
     float *rgb = malloc(sizeof(float) * 3 * n_pixels);
@@ -76,14 +100,57 @@ static bool encode_png(struct file_atomic *af, const struct film *film, float ex
     for (size_t i = 0; i < n_pixels; i++)
         for (int c = 0; c < 3; c++)
             rgb[3 * i + c] = (float)film_mean(&film->pixels[i], c);
-    bool ok = image_encode_png_srgb(af, film->width, film->height, rgb, exposure, err);
+    bool ok = image_encode_png_srgb(af, film->width, film->height, rgb, look, err);
     free(rgb);
     return ok;
 }
 
+/* Adds the string attribute name = printf(fmt, ...) to img. */
+static void add_attr(struct image *img, const char *name, const char *fmt, ...)
+{
+    if (img->n_attrs >= IMAGE_MAX_ATTRS)
+        return;
+    va_list ap;
+    va_start(ap, fmt);
+    snprintf(img->attr_names[img->n_attrs], sizeof img->attr_names[0], "%s", name);
+    vsnprintf(img->attr_values[img->n_attrs], sizeof img->attr_values[0], fmt, ap);
+    va_end(ap);
+    img->n_attrs++;
+}
+
+/* The header attributes of output.h's struct output_meta; samples is the count plane. */
+static void add_meta(struct image *img, const struct output_meta *meta, const float *samples)
+{
+    size_t n_pixels = (size_t)img->width * (size_t)img->height;
+    double total = 0.0;
+    for (size_t i = 0; i < n_pixels; i++)
+        total += samples[i];
+    add_attr(img, "mcpt.version", "%s", MCPT_VERSION);
+    add_attr(img, "mcpt.spp", "%.6g", total / (double)n_pixels);
+    if (!meta)
+        return;
+    if (meta->scene)
+        add_attr(img, "mcpt.scene", "%s", meta->scene);
+    if (meta->sampler) {
+        add_attr(img, "mcpt.sampler", "%s", meta->sampler);
+        add_attr(img, "mcpt.seed", "%llu", (unsigned long long)meta->seed);
+        if (meta->max_depth == UINT32_MAX)
+            add_attr(img, "mcpt.max-depth", "inf");
+        else
+            add_attr(img, "mcpt.max-depth", "%u", meta->max_depth);
+    }
+    if (meta->render_s >= 0.0)
+        add_attr(img, "mcpt.render-seconds", "%.3f", meta->render_s);
+    if (meta->render)
+        add_attr(img, PARTIAL_ATTR_RENDER, "%s", meta->render);
+    if (meta->ranges)
+        add_attr(img, PARTIAL_ATTR_RANGES, "%s", meta->ranges);
+}
+
 /* The EXR of every render into the temporary af: R, G, B, variance of the mean per channel,
- * sample count; finished, not renamed. */
-static bool encode_exr(struct file_atomic *af, const struct film *film, struct mcpt_error *err)
+ * sample count, and the attributes of meta; finished, not renamed. */
+static bool encode_exr(struct file_atomic *af, const struct film *film,
+                       const struct output_meta *meta, struct mcpt_error *err)
 {
     static const char *names[7] = {"R",          "G",          "B",      "variance.R",
                                    "variance.G", "variance.B", "samples"};
@@ -100,36 +167,41 @@ static bool encode_exr(struct file_atomic *af, const struct film *film, struct m
         img.data[c] = planes + (size_t)c * n_pixels;
     }
     film_resolve(film, img.data, img.data + 3, img.data[6]);
+    add_meta(&img, meta, img.data[6]);
     bool ok = image_encode_exr(af, &img, err);
     free(planes);
     return ok;
 }
 
-/* The preview alone, at png_path. */
-static bool write_png(const struct film *film, const char *png_path, float exposure,
+/* The PNG alone, at png_path. */
+static bool write_png(const struct film *film, const char *png_path, const struct image_look *look,
                       struct mcpt_error *err)
 {
     struct file_atomic af;
-    return file_atomic_open(&af, png_path, err) && encode_png(&af, film, exposure, err) &&
+    return file_atomic_open(&af, png_path, err) && encode_png(&af, film, look, err) &&
            file_atomic_rename(&af, err);
 }
 
-/* An image and its preview as a pair: both temporaries are written and synced before either
- * is renamed, so a failure or a kill -9 while writing leaves the old pair (and temporaries
- * that the next run removes).  When the image is written but its preview cannot be (a disk
- * full by the PNG), the image is kept, being what the render made, and the old preview is
- * removed rather than left beside an image it does not show; the message says so.  Between
- * the two renames (microseconds) a kill -9 can still leave the new image beside the old
- * preview. */
+/* An image and its preview as a pair (either may be "": not written): both temporaries are
+ * written and synced before either is renamed, so a failure or a kill -9 while writing leaves
+ * the old pair (and temporaries that the next run removes).  When the image is written but its
+ * preview cannot be (a disk full by the PNG), the image is kept, being what the render made,
+ * and the old preview is removed rather than left beside an image it does not show; the
+ * message says so.  Between the two renames (microseconds) a kill -9 can still leave the new
+ * image beside the old preview. */
 static bool write_pair(const char *exr_path, const char *png_path, const struct film *film,
-                       const struct partial_info *part, float exposure, struct mcpt_error *err)
+                       const struct partial_info *part, const struct output_meta *meta,
+                       const struct image_look *look, struct mcpt_error *err)
 {
+    if (!exr_path[0])
+        return !png_path[0] || write_png(film, png_path, look, err);
     struct file_atomic exr, png;
     if (!file_atomic_open(&exr, exr_path, err) ||
-        !(part ? partial_encode_exr(&exr, film, part, err) : encode_exr(&exr, film, err)))
+        !(part ? partial_encode_exr(&exr, film, part, err) : encode_exr(&exr, film, meta, err)))
         return false; /* nothing replaced */
-    bool is_png_ready = file_atomic_open(&png, png_path, err) &&
-                        encode_png(&png, film, exposure, err);
+    if (!png_path[0])
+        return file_atomic_rename(&exr, err);
+    bool is_png_ready = file_atomic_open(&png, png_path, err) && encode_png(&png, film, look, err);
     if (!file_atomic_rename(&exr, err)) {
         if (is_png_ready)
             file_atomic_abort(&png);
@@ -147,27 +219,29 @@ static bool write_pair(const char *exr_path, const char *png_path, const struct 
 }
 
 bool output_write_image(const struct output_paths *p, const struct film *film,
-                        const struct partial_info *part, float exposure, struct mcpt_error *err)
+                        const struct partial_info *part, const struct output_meta *meta,
+                        const struct image_look *look, struct mcpt_error *err)
 {
-    return write_pair(p->exr, p->png, film, part, exposure, err);
+    return write_pair(p->exr, p->png, film, part, meta, look, err);
 }
 
-bool output_write_preview(const struct output_paths *p, const struct film *film, float exposure,
-                          struct mcpt_error *err)
+bool output_write_preview(const struct output_paths *p, const struct film *film,
+                          const struct image_look *look, struct mcpt_error *err)
 {
-    return write_png(film, p->png, exposure, err);
+    return !p->png[0] || write_png(film, p->png, look, err);
 }
 
 bool output_write_snapshot(const struct output_paths *p, const struct film *film, uint32_t spp,
-                           uint32_t spp_final, float exposure, struct mcpt_error *err)
+                           uint32_t spp_final, const struct output_meta *meta,
+                           const struct image_look *look, struct mcpt_error *err)
 {
     char suffix[64], exr_path[FILE_PATH_BYTES], png_path[FILE_PATH_BYTES];
     int digits = snprintf(NULL, 0, "%u", spp_final);
     snprintf(suffix, sizeof suffix, "-spp%0*u.exr", digits, spp);
-    if (!with_suffix(p->exr, suffix, exr_path, sizeof exr_path, err) ||
+    if (!with_suffix(output_image_path(p), suffix, exr_path, sizeof exr_path, err) ||
         !with_suffix(exr_path, ".png", png_path, sizeof png_path, err))
         return false;
-    return write_pair(exr_path, png_path, film, NULL, exposure, err);
+    return write_pair(exr_path, png_path, film, NULL, meta, look, err);
 }
 
 bool output_write_heatmap(const struct output_paths *p, const struct film *film,
@@ -191,7 +265,7 @@ bool output_write_convergence(const struct output_paths *p, const char *curve_pa
     }
     if (!sheet->n_thumbs)
         return true;
-    return with_suffix(p->exr, "-contact.png", path, sizeof path, err) &&
+    return with_suffix(output_image_path(p), "-contact.png", path, sizeof path, err) &&
            plot_write_contact_sheet(path, sheet, err);
 }
 
@@ -225,8 +299,9 @@ int output_list(const struct output_paths *p, const char *curve_path, bool snaps
 {
     int n = 0;
     char path[FILE_PATH_BYTES], suffix[64];
-    bool ok = add_file(files, &n, p->exr, "the image (-o)", err) &&
-              add_file(files, &n, p->png, "the PNG preview", err) &&
+    bool ok = (!p->exr[0] || add_file(files, &n, p->exr, "the image (-o)", err)) &&
+              (!p->png[0] || add_file(files, &n, p->png,
+                                      p->exr[0] ? "the PNG preview" : "the image (-o)", err)) &&
               add_file(files, &n, p->checkpoint, "the checkpoint", err) &&
               (!p->heatmap[0] || add_file(files, &n, p->heatmap, "the sample-count map", err));
     if (ok && curve_path)
@@ -239,14 +314,14 @@ int output_list(const struct output_paths *p, const char *curve_path, bool snaps
         int digits = snprintf(NULL, 0, "%u", spp_final);
         for (uint64_t spp = 1; ok; spp = spp * 2 < spp_final ? spp * 2 : spp_final) {
             snprintf(suffix, sizeof suffix, "-spp%0*u.exr", digits, (uint32_t)spp);
-            ok = with_suffix(p->exr, suffix, path, sizeof path, err) &&
+            ok = with_suffix(output_image_path(p), suffix, path, sizeof path, err) &&
                  add_file(files, &n, path, "a snapshot", err) &&
                  with_suffix(files[n - 1].path, ".png", path, sizeof path, err) &&
                  add_file(files, &n, path, "a snapshot's preview", err);
             if (spp >= spp_final)
                 break;
         }
-        ok = ok && with_suffix(p->exr, "-contact.png", path, sizeof path, err) &&
+        ok = ok && with_suffix(output_image_path(p), "-contact.png", path, sizeof path, err) &&
              add_file(files, &n, path, "the contact sheet", err);
     }
     return ok ? n : -1;
