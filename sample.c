@@ -8,6 +8,7 @@
  * PBRT 4e, ch. A.5, "Sampling Multidimensional Functions"; Veach 1997, ch. 9 (MIS). */
 #include "sample.h"
 
+#include <assert.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -182,6 +183,7 @@ static float fraction_to_float(uint32_t x) { return (float)(x >> 8) * 0x1p-24f; 
  * (a hash restricted to the next power of two, cycle-walked back into [0, l)). */
 static uint32_t kensler_permute(uint32_t i, uint32_t l, uint32_t p)
 {
+    assert(l > 0); /* the cycle walk ends only in a non-empty range */
     uint32_t w = l - 1;
     w |= w >> 1;
     w |= w >> 2;

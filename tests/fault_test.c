@@ -60,6 +60,47 @@ Test(hang, stratified_set_of_2_32_minus_1, .init = setup, .fini = teardown)
     cr_assert_eq(rc, 0, "--spp 4294967295 --sample-range 0:1: exit %d: %s", rc, err);
 }
 
+/* SIGTERM (and SIGINT alike) ends a run in every long phase: before the render mcpt leaves
+ * both signals their default action, so the kernel ends it at once while it loads meshes or
+ * builds the BVH; from the render on its handler stops the workers between samples (the
+ * interrupt tests in resume_test.c).  A scene of eight Sponzas (532k triangles; about 0.7 s to
+ * load and 0.8 s to build here) is signalled 0.3 s in (loading) and 1.1 s in (building, or
+ * still loading on a slower machine): each run ends within half a second of the signal, by
+ * it, having written nothing. */
+Test(hang, sigterm_ends_mesh_load_and_bvh_build, .init = setup, .fini = teardown)
+{
+    const char *model = "../shared/models/sponza-dabrovic.obj";
+    if (access(model, R_OK) != 0)
+        cr_skip_test("%s not present", model);
+    char scene[300], out[300];
+    snprintf(scene, sizeof scene, "%s/sponzas.txt", tmpdir);
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    FILE *f = fopen(scene, "w");
+    cr_assert_not_null(f);
+    fprintf(f, "camera eye=0,1,3 look-at=0,0,0 up=0,1,0 fov=40\nfilm width=64 height=64\n");
+    char *model_abs = realpath(model, NULL); /* the scene's mesh paths are from its folder */
+    cr_assert_not_null(model_abs);
+    for (int k = 0; k < 8; k++)
+        fprintf(f, "mesh file=%s translate=%d,0,0\n", model_abs, 40 * k);
+    free(model_abs);
+    fclose(f);
+    const long delays_ms[2] = {300, 1100};
+    for (int i = 0; i < 2; i++) {
+        const char *args[] = {scene, "--spp", "1", "-o", out, NULL};
+        pid_t pid = test_start_mcpt(args, NULL, NULL, ALARM_S);
+        nanosleep(&(struct timespec){0, delays_ms[i] * 1000 * 1000}, NULL);
+        struct timespec t0, t1;
+        clock_gettime(CLOCK_MONOTONIC, &t0);
+        kill(pid, SIGTERM);
+        int rc = test_wait(pid);
+        clock_gettime(CLOCK_MONOTONIC, &t1);
+        double dt = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
+        cr_assert_eq(rc, 128 + SIGTERM, "signal at %ld ms: exit %d", delays_ms[i], rc);
+        cr_assert_lt(dt, 0.5, "signal at %ld ms: ended %.2f s later", delays_ms[i], dt);
+        cr_assert_not(test_exists(out), "signal at %ld ms: wrote an image", delays_ms[i]);
+    }
+}
+
 /* A FIFO with no writer, given wherever mcpt reads a file (--resume, compare's two images,
  * merge's parts, --reference), is refused at once as bad input naming it: open() of a FIFO
  * blocks until a writer comes, so inputs are opened without blocking and must be regular
@@ -681,6 +722,37 @@ Test(late, memory_limit_fails_before_the_render, .init = setup, .fini = teardown
     cr_assert_eq(rc, 2, "exit %d: %s", rc, err);
     const char *want = SMALL ": error: expected a render that fits in this process's memory limit";
     cr_assert(strncmp(err, want, strlen(want)) == 0 && strstr(err, "got a 3500x3500 film needing"),
+              "%s", err);
+    cr_assert_lt(dt, 5.0, "took %.1f s: it rendered first", dt);
+    cr_assert_not(test_exists(out));
+}
+
+/* The issue's film, 6500x6500 (2579 MiB), under `ulimit -v` in a shell: at 3 GiB the film fits
+ * but writing its image (1147 MiB more) does not, so the run is refused before the render, in
+ * well under a second.  (At 4 GiB both fit now, as the image's planes and the preview's are
+ * freed in turn: that run renders and writes its pair.) */
+Test(late, ulimit_v_6500_square_fails_before_the_render, .init = setup, .fini = teardown)
+{
+    char out[300], err_path[300], cmd[1200], err[4096];
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
+    const char *bin = getenv("MCPT") ? getenv("MCPT") : "./mcpt";
+    snprintf(cmd, sizeof cmd,
+             "ulimit -v %d && '%s' --version >/dev/null 2>&1 || exit 99; ulimit -v %d && exec '%s' "
+             "%s --width 6500 --height 6500 --spp 1 -o '%s' 2>'%s'",
+             3 << 20, bin, 3 << 20, bin, SMALL, out, err_path);
+    struct timespec t0, t1;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    int status = system(cmd);
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    int rc = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    if (rc == 99)
+        cr_skip_test("mcpt does not start under ulimit -v 3 GiB (a sanitizer build?): not run");
+    test_read_file(err_path, err, sizeof err);
+    double dt = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
+    cr_assert_eq(rc, 2, "exit %d: %s", rc, err);
+    const char *want = SMALL ": error: expected a render that fits in this process's memory limit";
+    cr_assert(strncmp(err, want, strlen(want)) == 0 && strstr(err, "got a 6500x6500 film needing"),
               "%s", err);
     cr_assert_lt(dt, 5.0, "took %.1f s: it rendered first", dt);
     cr_assert_not(test_exists(out));
