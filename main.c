@@ -40,6 +40,8 @@ static const char USAGE[] =
     "      --light-samples N  shadow rays per path vertex, each to a light picked by power\n"
     "                         (1..1024, default 1)\n"
     "      --split S          full (default), direct (bounces 0-1) or indirect (bounces > 1)\n"
+    "      --light-sampling M area (default) or solid-angle: how triangle and quad lights\n"
+    "                         are sampled (Arvo 1995; Urena et al. 2013)\n"
     "      --rr P             Russian roulette: throughput (default: continue with probability\n"
     "                         max beta) or a fixed continuation probability P in (0, 1]\n"
     "      --rr-depth D       bounces before roulette may end a path (1..1024, default 2)\n"
@@ -121,6 +123,8 @@ struct options {
     enum render_direct direct;
     bool has_split;
     enum render_split split;
+    bool has_light_sampling;
+    enum render_light_sampling light_sampling;
     bool has_rr;
     float rr_prob;                    /* 0: throughput-based */
     uint32_t light_samples;           /* --light-samples N; 0: from the scene, else 1 */
@@ -232,6 +236,7 @@ enum {
     OPT_SPLIT,
     OPT_RR,
     OPT_RR_DEPTH,
+    OPT_LIGHT_SAMPLING,
     OPT_SAMPLE_RANGE = 1280,
 };
 
@@ -242,6 +247,7 @@ static const struct option LONG_OPTS[] = {
     {"direct", required_argument, NULL, OPT_DIRECT},
     {"light-samples", required_argument, NULL, OPT_LIGHT_SAMPLES},
     {"split", required_argument, NULL, OPT_SPLIT},
+    {"light-sampling", required_argument, NULL, OPT_LIGHT_SAMPLING},
     {"rr", required_argument, NULL, OPT_RR},
     {"rr-depth", required_argument, NULL, OPT_RR_DEPTH},
     {"threads", required_argument, NULL, OPT_THREADS},
@@ -332,6 +338,11 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
         o->has_split = true;
         return scene_split_parse(optarg, &o->split) ||
                cmd_usage_error(err, "expected --split to be full, direct or indirect, got '%s'",
+                               optarg);
+    case OPT_LIGHT_SAMPLING:
+        o->has_light_sampling = true;
+        return scene_light_sampling_parse(optarg, &o->light_sampling) ||
+               cmd_usage_error(err, "expected --light-sampling to be area or solid-angle, got '%s'",
                                optarg);
     case OPT_RR:
         o->has_rr = true;
@@ -593,9 +604,12 @@ static double now_seconds(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-/* build: the BVH, the camera and the light table (trace_prepare), timed for the report. */
+/* build: the BVH, the camera and the light table (trace_prepare), timed for the report.  The
+ * light table samples as --light-sampling says, else as the scene's render statement. */
 static bool build(struct run *run, struct mcpt_error *err)
 {
+    if (run->o.has_light_sampling)
+        run->scene.render.light_sampling = run->o.light_sampling;
     double t0 = now_seconds();
     run->ts = trace_prepare(&run->scene, run->o.n_threads, err);
     run->t_build_s = now_seconds() - t0;
@@ -641,8 +655,10 @@ static bool sampling_options(const struct options *o, const struct render_settin
  * disjoint ranges hold exactly the whole render's samples), and fills *info with the range and
  * every setting the parts of one render must share. */
 static bool sample_range_options(const struct options *o, bool measuring, uint64_t scene_hash,
-                                 const struct film *film, struct trace_options *topt,
-                                 struct partial_info *info, struct mcpt_error *err)
+                                 const struct film *film,
+                                 enum render_light_sampling scene_light_sampling,
+                                 struct trace_options *topt, struct partial_info *info,
+                                 struct mcpt_error *err)
 {
     if (topt->adaptive)
         return cmd_usage_error(err, "expected no adaptive sampling with --sample-range (where a "
@@ -660,12 +676,13 @@ static bool sample_range_options(const struct options *o, bool measuring, uint64
     info->ranges[0] = o->range;
     snprintf(info->render, sizeof info->render,
              "scene=%016llx film=%dx%d spp=%u seed=%llu sampler=%s max-depth=%u direct=%s "
-             "light-samples=%u split=%s rr=%.9g rr-depth=%u",
+             "light-samples=%u split=%s rr=%.9g rr-depth=%u light-sampling=%s",
              (unsigned long long)scene_hash, film->width, film->height, topt->spp,
              (unsigned long long)topt->seed, sample_sampler_name(topt->sampler), topt->max_depth,
              scene_direct_name(topt->direct), topt->light_samples ? topt->light_samples : 1u,
              scene_split_name(topt->split), (double)topt->rr_prob,
-             topt->rr_depth ? topt->rr_depth : TRACE_RR_DEPTH_DEFAULT);
+             topt->rr_depth ? topt->rr_depth : TRACE_RR_DEPTH_DEFAULT,
+             scene_light_sampling_name(scene_light_sampling));
     topt->sampler_spp = topt->spp; /* the whole render's stratified sets */
     topt->sample_offset = o->range.begin;
     topt->spp = o->range.end - o->range.begin;
@@ -725,8 +742,9 @@ static bool render_options(struct run *run, struct mcpt_error *err)
     };
     if (!sampling_options(o, r, &run->topt, err))
         return false;
-    if (o->has_range && !sample_range_options(o, run->cv.measuring, run->scene_hash, &run->film,
-                                              &run->topt, &run->part, err))
+    if (o->has_range &&
+        !sample_range_options(o, run->cv.measuring, run->scene_hash, &run->film,
+                              run->scene.render.light_sampling, &run->topt, &run->part, err))
         return false;
     return !o->resume_path || resume_matches(run, err);
 }

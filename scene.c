@@ -52,6 +52,7 @@ enum value_kind {
     VAL_SAMPLER,  /* a sampler name: independent, stratified, sobol */
     VAL_DIRECT,   /* a direct-lighting estimator: mis, light, bsdf, cosine, hemisphere */
     VAL_SPLIT,    /* full, direct or indirect */
+    VAL_LIGHT_SAMPLING, /* area or solid-angle */
     VAL_RR,       /* 'throughput' (stored as 0) or a probability in (0, 1] */
     VAL_CHECKER,  /* true, false, or a colour (the checker's second albedo) */
 };
@@ -139,6 +140,7 @@ static const struct stmt_spec stmt_specs[STMT_COUNT] = {
         {"direct", VAL_DIRECT, RANGE_ANY, ALL_TYPES, 0},
         {"light-samples", VAL_INT, RANGE_1K, ALL_TYPES, 0},
         {"split", VAL_SPLIT, RANGE_ANY, ALL_TYPES, 0},
+        {"light-sampling", VAL_LIGHT_SAMPLING, RANGE_ANY, ALL_TYPES, 0},
         {"rr", VAL_RR, RANGE_ANY, ALL_TYPES, 0},
         {"rr-depth", VAL_INT, RANGE_1K, ALL_TYPES, 0},
     }},
@@ -599,6 +601,14 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
             return fail(ps, p->val_col, "expected mis, light, bsdf, cosine or hemisphere for "
                                         "'%s', got '%s'", sp->key, v);
         p->u = (uint32_t)direct;
+        return true;
+    }
+    case VAL_LIGHT_SAMPLING: {
+        enum render_light_sampling mode;
+        if (!scene_light_sampling_parse(p->text, &mode))
+            return fail(ps, p->val_col, "expected area or solid-angle for '%s', got '%s'",
+                        sp->key, v);
+        p->u = (uint32_t)mode;
         return true;
     }
     case VAL_SPLIT: {
@@ -1181,6 +1191,23 @@ static bool do_material(struct parser *ps, const struct stmt *st)
 static const char *const DIRECT_NAMES[RENDER_DIRECT_COUNT] = {"mis", "light", "bsdf", "cosine",
                                                                "hemisphere"};
 static const char *const SPLIT_NAMES[RENDER_SPLIT_COUNT] = {"full", "direct", "indirect"};
+static const char *const LIGHT_SAMPLING_NAMES[RENDER_LIGHT_SAMPLING_COUNT] = {"area",
+                                                                             "solid-angle"};
+
+const char *scene_light_sampling_name(enum render_light_sampling mode)
+{
+    return (unsigned)mode < RENDER_LIGHT_SAMPLING_COUNT ? LIGHT_SAMPLING_NAMES[mode] : "?";
+}
+
+bool scene_light_sampling_parse(const char *name, enum render_light_sampling *mode)
+{
+    for (int k = 0; k < RENDER_LIGHT_SAMPLING_COUNT; k++)
+        if (strcmp(name, LIGHT_SAMPLING_NAMES[k]) == 0) {
+            *mode = (enum render_light_sampling)k;
+            return true;
+        }
+    return false;
+}
 
 const char *scene_direct_name(enum render_direct direct)
 {
@@ -1240,6 +1267,8 @@ static bool do_render(struct parser *ps, const struct stmt *st)
         r->light_samples = p->u;
     if ((p = get(st, "split"))->key)
         r->split = (enum render_split)p->u;
+    if ((p = get(st, "light-sampling"))->key)
+        r->light_sampling = (enum render_light_sampling)p->u;
     if ((p = get(st, "rr"))->key)
         r->rr_prob = p->f[0];
     if ((p = get(st, "rr-depth"))->key)

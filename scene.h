@@ -65,6 +65,19 @@ enum render_split {
 };
 #define RENDER_SPLIT_COUNT 3
 
+/* How an area light (triangle, quad) is sampled from a point: uniformly by area (the default:
+ * cheaper, and as good where visibility dominates the error) or by solid angle (light.c,
+ * shape.h; docs/performance.md, "Per-sample error"). */
+enum render_light_sampling {
+    RENDER_LIGHT_AREA,
+    RENDER_LIGHT_SOLID_ANGLE,
+};
+#define RENDER_LIGHT_SAMPLING_COUNT 2
+
+/* "area", "solid-angle"; "?" outside the enum. */
+const char *scene_light_sampling_name(enum render_light_sampling mode);
+bool scene_light_sampling_parse(const char *name, enum render_light_sampling *mode);
+
 /* "mis", "light", "bsdf", "cosine", "hemisphere"; "?" outside the enum. */
 const char *scene_direct_name(enum render_direct direct);
 /* Sets *direct to the estimator called name; false (untouched) when there is none. */
@@ -89,6 +102,7 @@ struct render_settings {
     enum render_direct direct; /* direct-lighting estimator (default MIS) */
     uint32_t light_samples;    /* light samples per path vertex */
     enum render_split split;   /* bounces kept (default all) */
+    enum render_light_sampling light_sampling; /* area lights: by area (default) or solid angle */
     float rr_prob;             /* fixed Russian-roulette continuation probability; 0: by beta */
     uint32_t rr_depth;         /* bounces before Russian roulette starts */
 };

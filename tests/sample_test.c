@@ -554,6 +554,163 @@ Test(sample, narrow_cone_keeps_precision)
     cr_assert_eq(pdf_uniform_cone(&wide_sin2), pdf_uniform_cone(&wide_cos));
 }
 
+/* ---- the spherical polygons and the bilinear warp ---- */
+
+/* Whether unit w lies inside the spherical triangle (a, b, c): on the inner side of each edge's
+ * great circle. */
+static bool in_sph_triangle(vec3 a, vec3 b, vec3 c, vec3 w)
+{
+    float o = v3_dot(a, v3_cross(b, c));
+    return v3_dot(w, v3_cross(a, b)) * o >= 0.0f && v3_dot(w, v3_cross(b, c)) * o >= 0.0f &&
+           v3_dot(w, v3_cross(c, a)) * o >= 0.0f;
+}
+
+static bool draw_sph_triangle(void *ctx, const float u[3], vec3 *w)
+{
+    *w = sample_spherical_triangle(ctx, (vec2){u[0], u[1]});
+    return true;
+}
+static double pdf_sph_triangle_at(void *ctx, vec3 w)
+{
+    const struct sample_sph_triangle *st = ctx;
+    return in_sph_triangle(st->a, st->b, st->c, w) ? pdf_spherical_triangle(st) : 0.0;
+}
+
+struct rect_ctx {
+    struct sample_sph_rect sr;
+    vec3 corner, e1, e2;
+};
+static bool draw_sph_rect(void *ctx, const float u[3], vec3 *w)
+{
+    struct rect_ctx *c = ctx;
+    *w = v3_normalize(v3_sub(sample_spherical_rectangle(&c->sr, (vec2){u[0], u[1]}), c->sr.o));
+    return true;
+}
+/* 1 / S where the ray from o along w meets the rectangle (a ray-plane test in its frame). */
+static double pdf_sph_rect_at(void *ctx, vec3 w)
+{
+    struct rect_ctx *c = ctx;
+    vec3 n = v3_cross(c->e1, c->e2);
+    float t = v3_dot(n, v3_sub(c->corner, c->sr.o)) / v3_dot(n, w);
+    if (!(t > 0.0f))
+        return 0.0;
+    vec3 d = v3_sub(v3_add(c->sr.o, v3_scale(w, t)), c->corner);
+    float s1 = v3_dot(d, c->e1) / v3_dot(c->e1, c->e1),
+          s2 = v3_dot(d, c->e2) / v3_dot(c->e2, c->e2);
+    return s1 >= 0.0f && s1 <= 1.0f && s2 >= 0.0f && s2 <= 1.0f ? pdf_spherical_rectangle(&c->sr)
+                                                                : 0.0;
+}
+
+static const float BILINEAR_W[4] = {0.2f, 1.0f, 0.6f, 0.05f};
+static bool draw_bilinear(void *ctx, const float u[3], vec3 *w)
+{
+    (void)ctx;
+    vec2 p = sample_bilinear((vec2){u[0], u[1]}, BILINEAR_W);
+    *w = v3(p.x, p.y, 0.0f);
+    return true;
+}
+static double pdf_bilinear_at(void *ctx, vec3 w)
+{
+    (void)ctx;
+    return pdf_bilinear((vec2){w.x, w.y}, BILINEAR_W);
+}
+
+/* A rectangle seen from o with corner + s e1 + t e2; the frame it is given in is rotated. */
+static struct rect_ctx rect_case(vec3 o, vec3 corner, vec3 e1, vec3 e2)
+{
+    struct rect_ctx c = {.corner = corner, .e1 = e1, .e2 = e2};
+    cr_assert(sample_sph_rect_init(o, corner, e1, e2, &c.sr));
+    return c;
+}
+
+/* Arvo's spherical-triangle map (Arvo 1995) and the spherical-rectangle map (Urena et al. 2013)
+ * are uniform in solid angle: chi-square against 1 / Omega inside the polygon (significance
+ * 0.01 / 5), the pdf integrating to 1 (so Omega is right); the bilinear warp fits its pdf
+ * (PBRT 4e, ch. A.5, SampleBilinear).  A large and a small triangle, a rectangle seen
+ * off-centre, and one seen from beside its edge (a grazing view). */
+Test(sample, spherical_polygons_chi2, .timeout = 60)
+{
+    const int n_tests = 5;
+    struct sample_sph_triangle big, small;
+    cr_assert(sample_sph_triangle_init(v3_normalize(v3(0.1f, 0.2f, 1.0f)),
+                                       v3_normalize(v3(1.0f, -0.3f, 0.4f)),
+                                       v3_normalize(v3(-0.6f, 0.9f, 0.5f)), &big));
+    cr_assert(sample_sph_triangle_init(v3_normalize(v3(0.1f, 0.2f, 1.0f)),
+                                       v3_normalize(v3(0.3f, 0.1f, 1.0f)),
+                                       v3_normalize(v3(0.15f, 0.45f, 1.0f)), &small));
+    struct rect_ctx off = rect_case(v3(0.3f, -0.2f, 0.1f), v3(-1.0f, -0.5f, 1.0f),
+                                    v3(1.6f, 0.0f, 0.0f), v3(0.0f, 1.2f, 0.4f));
+    struct rect_ctx grazing = rect_case(v3(0.0f, 0.0f, 0.0f), v3(0.2f, -1.0f, 0.05f),
+                                        v3(0.0f, 2.0f, 0.0f), v3(1.5f, 0.0f, 0.0f));
+    struct {
+        struct chi2_spec spec;
+        const char *name;
+    } cases[] = {
+        {chi2_sphere(draw_sph_triangle, pdf_sph_triangle_at, &big), "spherical triangle 1 sr"},
+        {chi2_sphere(draw_sph_triangle, pdf_sph_triangle_at, &small), "spherical triangle small"},
+        {chi2_sphere(draw_sph_rect, pdf_sph_rect_at, &off), "spherical rectangle"},
+        {chi2_sphere(draw_sph_rect, pdf_sph_rect_at, &grazing), "spherical rectangle, grazing"},
+        {chi2_plane(draw_bilinear, pdf_bilinear_at, NULL, 0, 1, 0, 1), "bilinear"},
+    };
+    for (int k = 0; k < n_tests; k++) {
+        cases[k].spec.n_samples = 300000;
+        if (k == 1) /* a small triangle: a finer grid, so that cells resolve it */
+            cases[k].spec.n_rows = cases[k].spec.n_cols = 256;
+        struct chi2_result r;
+        chi2_run(&cases[k].spec, &r);
+        cr_assert(chi2_accept(&r, n_tests), "%s: %s", cases[k].name, r.msg);
+        cr_assert(fabs(r.pdf_integral - 1.0) < 3e-3, "%s: pdf integrates to %f", cases[k].name,
+                  r.pdf_integral);
+    }
+}
+
+/* The solid angles against closed forms: an octant triangle is pi / 2 sr; a square of side 2
+ * at distance 1 seen from its centre's normal is 4 asin(1/3) = 2 pi / 3 sr (a cube face). */
+Test(sample, spherical_polygon_areas)
+{
+    float octant = sample_spherical_triangle_area(v3(1, 0, 0), v3(0, 1, 0), v3(0, 0, 1));
+    cr_assert(fabsf(octant - MCPT_PI / 2.0f) < 1e-6f, "octant %.9g", octant);
+    struct sample_sph_rect sr;
+    cr_assert(sample_sph_rect_init(v3(0, 0, 0), v3(-1, -1, -1), v3(2, 0, 0), v3(0, 2, 0), &sr));
+    cr_assert(fabsf(sr.area - 2.0f * MCPT_PI / 3.0f) < 1e-6f, "cube face %.9g", sr.area);
+    /* a tiny triangle keeps its relative precision (the angle excess would lose it) */
+    double h = 1e-3;
+    float tiny = sample_spherical_triangle_area(v3(0, 0, 1), v3_normalize(v3((float)h, 0, 1)),
+                                                v3_normalize(v3(0, (float)h, 1)));
+    cr_assert(fabs(tiny / (0.5 * h * h) - 1.0) < 2e-3, "tiny %.9g vs %.9g", tiny, 0.5 * h * h);
+    /* refused: a degenerate triangle, a non-rectangular parallelogram, a point in the plane */
+    struct sample_sph_triangle st;
+    cr_assert(!sample_sph_triangle_init(v3(1, 0, 0), v3(1, 0, 0), v3(0, 1, 0), &st));
+    cr_assert(!sample_sph_rect_init(v3(0, 0, 0), v3(-1, -1, -1), v3(2, 0, 0), v3(1, 2, 0), &sr));
+    cr_assert(!sample_sph_rect_init(v3(0, 0, -1), v3(-1, -1, -1), v3(2, 0, 0), v3(0, 2, 0), &sr));
+}
+
+/* The inverses round-trip: sample_invert_X(sample_X(u)) = u, for the triangles and rectangles of
+ * the chi-square test and for the bilinear warp. */
+Test(sample, spherical_polygon_inverses_round_trip)
+{
+    struct sample_sph_triangle st;
+    cr_assert(sample_sph_triangle_init(v3_normalize(v3(0.1f, 0.2f, 1.0f)),
+                                       v3_normalize(v3(1.0f, -0.3f, 0.4f)),
+                                       v3_normalize(v3(-0.6f, 0.9f, 0.5f)), &st));
+    struct rect_ctx rc = rect_case(v3(0.3f, -0.2f, 0.1f), v3(-1.0f, -0.5f, 1.0f),
+                                   v3(1.6f, 0.0f, 0.0f), v3(0.0f, 1.2f, 0.4f));
+    struct pcg32 rng;
+    sample_pcg32_seed(&rng, 21u, 5u);
+    for (int i = 0; i < 100000; i++) {
+        vec2 u = {sample_pcg32_float(&rng), sample_pcg32_float(&rng)};
+        if (u.x < 1e-3f || u.x > 1.0f - 1e-3f || u.y < 1e-3f || u.y > 1.0f - 1e-3f)
+            continue; /* the corners, where a vertex has every u0 and the inverse no answer */
+        vec2 got[3];
+        got[0] = sample_invert_spherical_triangle(&st, sample_spherical_triangle(&st, u));
+        got[1] = sample_invert_spherical_rectangle(&rc.sr, sample_spherical_rectangle(&rc.sr, u));
+        got[2] = sample_invert_bilinear(sample_bilinear(u, BILINEAR_W), BILINEAR_W);
+        for (int k = 0; k < 3; k++)
+            cr_assert(fabsf(got[k].x - u.x) < 1e-3f && fabsf(got[k].y - u.y) < 1e-3f,
+                      "warp %d: u (%f, %f) -> (%f, %f)", k, u.x, u.y, got[k].x, got[k].y);
+    }
+}
+
 /* ---- discrete distributions: the alias method ---- */
 
 /* The alias table (Walker 1977; Vose 1991) picks index i with probability w_i / sum w: over a
