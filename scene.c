@@ -52,6 +52,7 @@ enum value_kind {
     VAL_SAMPLER,  /* a sampler name: independent, stratified, sobol */
     VAL_DIRECT,   /* a direct-lighting estimator: mis, light, bsdf, cosine, hemisphere */
     VAL_SPLIT,    /* full, direct or indirect */
+    VAL_ADAPTIVE_RULE,  /* pilot or stop */
     VAL_LIGHT_SAMPLING, /* area or solid-angle */
     VAL_RR,       /* 'throughput' (stored as 0) or a probability in (0, 1] */
     VAL_CHECKER,  /* true, false, or a colour (the checker's second albedo) */
@@ -132,6 +133,8 @@ static const struct stmt_spec stmt_specs[STMT_COUNT] = {
         {"max-depth", VAL_DEPTH, RANGE_ANY, ALL_TYPES, 0},
         {"sampler", VAL_SAMPLER, RANGE_ANY, ALL_TYPES, 0},
         {"adaptive", VAL_BOOL, RANGE_ANY, ALL_TYPES, 0},
+        {"adaptive-rule", VAL_ADAPTIVE_RULE, RANGE_ANY, ALL_TYPES, 0},
+        {"pilot-spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
         {"tolerance", VAL_NUMBER, RANGE_POSITIVE, ALL_TYPES, 0},
         {"adaptive-floor", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
         {"batch", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
@@ -601,6 +604,13 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
             return fail(ps, p->val_col, "expected mis, light, bsdf, cosine or hemisphere for "
                                         "'%s', got '%s'", sp->key, v);
         p->u = (uint32_t)direct;
+        return true;
+    }
+    case VAL_ADAPTIVE_RULE: {
+        enum render_adaptive_rule rule;
+        if (!scene_adaptive_rule_parse(p->text, &rule))
+            return fail(ps, p->val_col, "expected pilot or stop for '%s', got '%s'", sp->key, v);
+        p->u = (uint32_t)rule;
         return true;
     }
     case VAL_LIGHT_SAMPLING: {
@@ -1191,8 +1201,24 @@ static bool do_material(struct parser *ps, const struct stmt *st)
 static const char *const DIRECT_NAMES[RENDER_DIRECT_COUNT] = {"mis", "light", "bsdf", "cosine",
                                                                "hemisphere"};
 static const char *const SPLIT_NAMES[RENDER_SPLIT_COUNT] = {"full", "direct", "indirect"};
+static const char *const ADAPTIVE_RULE_NAMES[RENDER_ADAPTIVE_RULE_COUNT] = {"pilot", "stop"};
 static const char *const LIGHT_SAMPLING_NAMES[RENDER_LIGHT_SAMPLING_COUNT] = {"area",
                                                                              "solid-angle"};
+
+const char *scene_adaptive_rule_name(enum render_adaptive_rule rule)
+{
+    return (unsigned)rule < RENDER_ADAPTIVE_RULE_COUNT ? ADAPTIVE_RULE_NAMES[rule] : "?";
+}
+
+bool scene_adaptive_rule_parse(const char *name, enum render_adaptive_rule *rule)
+{
+    for (int k = 0; k < RENDER_ADAPTIVE_RULE_COUNT; k++)
+        if (strcmp(name, ADAPTIVE_RULE_NAMES[k]) == 0) {
+            *rule = (enum render_adaptive_rule)k;
+            return true;
+        }
+    return false;
+}
 
 const char *scene_light_sampling_name(enum render_light_sampling mode)
 {
@@ -1253,6 +1279,16 @@ static bool do_render(struct parser *ps, const struct stmt *st)
         r->sampler = (enum sampler_kind)p->u;
     if ((p = get(st, "adaptive"))->key)
         r->adaptive = p->b;
+    if ((p = get(st, "adaptive-rule"))->key) {
+        r->has_adaptive_rule = true;
+        r->adaptive_rule = (enum render_adaptive_rule)p->u;
+    }
+    if ((p = get(st, "pilot-spp"))->key) {
+        /* one sample has no spread, as for min-spp */
+        if (p->u < 2)
+            return fail(ps, p->val_col, "expected 'pilot-spp' >= 2, got %s", p->text);
+        r->pilot_spp = p->u;
+    }
     if ((p = get(st, "tolerance"))->key)
         r->tolerance = p->f[0];
     if ((p = get(st, "adaptive-floor"))->key)

@@ -859,6 +859,98 @@ Test(adaptive, rule_on_gaussian_streams)
         }
 }
 
+/* The pilot rule's count is the stop rule's predicted stop: with exact moments of the pilot
+ * (an alternating stream of an even count has mean mu and spread sigma) it is the N with
+ * 1.96 sigma / sqrt(N) = T max(mu, floor), rounded up to whole batches and clamped to
+ * [min_spp, max_spp]; no pilot (n = 0) gives the maximum. */
+Test(adaptive, pilot_count_on_exact_moments)
+{
+    const struct {
+        double mu, sigma, tol, floor_lum;
+        uint32_t min_spp, batch, max_spp;
+    } cases[] = {
+        {1.0, 0.5, 0.05, 0.01, 64, 32, 4096},   /* N* = 384.2 -> 416 */
+        {1.0, 2.0, 0.05, 0.01, 64, 32, 4096},   /* N* = 6147 -> the maximum */
+        {0.2, 0.1, 0.10, 0.01, 16, 8, 1024},    /* N* = 96.04 -> 104 */
+        {1e-3, 1e-2, 0.05, 0.01, 64, 32, 4096}, /* dark: N* = 1536.6 with the floor */
+        {0.0, 0.0, 0.05, 0.01, 64, 32, 4096},   /* black: the least */
+        {5.0, 0.01, 0.05, 0.01, 64, 32, 4096},  /* converged at once: the least */
+        {1.0, 0.5, 0.05, 0.01, 64, 1, 4096},    /* batch 1: N* rounded up, 385 */
+    };
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        struct stream st = {cases[c].mu, cases[c].sigma, {0, 1}};
+        double s1 = 0.0, s2 = 0.0;
+        for (uint32_t i = 0; i < 16; i++) {
+            double x = alternating(&st, i);
+            s1 += x;
+            s2 += x * x;
+        }
+        uint32_t got = trace_pilot_spp(s1, s2, 16, cases[c].tol, cases[c].floor_lum,
+                                       cases[c].min_spp, cases[c].max_spp, cases[c].batch);
+        uint32_t want = predicted_stop(cases[c].mu, cases[c].sigma, cases[c].min_spp,
+                                       cases[c].batch, cases[c].max_spp, cases[c].tol,
+                                       cases[c].floor_lum);
+        cr_assert_eq(got, want, "case %zu: pilot count %u, predicted %u", c, got, want);
+    }
+    cr_assert_eq(trace_pilot_spp(0.0, 0.0, 0, 0.05, 0.01, 64, 4096, 32), 4096u, "no pilot");
+}
+
+/* A pixel with a rare bright path: x = 0.5, or 50 with probability 1/100 (mean 0.995).  Over
+ * 20000 pixels: the stop rule (its own samples decide and estimate) returns a mean far below
+ * the truth (a pixel that has not met the bright path shows a mean of 0.5 and no spread, and
+ * stops at min_spp, 52% of them); the pilot rule (Kirk & Arvo 1991: 16 pilot samples decide,
+ * then N fresh samples estimate) returns the truth within 4 standard errors. */
+Test(adaptive, pilot_unbiased_where_stop_rule_is_not)
+{
+    enum { PIXELS = 20000, MIN_SPP = 64, BATCH = 32, MAX_SPP = 1024, PILOT = 16 };
+    const double tol = 0.1, floor_lum = 0.01, truth = 0.99 * 0.5 + 0.01 * 50.0;
+    struct pcg32 rng;
+    sample_pcg32_seed(&rng, 2024u, 5u);
+#define DRAW() (sample_pcg32_float(&rng) < 0.01f ? 50.0 : 0.5)
+    double sum[2] = {0.0, 0.0}, sum_sq[2] = {0.0, 0.0};
+    for (int i = 0; i < PIXELS; i++) {
+        /* the stop rule: test at MIN_SPP + k BATCH, estimate from the same samples */
+        double s1 = 0.0, s2 = 0.0;
+        uint32_t n = 0;
+        while (n < MAX_SPP && !(n >= MIN_SPP && (n - MIN_SPP) % BATCH == 0 &&
+                                trace_adaptive_stop(s1, s2, n, tol, floor_lum))) {
+            double x = DRAW();
+            s1 += x;
+            s2 += x * x;
+            n++;
+        }
+        double est = s1 / n;
+        sum[0] += est;
+        sum_sq[0] += est * est;
+        /* the pilot rule: PILOT samples decide N, N fresh samples estimate */
+        double p1 = 0.0, p2 = 0.0;
+        for (int k = 0; k < PILOT; k++) {
+            double x = DRAW();
+            p1 += x;
+            p2 += x * x;
+        }
+        uint32_t n_spp = trace_pilot_spp(p1, p2, PILOT, tol, floor_lum, MIN_SPP, MAX_SPP, BATCH);
+        double e1 = 0.0;
+        for (uint32_t k = 0; k < n_spp; k++)
+            e1 += DRAW();
+        est = e1 / n_spp;
+        sum[1] += est;
+        sum_sq[1] += est * est;
+    }
+#undef DRAW
+    double mean[2], se[2];
+    for (int r = 0; r < 2; r++) {
+        mean[r] = sum[r] / PIXELS;
+        se[r] = sqrt((sum_sq[r] / PIXELS - mean[r] * mean[r]) / (PIXELS - 1));
+    }
+    cr_log_info("stop rule %.5f +- %.5f, pilot rule %.5f +- %.5f, truth %.5f", mean[0], se[0],
+                mean[1], se[1], truth);
+    cr_assert(mean[0] < truth - 10.0 * se[0], "stop rule %g +- %g: expected its bias, truth %g",
+              mean[0], se[0], truth);
+    cr_assert(fabs(mean[1] - truth) < 4.0 * se[1], "pilot rule %g +- %g, truth %g", mean[1], se[1],
+              truth);
+}
+
 /* ---- samplers in the renderer ---- */
 
 static struct trace_scene *load_scene(const char *path, int width, int height, struct scene *s)
@@ -881,9 +973,9 @@ static void render_film(const struct trace_scene *ts, const struct trace_options
     cr_assert_eq(res.n_nonfinite, 0u);
 }
 
-/* Every sampler, and adaptive sampling, renders bit-identical films with 1 and 3 threads; an
- * adaptive render split into two calls (maximum 16, then 48) equals one call; and adaptive
- * sampling does stop some pixels early and run others on. */
+/* Every sampler, and adaptive sampling by either rule, renders bit-identical films with 1 and
+ * 3 threads; an adaptive render split into two calls (maximum 16, then 48) equals one call; and
+ * adaptive sampling does stop some pixels early and run others on. */
 Test(sampling, deterministic_for_any_thread_count, .timeout = 120)
 {
     struct scene s;
@@ -892,16 +984,20 @@ Test(sampling, deterministic_for_any_thread_count, .timeout = 120)
     size_t bytes = sizeof(struct film_pixel) * n_pixels;
     struct mcpt_error err;
     for (int k = 0; k < SAMPLER_COUNT; k++)
-        for (int adaptive = 0; adaptive < 2; adaptive++) {
+        for (int adaptive = 0; adaptive < 3; adaptive++) {
             struct trace_options opt = {.spp = adaptive ? 48 : 8,
                                         .max_depth = 5,
                                         .seed = 42,
                                         .sampler = KINDS[k],
-                                        .adaptive = adaptive,
+                                        .adaptive = adaptive > 0,
+                                        .adaptive_rule = adaptive == 1 ? RENDER_ADAPTIVE_STOP
+                                                                       : RENDER_ADAPTIVE_PILOT,
                                         .tolerance = 0.3f,
                                         .adaptive_floor = 0.01f,
                                         .min_spp = 8,
-                                        .batch = 8};
+                                        .batch = 8,
+                                        .pilot_spp = 8,
+                                        .max_spp = 48};
             struct film a, b, c;
             cr_assert(film_init(&a, s.width, s.height, &err));
             cr_assert(film_init(&b, s.width, s.height, &err));
@@ -932,6 +1028,86 @@ Test(sampling, deterministic_for_any_thread_count, .timeout = 120)
             film_free(&b);
             film_free(&c);
         }
+    trace_free(ts);
+    scene_free(&s);
+}
+
+/* The image mean of pixels' estimates (film means) of a 32 x 32 render of the glass Cornell box
+ * with options opt, channel by channel. */
+static void glass_image_mean(const struct trace_scene *ts, const struct trace_options *opt,
+                             int width, int height, double mean[3], uint64_t *n_samples)
+{
+    struct film film;
+    struct mcpt_error err;
+    cr_assert(film_init(&film, width, height, &err));
+    struct trace_result res;
+    cr_assert(trace_render(ts, opt, &film, &res, &err), "%s", err.msg);
+    *n_samples = res.n_samples + res.n_pilot;
+    for (int c = 0; c < 3; c++) {
+        double sum = 0.0;
+        for (int i = 0; i < width * height; i++)
+            sum += film_mean(&film.pixels[i], c);
+        mean[c] = sum / (width * height);
+    }
+    film_free(&film);
+}
+
+/* Adaptive sampling by the pilot rule is unbiased on the glass Cornell box, whose caustic the
+ * stop rule misses (docs/sampling.md): over 24 seeds, the image mean of adaptive renders (T
+ * 0.2, pilot 8, 8..256 spp) minus that of uniform 64-spp renders of other seeds is within 4
+ * standard errors of 0 (the seeds' scatter) in each channel, while the stop rule with the same
+ * T, min-spp and batch is below by more than 4. */
+Test(sampling, adaptive_pilot_unbiased_on_glass, .timeout = 240)
+{
+    enum { W = 32, H = 32, SEEDS = 24 };
+    struct scene s;
+    struct trace_scene *ts = load_scene("scenes/cornell-glass.txt", W, H, &s);
+    struct trace_options base = {.max_depth = TRACE_DEPTH_INFINITE,
+                                 .sampler = SAMPLER_SOBOL,
+                                 .n_threads = 2,
+                                 .tolerance = 0.2f,
+                                 .adaptive_floor = 0.01f,
+                                 .min_spp = 8,
+                                 .batch = 8,
+                                 .pilot_spp = 8};
+    double sum[2][3] = {{0}}, sum_sq[2][3] = {{0}};
+    uint64_t n_adaptive = 0;
+    for (uint64_t k = 0; k < SEEDS; k++) {
+        double uniform[3], pilot[3], stop[3];
+        uint64_t n;
+        struct trace_options opt = base;
+        opt.seed = 1000 + k;
+        opt.spp = 64;
+        glass_image_mean(ts, &opt, W, H, uniform, &n);
+        opt.seed = 2000 + k;
+        opt.spp = 256;
+        opt.adaptive = true;
+        opt.adaptive_rule = RENDER_ADAPTIVE_PILOT;
+        glass_image_mean(ts, &opt, W, H, pilot, &n);
+        n_adaptive += n;
+        opt.adaptive_rule = RENDER_ADAPTIVE_STOP;
+        glass_image_mean(ts, &opt, W, H, stop, &n);
+        for (int c = 0; c < 3; c++) {
+            double d[2] = {pilot[c] - uniform[c], stop[c] - uniform[c]};
+            for (int r = 0; r < 2; r++) {
+                sum[r][c] += d[r];
+                sum_sq[r][c] += d[r] * d[r];
+            }
+        }
+    }
+    for (int c = 0; c < 3; c++) {
+        double z[2];
+        for (int r = 0; r < 2; r++) {
+            double m = sum[r][c] / SEEDS;
+            double se = sqrt((sum_sq[r][c] / SEEDS - m * m) / (SEEDS - 1));
+            z[r] = m / se;
+        }
+        cr_log_info("channel %d: pilot - uniform %.2f SE, stop - uniform %.2f SE (pilot %.1f spp "
+                    "a pixel with its pilot)",
+                    c, z[0], z[1], (double)n_adaptive / SEEDS / (W * H));
+        cr_assert(fabs(z[0]) < 4.0, "channel %d: pilot rule off by %.2f SE", c, z[0]);
+        cr_assert(z[1] < -4.0, "channel %d: the stop rule's bias, %.2f SE, not seen", c, z[1]);
+    }
     trace_free(ts);
     scene_free(&s);
 }
@@ -1037,11 +1213,15 @@ Test(sampling, render_statement_parameters)
     struct scene s;
     struct mcpt_error err;
     cr_assert(load_text(CAM "render spp=8 sampler=stratified adaptive=true tolerance=0.1 "
-                            "adaptive-floor=0.002 batch=16 min-spp=32 max-spp=512\n",
+                            "adaptive-floor=0.002 batch=16 min-spp=32 max-spp=512 "
+                            "adaptive-rule=stop pilot-spp=8 light-sampling=solid-angle\n",
                         &s, &err),
               "%s", err.msg);
     cr_assert_eq(s.render.sampler, SAMPLER_STRATIFIED);
     cr_assert(s.render.adaptive);
+    cr_assert(s.render.has_adaptive_rule && s.render.adaptive_rule == RENDER_ADAPTIVE_STOP);
+    cr_assert_eq(s.render.pilot_spp, 8u);
+    cr_assert_eq(s.render.light_sampling, RENDER_LIGHT_SOLID_ANGLE);
     cr_assert_float_eq(s.render.tolerance, 0.1f, 1e-7f);
     cr_assert_float_eq(s.render.adaptive_floor, 0.002f, 1e-9f);
     cr_assert_eq(s.render.batch, 16u);
@@ -1053,6 +1233,8 @@ Test(sampling, render_statement_parameters)
     cr_assert_not(s.render.adaptive);
     cr_assert(s.render.tolerance == 0.0f && s.render.batch == 0 && s.render.min_spp == 0 &&
               s.render.max_spp == 0 && s.render.adaptive_floor < 0.0f);
+    cr_assert(!s.render.has_adaptive_rule && s.render.pilot_spp == 0);
+    cr_assert_eq(s.render.light_sampling, RENDER_LIGHT_AREA);
     scene_free(&s);
 }
 
@@ -1071,6 +1253,13 @@ Test(sampling, render_statement_errors)
         {"render tolerance=0\n", 18, "expected 'tolerance' > 0, got 0"},
         {"render batch=0\n", 14, "expected 'batch' in 1..4294967295, got 0"},
         {"render adaptive=yes\n", 17, "expected true or false for 'adaptive', got 'yes'"},
+        {"render adaptive-rule=early\n", 22,
+         "expected pilot or stop for 'adaptive-rule', got "
+         "'early'"},
+        {"render pilot-spp=1\n", 18, "expected 'pilot-spp' >= 2, got 1"},
+        {"render light-sampling=sphere\n", 23,
+         "expected area or solid-angle for "
+         "'light-sampling', got 'sphere'"},
     };
     for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
         char text[256];
