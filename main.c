@@ -43,7 +43,9 @@ static const char USAGE[] =
     "      --light-sampling M area (default) or solid-angle: how triangle and quad lights\n"
     "                         are sampled (Arvo 1995; Urena et al. 2013)\n"
     "      --rr P             Russian roulette: throughput (default: continue with probability\n"
-    "                         max beta) or a fixed continuation probability P in (0, 1]\n"
+    "                         max beta / threshold) or a fixed continuation probability P in\n"
+    "                         (0, 1]\n"
+    "      --rr-threshold B   throughput below which roulette plays (default 0.25; PBRT's 1)\n"
     "      --rr-depth D       bounces before roulette may end a path (1..1024, default 2)\n"
     "      --threads N        render threads (default: all cores)\n"
     "      --seed S           random seed, 0..2^64-1 (default 0)\n"
@@ -138,6 +140,7 @@ struct options {
     float rr_prob;                    /* 0: throughput-based */
     uint32_t light_samples;           /* --light-samples N; 0: from the scene, else 1 */
     uint32_t rr_depth;                /* --rr-depth D; 0: from the scene, else the default */
+    float rr_threshold;               /* --rr-threshold B; 0: from the scene, else the default */
     const char *resume_path;          /* --resume CKPT, or NULL */
     bool has_range;                   /* --sample-range A:B given */
     struct partial_range range;       /* its sample indices */
@@ -249,6 +252,7 @@ enum {
     OPT_RR,
     OPT_RR_DEPTH,
     OPT_LIGHT_SAMPLING,
+    OPT_RR_THRESHOLD,
     OPT_SAMPLE_RANGE = 1280,
 };
 
@@ -262,6 +266,7 @@ static const struct option LONG_OPTS[] = {
     {"light-sampling", required_argument, NULL, OPT_LIGHT_SAMPLING},
     {"rr", required_argument, NULL, OPT_RR},
     {"rr-depth", required_argument, NULL, OPT_RR_DEPTH},
+    {"rr-threshold", required_argument, NULL, OPT_RR_THRESHOLD},
     {"threads", required_argument, NULL, OPT_THREADS},
     {"seed", required_argument, NULL, OPT_SEED},
     {"sampler", required_argument, NULL, OPT_SAMPLER},
@@ -353,6 +358,9 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
         return scene_split_parse(optarg, &o->split) ||
                cmd_usage_error(err, "expected --split to be full, direct or indirect, got '%s'",
                                optarg);
+    case OPT_RR_THRESHOLD:
+        return (cmd_parse_float(optarg, 0.0f, 1e6f, &o->rr_threshold) && o->rr_threshold > 0.0f) ||
+               cmd_usage_error(err, "expected --rr-threshold to be a number > 0, got '%s'", optarg);
     case OPT_LIGHT_SAMPLING:
         o->has_light_sampling = true;
         return scene_light_sampling_parse(optarg, &o->light_sampling) ||
@@ -711,12 +719,14 @@ static bool sample_range_options(const struct options *o, bool measuring, uint64
     info->ranges[0] = o->range;
     snprintf(info->render, sizeof info->render,
              "scene=%016llx film=%dx%d spp=%u seed=%llu sampler=%s max-depth=%u direct=%s "
-             "light-samples=%u split=%s rr=%.9g rr-depth=%u light-sampling=%s",
+             "light-samples=%u split=%s rr=%.9g rr-depth=%u rr-threshold=%.9g "
+             "light-sampling=%s",
              (unsigned long long)scene_hash, film->width, film->height, topt->spp,
              (unsigned long long)topt->seed, sample_sampler_name(topt->sampler), topt->max_depth,
              scene_direct_name(topt->direct), topt->light_samples ? topt->light_samples : 1u,
              scene_split_name(topt->split), (double)topt->rr_prob,
              topt->rr_depth ? topt->rr_depth : TRACE_RR_DEPTH_DEFAULT,
+             (double)(topt->rr_threshold > 0.0f ? topt->rr_threshold : TRACE_RR_THRESHOLD_DEFAULT),
              scene_light_sampling_name(scene_light_sampling));
     topt->sampler_spp = topt->spp; /* the whole render's stratified sets */
     topt->sample_offset = o->range.begin;
@@ -774,6 +784,7 @@ static bool render_options(struct run *run, struct mcpt_error *err)
         .split = o->has_split ? o->split : r->split,
         .rr_prob = o->has_rr ? o->rr_prob : r->rr_prob,
         .rr_depth = o->rr_depth ? o->rr_depth : r->rr_depth,
+        .rr_threshold = o->rr_threshold > 0.0f ? o->rr_threshold : r->rr_threshold,
     };
     if (!sampling_options(o, r, &run->topt, err))
         return false;

@@ -146,6 +146,7 @@ static const struct stmt_spec stmt_specs[STMT_COUNT] = {
         {"light-sampling", VAL_LIGHT_SAMPLING, RANGE_ANY, ALL_TYPES, 0},
         {"rr", VAL_RR, RANGE_ANY, ALL_TYPES, 0},
         {"rr-depth", VAL_INT, RANGE_1K, ALL_TYPES, 0},
+        {"rr-threshold", VAL_NUMBER, RANGE_POSITIVE, ALL_TYPES, 0},
     }},
     [STMT_MATERIAL] = {"material", false, {"diffuse", "mirror", "dielectric", "diffuse-uniform",
                                            "conductor", "plastic", "unity", NULL}, {
@@ -1309,6 +1310,8 @@ static bool do_render(struct parser *ps, const struct stmt *st)
         r->rr_prob = p->f[0];
     if ((p = get(st, "rr-depth"))->key)
         r->rr_depth = p->u;
+    if ((p = get(st, "rr-threshold"))->key)
+        r->rr_threshold = p->f[0];
     if ((p = get(st, "min-spp"))->key) {
         /* one sample has no spread: sigma = 0 would stop every lit pixel at once */
         if (p->u < 2)

@@ -118,8 +118,9 @@ struct render_settings {
     uint32_t light_samples;                    /* light samples per path vertex */
     enum render_split split;                   /* bounces kept (default all) */
     enum render_light_sampling light_sampling; /* area lights: by area (default) or solid angle */
-    float rr_prob;     /* fixed Russian-roulette continuation probability; 0: by beta */
-    uint32_t rr_depth; /* bounces before Russian roulette starts */
+    float rr_prob;      /* fixed Russian-roulette continuation probability; 0: by beta */
+    float rr_threshold; /* roulette by beta below this throughput; 0: not given */
+    uint32_t rr_depth;  /* bounces before Russian roulette starts */
 };
 
 struct scene {

@@ -98,6 +98,8 @@ vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *op
     const struct scene *scene = ts->scene;
     const uint32_t n_ls = opt->light_samples ? opt->light_samples : 1;
     const uint32_t rr_depth = opt->rr_depth ? opt->rr_depth : TRACE_RR_DEPTH_DEFAULT;
+    const float rr_threshold = opt->rr_threshold > 0.0f ? opt->rr_threshold
+                                                        : TRACE_RR_THRESHOLD_DEFAULT;
     /* inf (TRACE_DEPTH_INFINITE) and anything deeper stop at the cap, which also keeps the
      * bounce dimensions below sample.h's SAMPLE_DIM_LIGHT_EXTRA */
     uint32_t max_bounces = opt->max_depth < TRACE_DEPTH_CAP ? opt->max_depth : TRACE_DEPTH_CAP;
@@ -175,10 +177,12 @@ vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *op
         ray = spawn_ray(&hr.sf, wi_world);
 
         /* Russian roulette after bounce rr_depth: continue with probability p, beta /= p;
-         * p = min(1, max(beta) eta^2) by throughput, or the fixed --rr p */
+         * p = min(1, max(beta) eta^2 / threshold) by throughput (a survivor below the threshold
+         * carries max(beta) eta^2 = threshold on), or the fixed --rr p */
         if (n_bounces >= rr_depth) {
-            float p = opt->rr_prob > 0.0f ? opt->rr_prob
-                                          : fminf(1.0f, v3_max_comp(beta) * eta_scale);
+            float p = opt->rr_prob > 0.0f
+                          ? opt->rr_prob
+                          : fminf(1.0f, v3_max_comp(beta) * eta_scale / rr_threshold);
             if (p < 1.0f) {
                 sample_set_dim(sampler, dim0 + SAMPLE_BOUNCE_ROULETTE);
                 if (!(sample_1d(sampler) < p))

@@ -51,6 +51,7 @@ Test(cli, bad_usage, .init = setup, .fini = teardown)
         {"tests/data/cli/tiny.txt", "--adaptive-rule", "pilot", NULL}, /* without --adaptive */
         {"tests/data/cli/tiny.txt", "--adaptive", "--adaptive-rule", "stop", "--pilot-spp", "8"},
         {"tests/data/cli/tiny.txt", "--light-sampling", "sphere", NULL},
+        {"tests/data/cli/tiny.txt", "--rr-threshold", "0", NULL},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         char err[4096];

@@ -21,8 +21,10 @@
 
 static void assert_vec3(vec3 a, float x, float y, float z, const char *what)
 {
-    cr_assert(a.x == x && a.y == y && a.z == z, "%s: expected (%.9g, %.9g, %.9g), got (%.9g, "
-              "%.9g, %.9g)", what, x, y, z, a.x, a.y, a.z);
+    cr_assert(a.x == x && a.y == y && a.z == z,
+              "%s: expected (%.9g, %.9g, %.9g), got (%.9g, "
+              "%.9g, %.9g)",
+              what, x, y, z, a.x, a.y, a.z);
 }
 
 static void assert_vec3_near(vec3 a, float x, float y, float z, const char *what)
@@ -170,8 +172,8 @@ Test(scene, full_scene_values)
 
     /* mesh 1: translate=1,2,3 rotate=0,1,0,90 scale=2; mesh 2: scale=-1,1,1 */
     cr_assert_eq(sc.n_positions, 12);
-    const float pos[12][3] = {{1, 2, 3},  {1, 2, 1}, {1, 4, 1},  {1, 4, 3}, {3, 2, 3}, {1, 2, -1},
-                              {0, 0, 0},  {-1, 0, 0}, {-1, 1, 0}, {0, 1, 0}, {0, 0, 1}, {-2, 0, 0}};
+    const float pos[12][3] = {{1, 2, 3}, {1, 2, 1},  {1, 4, 1},  {1, 4, 3}, {3, 2, 3}, {1, 2, -1},
+                              {0, 0, 0}, {-1, 0, 0}, {-1, 1, 0}, {0, 1, 0}, {0, 0, 1}, {-2, 0, 0}};
     for (int i = 0; i < 12; i++)
         assert_vec3(sc.positions[i], pos[i][0], pos[i][1], pos[i][2], "position");
     cr_assert_eq(sc.n_normals, 4);
@@ -184,12 +186,12 @@ Test(scene, full_scene_values)
 
     cr_assert_eq(sc.n_tris, 10);
     const struct scene_tri tris[10] = {
-        {{0, 1, 4}, {-1, -1, -1}, {-1, -1, -1}, 11},  /* no usemtl: "default" */
+        {{0, 1, 4}, {-1, -1, -1}, {-1, -1, -1}, 11}, /* no usemtl: "default" */
         {{0, 1, 2}, {0, 0, 0}, {0, 1, 2}, 5},
         {{0, 2, 3}, {0, 0, 0}, {0, 2, 3}, 5},
-        {{0, 2, 4}, {-1, -1, -1}, {-1, -1, -1}, 6},   /* zero normal: vn dropped */
+        {{0, 2, 4}, {-1, -1, -1}, {-1, -1, -1}, 6}, /* zero normal: vn dropped */
         {{0, 1, 5}, {-1, -1, -1}, {-1, -1, -1}, 6},
-        {{6, 10, 7}, {-1, -1, -1}, {-1, -1, -1}, 0},  /* mirrored: corners 0, 2, 1 */
+        {{6, 10, 7}, {-1, -1, -1}, {-1, -1, -1}, 0}, /* mirrored: corners 0, 2, 1 */
         {{6, 8, 7}, {2, 2, 2}, {4, 6, 5}, 0},
         {{6, 9, 8}, {2, 2, 2}, {4, 7, 6}, 0},
         {{6, 10, 8}, {-1, -1, -1}, {-1, -1, -1}, 0},
@@ -242,8 +244,8 @@ Test(scene, full_scene_values)
 
     /* lights: tri 3 (tri 4 has zero area), quad 0, spheres 0 and 1, then the point lights */
     cr_assert_eq(sc.n_lights, 6);
-    const enum light_kind kinds[6] = {LIGHT_TRIANGLE, LIGHT_QUAD, LIGHT_SPHERE, LIGHT_SPHERE,
-                                      LIGHT_POINT, LIGHT_POINT};
+    const enum light_kind kinds[6] = {LIGHT_TRIANGLE, LIGHT_QUAD,  LIGHT_SPHERE,
+                                      LIGHT_SPHERE,   LIGHT_POINT, LIGHT_POINT};
     const uint32_t prims[6] = {3, 0, 0, 1, 0, 1};
     for (int i = 0; i < 6; i++) {
         cr_assert_eq(sc.lights[i].kind, kinds[i], "light %d kind", i);
@@ -326,7 +328,8 @@ Test(scene, rotation_rodrigues)
     scene_free(&sc);
     /* -90 about z, written as 270: (1,0,0) -> (0,-1,0) exactly; scale applies before */
     load_ok(CAM MAT "quad corner=1,0,0 edge1=0,1,0 edge2=0,0,1 material=red rotate=0,0,1,270 "
-                    "scale=3,1,1 translate=0,0,1\n", &sc);
+                    "scale=3,1,1 translate=0,0,1\n",
+            &sc);
     assert_vec3(sc.quads[0].corner, 0, -3, 1, "corner");
     assert_vec3(sc.quads[0].e1, 1, 0, 0, "e1");
     assert_vec3(sc.quads[0].e2, 0, 0, 1, "e2");
@@ -340,8 +343,8 @@ Test(scene, normals_inverse_transpose)
 {
     struct scene sc;
     struct mcpt_error err = {0};
-    cr_assert(scene_load("tests/data/scene/nonuniform.txt", &sc, &err), "%s:%d:%d: %s",
-              err.file, err.line, err.col, err.msg);
+    cr_assert(scene_load("tests/data/scene/nonuniform.txt", &sc, &err), "%s:%d:%d: %s", err.file,
+              err.line, err.col, err.msg);
     cr_assert(sc.n_tris == 1 && sc.n_normals == 1);
     vec3 n = sc.normals[sc.tris[0].vn[0]];
     vec3 p0 = sc.positions[sc.tris[0].v[0]];
@@ -361,8 +364,8 @@ Test(scene, cornell_box)
 {
     struct scene sc;
     struct mcpt_error err = {0};
-    cr_assert(scene_load("scenes/cornell-box.txt", &sc, &err), "%s:%d:%d: %s", err.file,
-              err.line, err.col, err.msg);
+    cr_assert(scene_load("scenes/cornell-box.txt", &sc, &err), "%s:%d:%d: %s", err.file, err.line,
+              err.col, err.msg);
     assert_vec3(sc.camera.eye, 0, 1, 3.9f, "eye");
     assert_vec3(sc.camera.look_at, 0, 1, 0, "look-at");
     assert_vec3(sc.camera.up, 0, 1, 0, "up");
@@ -639,7 +642,9 @@ Test(scene, error_binary_and_long_lines)
 {
     check_error("camera eye=0\0,0,5 look-at=0,0,0 up=0,1,0 fov=40\n",
                 "scene.txt:1:13: error: expected text, got the byte 0x00");
-    check_error(CAM "\x7f" "ELF\n", "scene.txt:2:1: error: expected text, got the byte 0x7f");
+    check_error(CAM "\x7f"
+                    "ELF\n",
+                "scene.txt:2:1: error: expected text, got the byte 0x7f");
     check_error(CAM "film width=4\rheight=4\n",
                 "scene.txt:2:13: error: expected text, got the byte 0x0d");
     char text[6000];
@@ -674,8 +679,7 @@ Test(scene, error_mesh_passes_obj_errors)
 
     cr_assert(!obj_load("tests/data/scene/no-such-file.obj", &mesh, &obj_err));
     mcpt_error_format(&obj_err, golden, sizeof golden);
-    cr_assert(strncmp(golden, "tests/data/scene/no-such-file.obj: error: ", 42) == 0, "%s",
-              golden);
+    cr_assert(strncmp(golden, "tests/data/scene/no-such-file.obj: error: ", 42) == 0, "%s", golden);
     check_file_error("tests/data/scene/missing-mesh.txt", golden);
 }
 
@@ -727,8 +731,9 @@ Test(scene, light_transport_materials)
     cr_assert_eq(sc.render.rr_prob, 0.75f);
     cr_assert_eq(sc.render.rr_depth, 3u);
     scene_free(&sc);
-    load_ok(CAM "render rr=throughput\n", &sc);
+    load_ok(CAM "render rr=throughput rr-threshold=0.5\n", &sc);
     cr_assert_eq(sc.render.rr_prob, 0.0f);
+    cr_assert_eq(sc.render.rr_threshold, 0.5f);
     cr_assert_eq(sc.render.direct, RENDER_DIRECT_MIS, "the default");
     scene_free(&sc);
 }
