@@ -1206,64 +1206,71 @@ static const char *const ADAPTIVE_RULE_NAMES[RENDER_ADAPTIVE_RULE_COUNT] = {"pil
 static const char *const LIGHT_SAMPLING_NAMES[RENDER_LIGHT_SAMPLING_COUNT] = {"area",
                                                                              "solid-angle"};
 
-const char *scene_adaptive_rule_name(enum render_adaptive_rule rule)
+/* names[k] of an enum of n values, or "?" outside it. */
+static const char *enum_name(const char *const *names, int n, int k)
 {
-    return (unsigned)rule < RENDER_ADAPTIVE_RULE_COUNT ? ADAPTIVE_RULE_NAMES[rule] : "?";
+    return k >= 0 && k < n ? names[k] : "?";
 }
 
-bool scene_adaptive_rule_parse(const char *name, enum render_adaptive_rule *rule)
+/* The k with names[k] equal to name, or -1. */
+static int enum_parse(const char *const *names, int n, const char *name)
 {
-    for (int k = 0; k < RENDER_ADAPTIVE_RULE_COUNT; k++)
-        if (strcmp(name, ADAPTIVE_RULE_NAMES[k]) == 0) {
-            *rule = (enum render_adaptive_rule)k;
-            return true;
-        }
-    return false;
-}
-
-const char *scene_light_sampling_name(enum render_light_sampling mode)
-{
-    return (unsigned)mode < RENDER_LIGHT_SAMPLING_COUNT ? LIGHT_SAMPLING_NAMES[mode] : "?";
-}
-
-bool scene_light_sampling_parse(const char *name, enum render_light_sampling *mode)
-{
-    for (int k = 0; k < RENDER_LIGHT_SAMPLING_COUNT; k++)
-        if (strcmp(name, LIGHT_SAMPLING_NAMES[k]) == 0) {
-            *mode = (enum render_light_sampling)k;
-            return true;
-        }
-    return false;
+    for (int k = 0; k < n; k++)
+        if (strcmp(name, names[k]) == 0)
+            return k;
+    return -1;
 }
 
 const char *scene_direct_name(enum render_direct direct)
 {
-    return (unsigned)direct < RENDER_DIRECT_COUNT ? DIRECT_NAMES[direct] : "?";
+    return enum_name(DIRECT_NAMES, RENDER_DIRECT_COUNT, (int)direct);
 }
 
 bool scene_direct_parse(const char *name, enum render_direct *direct)
 {
-    for (int k = 0; k < RENDER_DIRECT_COUNT; k++)
-        if (strcmp(name, DIRECT_NAMES[k]) == 0) {
-            *direct = (enum render_direct)k;
-            return true;
-        }
-    return false;
+    int k = enum_parse(DIRECT_NAMES, RENDER_DIRECT_COUNT, name);
+    if (k >= 0)
+        *direct = (enum render_direct)k;
+    return k >= 0;
 }
 
 const char *scene_split_name(enum render_split split)
 {
-    return (unsigned)split < RENDER_SPLIT_COUNT ? SPLIT_NAMES[split] : "?";
+    return enum_name(SPLIT_NAMES, RENDER_SPLIT_COUNT, (int)split);
 }
 
 bool scene_split_parse(const char *name, enum render_split *split)
 {
-    for (int k = 0; k < RENDER_SPLIT_COUNT; k++)
-        if (strcmp(name, SPLIT_NAMES[k]) == 0) {
-            *split = (enum render_split)k;
-            return true;
-        }
-    return false;
+    int k = enum_parse(SPLIT_NAMES, RENDER_SPLIT_COUNT, name);
+    if (k >= 0)
+        *split = (enum render_split)k;
+    return k >= 0;
+}
+
+const char *scene_adaptive_rule_name(enum render_adaptive_rule rule)
+{
+    return enum_name(ADAPTIVE_RULE_NAMES, RENDER_ADAPTIVE_RULE_COUNT, (int)rule);
+}
+
+bool scene_adaptive_rule_parse(const char *name, enum render_adaptive_rule *rule)
+{
+    int k = enum_parse(ADAPTIVE_RULE_NAMES, RENDER_ADAPTIVE_RULE_COUNT, name);
+    if (k >= 0)
+        *rule = (enum render_adaptive_rule)k;
+    return k >= 0;
+}
+
+const char *scene_light_sampling_name(enum render_light_sampling mode)
+{
+    return enum_name(LIGHT_SAMPLING_NAMES, RENDER_LIGHT_SAMPLING_COUNT, (int)mode);
+}
+
+bool scene_light_sampling_parse(const char *name, enum render_light_sampling *mode)
+{
+    int k = enum_parse(LIGHT_SAMPLING_NAMES, RENDER_LIGHT_SAMPLING_COUNT, name);
+    if (k >= 0)
+        *mode = (enum render_light_sampling)k;
+    return k >= 0;
 }
 
 /* render: spp, depth, sampler, the adaptive-sampling settings (docs/sampling.md) and the light

@@ -71,6 +71,15 @@ static void receiver_weights(const struct surface *ref, vec3 d00, vec3 d10, vec3
         w[k] = fmaxf(0.01f, fabsf(v3_dot(ref->ns, d[k])));
 }
 
+/* Warps *u by the bilinear density of the receiver weights w (receiver_weights) and returns
+ * its density at the warped point, pdf_bilinear(u, w): the factor of pdf_sa before the
+ * spherical map's 1 / solid angle. */
+static float warp_by_cosine(vec2 *u, const float w[4])
+{
+    *u = sample_bilinear(*u, w);
+    return pdf_bilinear(*u, w);
+}
+
 /* Completes *ss, whose point p is set, with the unit direction wi from ref->p and the density
  * pdf_sa; false when p coincides with ref->p or is seen edge-on (n, any length, is the
  * shape's normal) or the density is not finite. */
@@ -310,8 +319,7 @@ bool shape_quad_sample_solid_angle(const struct quad *q, const struct surface *r
         return shape_quad_sample(q, ref, u, ss);
     /* Urena et al. 2013, u first warped by the cosine at the receiver:
      * pdf_sa = pdf_bilinear(u) / S */
-    u = sample_bilinear(u, w);
-    float pdf_u = pdf_bilinear(u, w);
+    float pdf_u = warp_by_cosine(&u, w);
     vec3 pr = v3_sub(sample_spherical_rectangle(&sr, u), q->corner);
     float alpha = fminf(1.0f, fmaxf(0.0f, v3_dot(pr, q->e1) / v3_dot(q->e1, q->e1)));
     float beta = fminf(1.0f, fmaxf(0.0f, v3_dot(pr, q->e2) / v3_dot(q->e2, q->e2)));
@@ -459,8 +467,7 @@ bool shape_triangle_sample_solid_angle(const vec3 p[3], const struct surface *re
     if (!triangle_by_solid_angle(p, ref, &st, w))
         return shape_triangle_sample(p, ref, u, ss);
     /* Arvo 1995, u first warped by the cosine at the receiver: pdf_sa = pdf_bilinear(u) / Omega */
-    u = sample_bilinear(u, w);
-    float pdf_u = pdf_bilinear(u, w);
+    float pdf_u = warp_by_cosine(&u, w);
     vec3 wi = sample_spherical_triangle(&st, u);
     /* the barycentrics where the ray ref->p + t wi meets the triangle's plane (Moller & Trumbore
      * 1997), clamped onto the triangle against rounding */

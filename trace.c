@@ -283,7 +283,7 @@ static vec3 camera_sample(const struct render_job *job, struct worker *w, uint32
 }
 
 /* Adaptive sampling, the pilot rule (two-stage sampling, Kirk & Arvo 1991, "Unbiased Sampling
- * Techniques for Image Synthesis", sec. 4): the samples pixel (x, y) gets.  A pilot of
+ * Techniques for Image Synthesis", SIGGRAPH 91): the samples pixel (x, y) gets.  A pilot of
  * pilot_spp samples from a stream of its own (the seed hashed with PILOT_SEED_TAG, so its
  * scrambles and its values are independent of the image's) estimates mu and sigma of the
  * pixel's luminance, and trace_pilot_spp turns them into N.  The pilot is then discarded: the
