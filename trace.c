@@ -247,6 +247,7 @@ static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, u
     uint64_t done = 0;
     uint64_t skipped = 0; /* samples an adaptive stop saved, counted as progress */
     struct sampler sampler;
+    sample_start_pixel(&sampler, opt->sampler, opt->seed, pixel_idx, job->set_spp);
     while (px->n + px->n_dropped < opt->spp) {
         if (opt->cancel && atomic_load_explicit(opt->cancel, memory_order_relaxed)) {
             w->result.cancelled = true;
@@ -257,7 +258,7 @@ static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, u
             break;
         }
         uint32_t sample_idx = opt->sample_offset + px->n + px->n_dropped;
-        sample_start_spp(&sampler, opt->sampler, opt->seed, pixel_idx, sample_idx, job->set_spp);
+        sample_start_index(&sampler, sample_idx);
         /* box filter: uniform jitter inside the pixel */
         vec2 u_pixel = sample_2d(&sampler);
         vec2 u_lens = sample_2d(&sampler);

@@ -154,6 +154,63 @@ Test(sample, sobol_matches_generator_matrices)
     }
 }
 
+/* The nibble table the joint point is computed from is the generator matrices' product with
+ * every 4-bit digit: SOBOL_NIBBLES[p][v][d] = C_d * (v << 4p) over GF(2). */
+Test(sample, sobol_nibbles_match_generator_matrices)
+{
+    for (int p = 0; p < 8; p++)
+        for (uint32_t v = 0; v < 16; v++)
+            for (int d = 0; d < SOBOL_N_DIMS; d++) {
+                uint32_t x = 0;
+                for (int b = 0; b < 4; b++)
+                    if (v >> b & 1u)
+                        x ^= SOBOL_MATRICES[d][4 * p + b];
+                cr_assert_eq(SOBOL_NIBBLES[p][v][d], x, "digit %d value %u dim %d", p, v, d);
+            }
+}
+
+/* A sampler started once per pixel (sample_start_pixel) and then per sample
+ * (sample_start_index), in any order of sample indices, gives the values of a sampler started
+ * afresh for each sample: what it keeps between samples (the pixel's seeds, the joint point,
+ * the padded block) is a cache of a function of (seed, pixel, sample, dimension).  Requests of
+ * both sizes at every offset in the bounce blocks, past the blocks whose seeds are kept, in the
+ * extra light-sample block, and a sample that starts in the block where the last one ended. */
+Test(sample, pixel_start_matches_sample_start)
+{
+    static const uint32_t order[] = {5, 0, 1, 1000, 3, 5, 77, 2, 4096, 0};
+    for (int k = 0; k < SAMPLER_COUNT; k++) {
+        struct sampler px;
+        sample_start_pixel(&px, KINDS[k], 21u, 4242u, 16u);
+        for (size_t i = 0; i < sizeof order / sizeof order[0]; i++) {
+            sample_start_index(&px, order[i]);
+            /* odd samples start in the block where the previous one ended */
+            for (uint32_t dim = i % 2 ? 95 : 0; dim < 100;) {
+                bool is_2d = (dim * 7 + order[i]) % 3 == 0;
+                struct sampler fresh;
+                sample_start_spp(&fresh, KINDS[k], 21u, 4242u, order[i], 16u);
+                sample_set_dim(&fresh, dim);
+                sample_set_dim(&px, dim);
+                if (is_2d) {
+                    vec2 a = sample_2d(&px), b = sample_2d(&fresh);
+                    cr_assert(a.x == b.x && a.y == b.y, "%s sample %u dim %u (2D)",
+                              sample_sampler_name(KINDS[k]), order[i], dim);
+                } else {
+                    cr_assert(sample_1d(&px) == sample_1d(&fresh), "%s sample %u dim %u",
+                              sample_sampler_name(KINDS[k]), order[i], dim);
+                }
+                dim += is_2d ? 2 + dim % 2 : 1;
+            }
+            struct sampler fresh;
+            sample_start_spp(&fresh, KINDS[k], 21u, 4242u, order[i], 16u);
+            sample_set_dim(&fresh, SAMPLE_DIM_LIGHT_EXTRA + 4);
+            sample_set_dim(&px, SAMPLE_DIM_LIGHT_EXTRA + 4);
+            vec2 a = sample_2d(&px), b = sample_2d(&fresh);
+            cr_assert(a.x == b.x && a.y == b.y, "%s sample %u light-sample block",
+                      sample_sampler_name(KINDS[k]), order[i]);
+        }
+    }
+}
+
 /* Is every elementary interval [a 2^-j, (a+1) 2^-j) x [b 2^-(m-j), (b+1) 2^-(m-j)) hit exactly
  * once by the 2^m points (x, y) (fractions of 2^32)?  That is a (0,m,2)-net in base 2. */
 static bool is_02_net(const uint32_t *x, const uint32_t *y, int m)
