@@ -174,6 +174,10 @@ BENCH_CFLAGS = $(filter-out -MMD -MP,$(CFLAGS_ALL))
 bench/raybench: bench/raybench.c bench/bench.c bench/bench.h $(BENCH_OBJS) $(FLAGS_STAMP)
 	$(CC) $(BENCH_CFLAGS) -o $@ bench/raybench.c bench/bench.c $(BENCH_OBJS) -lpthread -lm
 
+# bench/raydump: the rays of a render as ray files for raybench (links the renderer)
+bench/raydump: bench/raydump.c bench/bench.c bench/bench.h $(LIB_OBJS) $(FLAGS_STAMP)
+	$(CC) $(BENCH_CFLAGS) -o $@ bench/raydump.c bench/bench.c $(LIB_OBJS) $(LDLIBS_ALL)
+
 bench/embree_bench: bench/embree_bench.c bench/bench.c bench/bench.h $(BENCH_OBJS) $(FLAGS_STAMP)
 	$(CC) $(BENCH_CFLAGS) $(EMBREE_CFLAGS) -o $@ bench/embree_bench.c bench/bench.c $(BENCH_OBJS) \
 	    $(EMBREE_LIBS) -lpthread -lm
@@ -202,6 +206,6 @@ bench-embree:
 endif
 
 clean:
-	rm -rf build build-san build-fuzz build-vg mcpt bench/raybench bench/embree_bench
+	rm -rf build build-san build-fuzz build-vg mcpt bench/raybench bench/embree_bench bench/raydump
 
 -include $(wildcard $(BUILD)/*.d $(BUILD)/tests/*.d $(FUZZ_BUILD)/*.d)

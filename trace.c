@@ -65,6 +65,8 @@ struct last_bounce {
     bool is_specular;  /* the sample came from a delta lobe: no MIS */
 };
 
+static void count_ray(const struct trace_options *opt, const struct ray *ray, bool is_shadow,
+                      uint64_t *n_rays);
 static bool intersect(const struct trace_scene *ts, const struct ray *ray, struct hit_record *hr);
 static bool occluded(const struct trace_scene *ts, const struct ray *ray);
 static struct ray spawn_ray(const struct surface *sf, vec3 d);
@@ -113,7 +115,7 @@ vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *op
     for (uint32_t n_bounces = 0;;) {
         /* find the next vertex */
         struct hit_record hr;
-        (*n_rays)++;
+        count_ray(opt, &ray, false, n_rays);
         bool hit = intersect(ts, &ray, &hr);
         vec3 wo_world = v3_normalize(v3_neg(ray.d));
 
@@ -521,9 +523,9 @@ static vec3 sample_one_light(const struct trace_scene *ts, const struct trace_op
     if (v3_is_zero(f))
         return zero;
     /* the shadow ray: to infinity for the sky, else to the light point */
-    (*n_rays)++;
     struct ray shadow = ls.is_infinite ? spawn_ray(sf, ls.wi)
                                        : spawn_ray_to(sf, ls.p, ls.p_error, ls.n);
+    count_ray(opt, &shadow, true, n_rays);
     if (occluded(ts, &shadow))
         return zero;
     vec3 Ld = v3_scale(v3_mul(f, ls.Le), fabsf(wi.z) / ((float)n_ls * pmf));
@@ -555,6 +557,15 @@ static bool sample_direction(const struct material *m, vec3 wo, enum render_dire
 }
 
 /* ---- scene queries ---- */
+
+/* Every ray traced is counted, and shown to the benchmark's hook if there is one. */
+static void count_ray(const struct trace_options *opt, const struct ray *ray, bool is_shadow,
+                      uint64_t *n_rays)
+{
+    (*n_rays)++;
+    if (opt->ray_hook)
+        opt->ray_hook(opt->ray_hook_user, ray, is_shadow);
+}
 
 /* The surface of scene triangle tri_idx at the barycentrics (b1, b2) of a hit. */
 static struct surface triangle_surface(const struct scene *scene, uint32_t tri_idx, float b1,
