@@ -141,7 +141,6 @@ void sample_start_pixel(struct sampler *s, enum sampler_kind kind, uint64_t seed
     s->cmj_cols = kind == SAMPLER_STRATIFIED && set_spp > 1 ? cmj_columns(set_spp) : 1;
     s->pixel_hash = sample_hash64(seed ^ sample_hash64(0x9e3779b97f4a7c15ULL + pixel_idx));
     s->rng = (struct pcg32){0, 1};
-    s->pad_seeded = 0;
     s->pad_dim0 = SAMPLE_PAD_NONE;
     if (kind == SAMPLER_SOBOL)
         sobol_joint_seeds(s);
@@ -415,11 +414,10 @@ static inline vec2 pad_request(uint32_t sample_idx_rev, uint32_t seed_index, uin
 
 /* The padded dimensions of the bounce blocks (sample.h: SAMPLE_DIMS_PER_BOUNCE dimensions from
  * SAMPLE_DIM_BOUNCE0 on) are computed a block at a time, the request at every dimension of the
- * block at once, a lane each (the compiler vectorises the loop), and kept until the sample
- * leaves the block: lane l holds x and y of a request at dimension pad_dim0 + l.  The seeds of
- * the first SAMPLE_SOBOL_PAD_SEEDED blocks are hashed once per pixel, when the pixel first
- * reaches the block.  Other dimensions (the light-sample block, any dimension below the first
- * bounce) are requested one at a time. */
+ * block at once, a lane each (the compiler vectorises the loop, hashes included), and kept until
+ * the sample leaves the block: lane l holds x and y of a request at dimension pad_dim0 + l.
+ * Other dimensions (the light-sample block, any dimension below the first bounce) are requested
+ * one at a time. */
 static bool pad_in_blocks(uint32_t dim)
 {
     return dim >= SAMPLE_DIM_BOUNCE0 && dim < SAMPLE_DIM_LIGHT_EXTRA;
@@ -428,19 +426,11 @@ static bool pad_in_blocks(uint32_t dim)
 /* Fills the block cache with the block of dimension dim (pad_in_blocks(dim)). */
 static void pad_block(struct sampler *s, uint32_t dim)
 {
-    uint32_t block = (dim - SAMPLE_DIM_BOUNCE0) / SAMPLE_DIMS_PER_BOUNCE;
-    uint32_t dim0 = SAMPLE_DIM_BOUNCE0 + block * SAMPLE_DIMS_PER_BOUNCE;
-    struct sample_pad_seeds local;
-    struct sample_pad_seeds *seeds = block < SAMPLE_SOBOL_PAD_SEEDED ? &s->pad_seeds[block]
-                                                                     : &local;
-    if (seeds == &local || !(s->pad_seeded >> block & 1u)) {
-        for (int l = 0; l < SAMPLE_PAD_LANES; l++)
-            request_seeds(s, dim0 + (uint32_t)l, &seeds->index[l], &seeds->x[l], &seeds->y[l]);
-        if (seeds != &local)
-            s->pad_seeded |= 1u << block;
-    }
+    uint32_t dim0 = dim - (dim - SAMPLE_DIM_BOUNCE0) % SAMPLE_DIMS_PER_BOUNCE;
     for (int l = 0; l < SAMPLE_PAD_LANES; l++) {
-        vec2 u = pad_request(s->sample_idx_rev, seeds->index[l], seeds->x[l], seeds->y[l]);
+        uint32_t seed_index, seed_x, seed_y;
+        request_seeds(s, dim0 + (uint32_t)l, &seed_index, &seed_x, &seed_y);
+        vec2 u = pad_request(s->sample_idx_rev, seed_index, seed_x, seed_y);
         s->pad_x[l] = u.x;
         s->pad_y[l] = u.y;
     }

@@ -85,30 +85,24 @@ enum {
  * fraction (value / 2^32); direction numbers of Joe & Kuo 2008 (sobol_matrices.h). */
 uint32_t sample_sobol_u32(uint32_t index, uint32_t dim);
 
+/* Sobol' padding is computed a bounce block at a time (sample.c, pad_block), a lane per
+ * dimension of the block. */
+enum {
+    SAMPLE_PAD_LANES = 8, /* lanes of a block: SAMPLE_DIMS_PER_BOUNCE, and one spare */
+};
+_Static_assert((int)SAMPLE_PAD_LANES >= (int)SAMPLE_DIMS_PER_BOUNCE,
+               "a padded block is one bounce");
+/* pad_dim0 when no block is held: dim - SAMPLE_PAD_NONE is no lane for any dimension in use
+ * (all are below 2^28). */
+#define SAMPLE_PAD_NONE 0xf0000000u
+
 /* The sample generator for one (pixel, sample index), read dimension by dimension.
  * Independent: a PCG32 stream seeded by hashing (seed, pixel_idx, sample_idx).  Stratified and
  * Sobol': stateless hashes of (seed, pixel_idx, sample_idx, dim, set_spp).  What the samples of
  * one pixel share (the hashes of the pixel's seeds) is computed once by sample_start_pixel; each
  * sample then starts with sample_start_index, which for Sobol' also computes the whole joint
- * point at once (a lane per dimension), so that reading a joint dimension is a load. */
-/* Sobol' padding is computed a bounce block at a time (sample.c, pad_block). */
-enum {
-    SAMPLE_PAD_LANES = 8,        /* lanes of a block: SAMPLE_DIMS_PER_BOUNCE, and one spare */
-    SAMPLE_SOBOL_PAD_SEEDED = 8, /* bounce blocks whose padding seeds are kept per pixel */
-};
-/* pad_dim0 when no block is held: dim - SAMPLE_PAD_NONE is no lane for any dimension in use
- * (all are below 2^28). */
-#define SAMPLE_PAD_NONE 0xf0000000u
-_Static_assert((int)SAMPLE_PAD_LANES >= (int)SAMPLE_DIMS_PER_BOUNCE,
-               "a padded block is one bounce");
-
-/* The seeds of the padding requests at dimensions dim0 + lane of one bounce block. */
-struct sample_pad_seeds {
-    uint32_t index[SAMPLE_PAD_LANES]; /* the shuffle of the sample index */
-    uint32_t x[SAMPLE_PAD_LANES];     /* the scramble of the first coordinate */
-    uint32_t y[SAMPLE_PAD_LANES];     /* the scramble of the second */
-};                                    /* 96 bytes */
-
+ * point at once (a lane per dimension), so that reading a joint dimension is a load.  A sampler
+ * holds no pointer: copying one copies the sample. */
 struct sampler {
     enum sampler_kind kind;
     uint64_t seed;
@@ -122,8 +116,6 @@ struct sampler {
     /* Sobol', per pixel */
     uint32_t shuffle_seed;                      /* seed of the joint point's index shuffle */
     uint32_t joint_seed[SAMPLE_SOBOL_MAX_DIMS]; /* scramble seed of each joint dimension */
-    uint32_t pad_seeded;                        /* bit k set once pad_seeds[k] is filled */
-    struct sample_pad_seeds pad_seeds[SAMPLE_SOBOL_PAD_SEEDED];
     /* Sobol', per sample */
     uint32_t sample_idx_rev;              /* sample_idx bit-reversed: the padding's input */
     float joint_u[SAMPLE_SOBOL_MAX_DIMS]; /* the joint point, a value per dimension */
@@ -131,7 +123,7 @@ struct sampler {
                                              SAMPLE_PAD_NONE */
     float pad_x[SAMPLE_PAD_LANES];        /* the padding requests at pad_dim0 + lane: x, */
     float pad_y[SAMPLE_PAD_LANES];        /* and y of a 2D request */
-};                                        /* 1040 bytes */
+};                                        /* 272 bytes */
 
 /* Starts the sample sample_idx of pixel pixel_idx at dimension 0, with set_spp = 0: the
  * stratified sampler then has no strata to fill and gives independent hashed uniforms. */

@@ -173,8 +173,8 @@ Test(sample, sobol_nibbles_match_generator_matrices)
  * (sample_start_index), in any order of sample indices, gives the values of a sampler started
  * afresh for each sample: what it keeps between samples (the pixel's seeds, the joint point,
  * the padded block) is a cache of a function of (seed, pixel, sample, dimension).  Requests of
- * both sizes at every offset in the bounce blocks, past the blocks whose seeds are kept, in the
- * extra light-sample block, and a sample that starts in the block where the last one ended. */
+ * both sizes at every offset of the bounce blocks, in the extra light-sample block, and a sample
+ * that starts in the block where the last one ended. */
 Test(sample, pixel_start_matches_sample_start)
 {
     static const uint32_t order[] = {5, 0, 1, 1000, 3, 5, 77, 2, 4096, 0};
