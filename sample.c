@@ -126,7 +126,7 @@ static uint32_t cmj_columns(uint32_t n_samples)
     return root;
 }
 
-static void sobol_joint_seeds(struct sampler *s);
+static void sobol_pixel_seeds(struct sampler *s);
 static void sobol_joint_point(struct sampler *s);
 
 void sample_start_pixel(struct sampler *s, enum sampler_kind kind, uint64_t seed,
@@ -143,7 +143,7 @@ void sample_start_pixel(struct sampler *s, enum sampler_kind kind, uint64_t seed
     s->rng = (struct pcg32){0, 1};
     s->pad_dim0 = SAMPLE_PAD_NONE;
     if (kind == SAMPLER_SOBOL)
-        sobol_joint_seeds(s);
+        sobol_pixel_seeds(s);
 }
 
 void sample_start_index(struct sampler *s, uint32_t sample_idx)
@@ -348,14 +348,26 @@ static uint32_t nested_uniform_scramble(uint32_t x, uint32_t seed)
     return reverse_bits32(laine_karras_permutation(reverse_bits32(x), seed));
 }
 
-/* The per-pixel seeds of the joint point: the index shuffle's, and one scramble seed per
- * dimension of the table (those past SAMPLE_SOBOL_JOINT_DIMS are computed for the lanes' sake
- * and never read). */
-static void sobol_joint_seeds(struct sampler *s)
+static void pad_block_seeds(const struct sampler *s, uint32_t dim0, struct sample_pad_seeds *seeds);
+
+/* The first bounce block with a padded dimension: the blocks whose seeds a sampler keeps per
+ * pixel are this one and the next SAMPLE_PAD_KEPT - 1. */
+static const uint32_t PAD_FIRST_KEPT = SAMPLE_SOBOL_JOINT_DIMS <= SAMPLE_DIM_BOUNCE0
+                                           ? 0
+                                           : (SAMPLE_SOBOL_JOINT_DIMS - SAMPLE_DIM_BOUNCE0) /
+                                                 SAMPLE_DIMS_PER_BOUNCE;
+
+/* The per-pixel seeds: the joint point's index shuffle, one scramble seed per dimension of the
+ * table (those past SAMPLE_SOBOL_JOINT_DIMS are computed for the lanes' sake and never read),
+ * and the padding seeds of the bounce blocks every path reaches first. */
+static void sobol_pixel_seeds(struct sampler *s)
 {
     s->shuffle_seed = dim_seed(s, UINT32_MAX, 0);
     for (uint32_t d = 0; d < SAMPLE_SOBOL_MAX_DIMS; d++)
         s->joint_seed[d] = dim_seed(s, d, 1);
+    for (uint32_t k = 0; k < SAMPLE_PAD_KEPT; k++)
+        pad_block_seeds(s, SAMPLE_DIM_BOUNCE0 + (PAD_FIRST_KEPT + k) * SAMPLE_DIMS_PER_BOUNCE,
+                        &s->pad_kept[k]);
 }
 
 /* The joint point of the sample, every dimension at once (Burley 2020: shuffled_scrambled_sobol4d
@@ -423,14 +435,26 @@ static bool pad_in_blocks(uint32_t dim)
     return dim >= SAMPLE_DIM_BOUNCE0 && dim < SAMPLE_DIM_LIGHT_EXTRA;
 }
 
+/* The seeds of the requests at dimensions dim0 + lane. */
+static void pad_block_seeds(const struct sampler *s, uint32_t dim0, struct sample_pad_seeds *seeds)
+{
+    for (int l = 0; l < SAMPLE_PAD_LANES; l++)
+        request_seeds(s, dim0 + (uint32_t)l, &seeds->index[l], &seeds->x[l], &seeds->y[l]);
+}
+
 /* Fills the block cache with the block of dimension dim (pad_in_blocks(dim)). */
 static void pad_block(struct sampler *s, uint32_t dim)
 {
-    uint32_t dim0 = dim - (dim - SAMPLE_DIM_BOUNCE0) % SAMPLE_DIMS_PER_BOUNCE;
+    uint32_t block = (dim - SAMPLE_DIM_BOUNCE0) / SAMPLE_DIMS_PER_BOUNCE;
+    uint32_t dim0 = SAMPLE_DIM_BOUNCE0 + block * SAMPLE_DIMS_PER_BOUNCE;
+    struct sample_pad_seeds computed;
+    const struct sample_pad_seeds *seeds = &computed;
+    if (block - PAD_FIRST_KEPT < SAMPLE_PAD_KEPT)
+        seeds = &s->pad_kept[block - PAD_FIRST_KEPT];
+    else
+        pad_block_seeds(s, dim0, &computed);
     for (int l = 0; l < SAMPLE_PAD_LANES; l++) {
-        uint32_t seed_index, seed_x, seed_y;
-        request_seeds(s, dim0 + (uint32_t)l, &seed_index, &seed_x, &seed_y);
-        vec2 u = pad_request(s->sample_idx_rev, seed_index, seed_x, seed_y);
+        vec2 u = pad_request(s->sample_idx_rev, seeds->index[l], seeds->x[l], seeds->y[l]);
         s->pad_x[l] = u.x;
         s->pad_y[l] = u.y;
     }

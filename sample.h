@@ -78,7 +78,9 @@ enum {
  * bounce (direct light at the first hit), 11 dimensions; every later 1D or 2D request is a
  * separately shuffled and scrambled padding sequence.  docs/sampling.md measures this against
  * a joint pixel and lens only (4, Burley 2020's choice). */
+#ifndef SAMPLE_SOBOL_JOINT_DIMS /* -DSAMPLE_SOBOL_JOINT_DIMS=4: the experiment's other arm */
 #define SAMPLE_SOBOL_JOINT_DIMS (SAMPLE_DIM_BOUNCE0 + SAMPLE_DIMS_PER_BOUNCE)
+#endif
 #define SAMPLE_SOBOL_MAX_DIMS 16 /* dimensions in the generator-matrix table */
 
 /* The unscrambled Sobol' point of index in dimension dim < SAMPLE_SOBOL_MAX_DIMS, as a 32-bit
@@ -89,12 +91,20 @@ uint32_t sample_sobol_u32(uint32_t index, uint32_t dim);
  * dimension of the block. */
 enum {
     SAMPLE_PAD_LANES = 8, /* lanes of a block: SAMPLE_DIMS_PER_BOUNCE, and one spare */
+    SAMPLE_PAD_KEPT = 2,  /* the first padded blocks, whose seeds are hashed once per pixel */
 };
 _Static_assert((int)SAMPLE_PAD_LANES >= (int)SAMPLE_DIMS_PER_BOUNCE,
                "a padded block is one bounce");
 /* pad_dim0 when no block is held: dim - SAMPLE_PAD_NONE is no lane for any dimension in use
  * (all are below 2^28). */
 #define SAMPLE_PAD_NONE 0xf0000000u
+
+/* The seeds of the padding requests at the dimensions dim0 + lane of one bounce block. */
+struct sample_pad_seeds {
+    uint32_t index[SAMPLE_PAD_LANES]; /* the shuffle of the sample index */
+    uint32_t x[SAMPLE_PAD_LANES];     /* the scramble of the first coordinate */
+    uint32_t y[SAMPLE_PAD_LANES];     /* the scramble of the second */
+};                                    /* 96 bytes */
 
 /* The sample generator for one (pixel, sample index), read dimension by dimension.
  * Independent: a PCG32 stream seeded by hashing (seed, pixel_idx, sample_idx).  Stratified and
@@ -114,8 +124,9 @@ struct sampler {
     uint32_t cmj_cols;   /* stratified: columns m of the m x n multi-jittered grid */
     uint64_t pixel_hash; /* hash of (seed, pixel_idx): root of every scrambling seed */
     /* Sobol', per pixel */
-    uint32_t shuffle_seed;                      /* seed of the joint point's index shuffle */
-    uint32_t joint_seed[SAMPLE_SOBOL_MAX_DIMS]; /* scramble seed of each joint dimension */
+    uint32_t shuffle_seed;                             /* seed of the joint point's index shuffle */
+    uint32_t joint_seed[SAMPLE_SOBOL_MAX_DIMS];        /* scramble seed of each joint dimension */
+    struct sample_pad_seeds pad_kept[SAMPLE_PAD_KEPT]; /* of the first padded blocks */
     /* Sobol', per sample */
     uint32_t sample_idx_rev;              /* sample_idx bit-reversed: the padding's input */
     float joint_u[SAMPLE_SOBOL_MAX_DIMS]; /* the joint point, a value per dimension */
@@ -123,7 +134,7 @@ struct sampler {
                                              SAMPLE_PAD_NONE */
     float pad_x[SAMPLE_PAD_LANES];        /* the padding requests at pad_dim0 + lane: x, */
     float pad_y[SAMPLE_PAD_LANES];        /* and y of a 2D request */
-};                                        /* 272 bytes */
+};                                        /* 464 bytes */
 
 /* Starts the sample sample_idx of pixel pixel_idx at dimension 0, with set_spp = 0: the
  * stratified sampler then has no strata to fill and gives independent hashed uniforms. */
