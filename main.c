@@ -176,6 +176,19 @@ struct run {
     int signal; /* SIGINT or SIGTERM, when it stopped the render */
 };
 
+/* The parsers' warnings (file:line:col: warning: ...), one line each, unless --quiet. */
+static void print_scene_warnings(const struct scene *scene, bool quiet)
+{
+    if (quiet)
+        return;
+    uint32_t n_kept = scene->n_warnings < SCENE_MAX_WARNINGS ? scene->n_warnings
+                                                             : SCENE_MAX_WARNINGS;
+    for (uint32_t i = 0; i < n_kept; i++)
+        fprintf(stderr, "%s\n", scene->warnings[i]);
+    if (scene->n_warnings > n_kept)
+        fprintf(stderr, "mcpt: warning: %u more warnings not shown\n", scene->n_warnings - n_kept);
+}
+
 static bool parse(int argc, char **argv, struct run *run, struct mcpt_error *err);
 static bool load(struct run *run, struct mcpt_error *err);
 static bool build(struct run *run, struct mcpt_error *err);
@@ -561,6 +574,7 @@ static bool load(struct run *run, struct mcpt_error *err)
     if (!scene_load(o->scene_path, &run->scene, err))
         return false;
     run->has_scene = true;
+    print_scene_warnings(&run->scene, o->quiet);
     if (!checkpoint_hash_file(o->scene_path, &run->scene_hash, err))
         return false;
     if (o->width)
