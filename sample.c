@@ -358,12 +358,12 @@ static const uint32_t PAD_FIRST_KEPT = SAMPLE_SOBOL_JOINT_DIMS <= SAMPLE_DIM_BOU
                                                  SAMPLE_DIMS_PER_BOUNCE;
 
 /* The per-pixel seeds: the joint point's index shuffle, one scramble seed per dimension of the
- * table (those past SAMPLE_SOBOL_JOINT_DIMS are computed for the lanes' sake and never read),
+ * joint lane (those past SAMPLE_SOBOL_JOINT_DIMS are computed for the lanes' sake, never read),
  * and the padding seeds of the bounce blocks every path reaches first. */
 static void sobol_pixel_seeds(struct sampler *s)
 {
     s->shuffle_seed = dim_seed(s, UINT32_MAX, 0);
-    for (uint32_t d = 0; d < SAMPLE_SOBOL_MAX_DIMS; d++)
+    for (uint32_t d = 0; d < SAMPLE_SOBOL_JOINT_LANES; d++)
         s->joint_seed[d] = dim_seed(s, d, 1);
     for (uint32_t k = 0; k < SAMPLE_PAD_KEPT; k++)
         pad_block_seeds(s, SAMPLE_DIM_BOUNCE0 + (PAD_FIRST_KEPT + k) * SAMPLE_DIMS_PER_BOUNCE,
@@ -383,13 +383,13 @@ static void sobol_joint_point(struct sampler *s)
 {
     s->sample_idx_rev = reverse_bits32(s->sample_idx);
     uint32_t index = reverse_bits32(laine_karras_permutation(s->sample_idx_rev, s->shuffle_seed));
-    uint32_t x[SAMPLE_SOBOL_MAX_DIMS] = {0};
+    uint32_t x[SAMPLE_SOBOL_JOINT_LANES] = {0};
     for (int p = 0; p < 8; p++) {
         const uint32_t *row = SOBOL_NIBBLES[p][index >> 4 * p & 15u];
-        for (int d = 0; d < SAMPLE_SOBOL_MAX_DIMS; d++)
+        for (int d = 0; d < SAMPLE_SOBOL_JOINT_LANES; d++)
             x[d] ^= row[d];
     }
-    for (int d = 0; d < SAMPLE_SOBOL_MAX_DIMS; d++)
+    for (int d = 0; d < SAMPLE_SOBOL_JOINT_LANES; d++)
         s->joint_u[d] = fraction_to_float(nested_uniform_scramble(x[d], s->joint_seed[d]));
 }
 

@@ -82,6 +82,9 @@ enum {
 #define SAMPLE_SOBOL_JOINT_DIMS (SAMPLE_DIM_BOUNCE0 + SAMPLE_DIMS_PER_BOUNCE)
 #endif
 #define SAMPLE_SOBOL_MAX_DIMS 16 /* dimensions in the generator-matrix table */
+/* Lanes of the joint point's loops (sample.c): the joint dimensions rounded up to a vector of 8
+ * or 16 (the lanes past the joint dimensions are computed and never read). */
+#define SAMPLE_SOBOL_JOINT_LANES (SAMPLE_SOBOL_JOINT_DIMS <= 8 ? 8 : SAMPLE_SOBOL_MAX_DIMS)
 
 /* The unscrambled Sobol' point of index in dimension dim < SAMPLE_SOBOL_MAX_DIMS, as a 32-bit
  * fraction (value / 2^32); direction numbers of Joe & Kuo 2008 (sobol_matrices.h). */
@@ -125,16 +128,16 @@ struct sampler {
     uint64_t pixel_hash; /* hash of (seed, pixel_idx): root of every scrambling seed */
     /* Sobol', per pixel */
     uint32_t shuffle_seed;                             /* seed of the joint point's index shuffle */
-    uint32_t joint_seed[SAMPLE_SOBOL_MAX_DIMS];        /* scramble seed of each joint dimension */
+    uint32_t joint_seed[SAMPLE_SOBOL_JOINT_LANES];     /* scramble seed of each joint dimension */
     struct sample_pad_seeds pad_kept[SAMPLE_PAD_KEPT]; /* of the first padded blocks */
     /* Sobol', per sample */
-    uint32_t sample_idx_rev;              /* sample_idx bit-reversed: the padding's input */
-    float joint_u[SAMPLE_SOBOL_MAX_DIMS]; /* the joint point, a value per dimension */
-    uint32_t pad_dim0;                    /* first dimension of the block held, or
+    uint32_t sample_idx_rev;                 /* sample_idx bit-reversed: the padding's input */
+    float joint_u[SAMPLE_SOBOL_JOINT_LANES]; /* the joint point, a value per dimension */
+    uint32_t pad_dim0;                       /* first dimension of the block held, or
                                              SAMPLE_PAD_NONE */
-    float pad_x[SAMPLE_PAD_LANES];        /* the padding requests at pad_dim0 + lane: x, */
-    float pad_y[SAMPLE_PAD_LANES];        /* and y of a 2D request */
-};                                        /* 464 bytes */
+    float pad_x[SAMPLE_PAD_LANES];           /* the padding requests at pad_dim0 + lane: x, */
+    float pad_y[SAMPLE_PAD_LANES];           /* and y of a 2D request */
+};                                           /* 464 bytes */
 
 /* Starts the sample sample_idx of pixel pixel_idx at dimension 0, with set_spp = 0: the
  * stratified sampler then has no strata to fill and gives independent hashed uniforms. */

@@ -293,12 +293,11 @@ static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, u
     uint32_t pixel_idx = y * (uint32_t)film->width + x;
     struct film_pixel *px = &film->pixels[pixel_idx];
     uint64_t done = 0;
-    uint64_t skipped = 0;  /* samples an adaptive stop saved, counted as progress */
-    uint64_t n_rays = 0;   /* kept here, added to the worker's count once per pixel */
+    uint64_t skipped = 0; /* samples an adaptive stop saved, counted as progress */
+    uint64_t n_rays = 0;  /* kept here, added to the worker's count once per pixel */
     struct sampler samplers[TRACE_PACKET];
+    uint32_t n_started = 1; /* samplers started on the pixel: copies of the first */
     sample_start_pixel(&samplers[0], opt->sampler, opt->seed, pixel_idx, job->set_spp);
-    for (int i = 1; i < TRACE_PACKET; i++)
-        samplers[i] = samplers[0];
     while (px->n + px->n_dropped < opt->spp) {
         if (opt->cancel && atomic_load_explicit(opt->cancel, memory_order_relaxed)) {
             w->result.cancelled = true;
@@ -315,6 +314,8 @@ static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, u
         n = n < TRACE_PACKET ? n : TRACE_PACKET;
         /* the camera rays: box filter (uniform jitter inside the pixel), then the lens */
         struct ray rays[TRACE_PACKET];
+        for (; n_started < n; n_started++)
+            samplers[n_started] = samplers[0];
         for (uint32_t i = 0; i < n; i++) {
             sample_start_index(&samplers[i], opt->sample_offset + taken + i);
             vec2 u_pixel = sample_2d(&samplers[i]);
