@@ -326,8 +326,8 @@ static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, u
         struct first_hit first[TRACE_PACKET];
         bool packet = intersect_camera_rays(job->ts, rays, n, first);
         for (uint32_t i = 0; i < n; i++) {
-            vec3 L = radiance(job->ts, opt, rays[i], packet ? &first[i] : NULL, &samplers[i],
-                              &n_rays);
+            vec3 L = packet ? radiance(job->ts, opt, rays[i], &first[i], &samplers[i], &n_rays)
+                            : trace_radiance(job->ts, opt, rays[i], &samplers[i], &n_rays);
             if (v3_is_finite(L)) {
                 film_add(px, L);
             } else {
