@@ -75,11 +75,13 @@ enum {
 };
 
 /* Dimensions the Sobol' sampler draws from one Sobol' point: pixel, lens and the first
- * bounce (direct light at the first hit), 11 dimensions; every later 1D or 2D request is a
- * separately shuffled and scrambled padding sequence.  docs/sampling.md measures this against
- * a joint pixel and lens only (4, Burley 2020's choice). */
-#ifndef SAMPLE_SOBOL_JOINT_DIMS /* -DSAMPLE_SOBOL_JOINT_DIMS=4: the experiment's other arm */
-#define SAMPLE_SOBOL_JOINT_DIMS (SAMPLE_DIM_BOUNCE0 + SAMPLE_DIMS_PER_BOUNCE)
+ * bounce's light sample (choice and position: the direct light at the first hit, whose shadow
+ * edges couple it with the pixel position), 7 dimensions; every later 1D or 2D request (the
+ * first bounce's BSDF sample on) is a separately shuffled and scrambled (0,2)-sequence.
+ * docs/sampling.md measures this against the whole first bounce joint (11) and pixel and lens
+ * only (4, Burley 2020's choice); -DSAMPLE_SOBOL_JOINT_DIMS=N builds the others. */
+#ifndef SAMPLE_SOBOL_JOINT_DIMS
+#define SAMPLE_SOBOL_JOINT_DIMS (SAMPLE_DIM_BOUNCE0 + SAMPLE_BOUNCE_BSDF_LOBE)
 #endif
 #define SAMPLE_SOBOL_MAX_DIMS 16 /* dimensions in the generator-matrix table */
 /* Lanes of the joint point's loops (sample.c): the joint dimensions rounded up to a vector of 8
@@ -94,7 +96,7 @@ uint32_t sample_sobol_u32(uint32_t index, uint32_t dim);
  * dimension of the block. */
 enum {
     SAMPLE_PAD_LANES = 8, /* lanes of a block: SAMPLE_DIMS_PER_BOUNCE, and one spare */
-    SAMPLE_PAD_KEPT = 2,  /* the first padded blocks, whose seeds are hashed once per pixel */
+    SAMPLE_PAD_KEPT = 3,  /* the first padded blocks, whose seeds are hashed once per pixel */
 };
 _Static_assert((int)SAMPLE_PAD_LANES >= (int)SAMPLE_DIMS_PER_BOUNCE,
                "a padded block is one bounce");
