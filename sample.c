@@ -503,21 +503,34 @@ vec2 sample_2d_compute(struct sampler *s, uint32_t dim)
 
 /* ---- warps ---- */
 
+/* cos and sin of phi in [-pi/4, pi/4] by the minimax polynomials of the Cephes library's cosf
+ * and sinf on that interval (Moshier 1989, "Methods and Programs for Mathematical Functions";
+ * relative error about 3e-8): the concentric map needs no argument reduction, so it is cheaper
+ * than the library's sincosf. */
+static vec2 cos_sin_quarter(float phi)
+{
+    float z = phi * phi;
+    float c = ((2.443315711809948e-5f * z - 1.388731625493765e-3f) * z + 4.166664568298827e-2f) *
+                  z * z -
+              0.5f * z + 1.0f;
+    float sn = ((-1.9515295891e-4f * z + 8.3321608736e-3f) * z - 1.6666654611e-1f) * z * phi + phi;
+    return (vec2){c, sn};
+}
+
 vec2 sample_concentric_disk(vec2 u)
 {
-    /* map u to [-1,1]^2, then squares to concentric rings (Shirley & Chiu 1997) */
+    /* map u to [-1,1]^2, then squares to concentric rings (Shirley & Chiu 1997):
+     * r = ox, theta = pi/4 oy/ox when |ox| > |oy|, else r = oy, theta = pi/2 - pi/4 ox/oy, whose
+     * cos and sin are the sin and cos of pi/4 ox/oy */
     float ox = 2.0f * u.x - 1.0f, oy = 2.0f * u.y - 1.0f;
     if (ox == 0.0f && oy == 0.0f)
         return (vec2){0.0f, 0.0f};
-    float r, theta;
     if (fabsf(ox) > fabsf(oy)) {
-        r = ox;
-        theta = (MCPT_PI / 4.0f) * (oy / ox);
-    } else {
-        r = oy;
-        theta = (MCPT_PI / 2.0f) - (MCPT_PI / 4.0f) * (ox / oy);
+        vec2 cs = cos_sin_quarter((MCPT_PI / 4.0f) * (oy / ox));
+        return (vec2){ox * cs.x, ox * cs.y};
     }
-    return (vec2){r * cosf(theta), r * sinf(theta)};
+    vec2 cs = cos_sin_quarter((MCPT_PI / 4.0f) * (ox / oy));
+    return (vec2){oy * cs.y, oy * cs.x};
 }
 
 vec2 sample_invert_concentric_disk(vec2 p)
