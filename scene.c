@@ -1767,16 +1767,20 @@ static bool build_lights(struct parser *ps)
 
 /* ---- public API --------------------------------------------------------------------------- */
 
-bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err)
+/* Parses the scene from the descriptor fd (-1: open path), named path in messages; the files
+ * it names are relative to the first n_dir bytes of path (0: the working directory). */
+static bool load(int fd, const char *path, size_t n_dir, struct scene *scene,
+                 struct mcpt_error *err)
 {
     struct mcpt_error err_local;
     struct parser ps = {.path = path,
                         .scene = scene,
                         .err = err ? err : &err_local,
-                        .fd = -1,
+                        .fd = fd,
                         .default_mat_idx = -1};
     char *line = NULL;
     bool ok = false;
+    bool is_opened = fd < 0;
     memset(scene, 0, sizeof *scene);
     scene->width = 512;
     scene->height = 512;
@@ -1788,7 +1792,8 @@ bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err)
     /* a regular file, or a pipe (mcpt <(generate) reads /dev/fd/N); never a device, and open()
      * never waits for a FIFO's writer */
     const char *not_regular = NULL;
-    ps.fd = obj_open_input(path, true, &not_regular);
+    if (is_opened)
+        ps.fd = obj_open_input(path, true, &not_regular);
     if (ps.fd < 0) {
         if (not_regular)
             mcpt_error_set(ps.err, path, 0, 0, "expected a regular file, got %s", not_regular);
@@ -1797,8 +1802,6 @@ bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err)
                            strerror(errno));
         goto done;
     }
-    const char *slash = strrchr(path, '/');
-    size_t n_dir = slash ? (size_t)(slash - path) + 1 : 0;
     ps.dir = malloc(n_dir + 1);
     line = malloc(SCENE_MAX_LINE_BYTES + 1);
     ps.in = malloc(SCENE_READ_BYTES);
@@ -1834,7 +1837,7 @@ bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err)
     }
     ok = build_lights(&ps);
 done:
-    if (ps.fd >= 0)
+    if (ps.fd >= 0 && is_opened)
         close(ps.fd);
     free(line);
     free(ps.in);
@@ -1845,6 +1848,17 @@ done:
     if (!ok)
         scene_free(scene);
     return ok;
+}
+
+bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err)
+{
+    const char *slash = strrchr(path, '/');
+    return load(-1, path, slash ? (size_t)(slash - path) + 1 : 0, scene, err);
+}
+
+bool scene_load_stream(FILE *f, const char *name, struct scene *scene, struct mcpt_error *err)
+{
+    return load(fileno(f), name, 0, scene, err); /* read from the descriptor's offset */
 }
 
 void scene_free(struct scene *scene)

@@ -140,6 +140,12 @@ struct scene {
  * read failure). */
 bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err);
 
+/* As scene_load, from the open stream f, e.g. a copy of standard input: read through its
+ * descriptor from the descriptor's offset (rewind f first) to the end; not closed.  name
+ * stands for the file in error messages ("<stdin>"), and the OBJ/MTL files it names are
+ * relative to the working directory. */
+bool scene_load_stream(FILE *f, const char *name, struct scene *scene, struct mcpt_error *err);
+
 /* Frees everything scene_load allocated and zeroes *scene.  Safe on a zeroed scene. */
 void scene_free(struct scene *scene);
 
