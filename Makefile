@@ -196,6 +196,10 @@ bench/raybench: bench/raybench.c bench/bench.c bench/bench.h $(BENCH_OBJS) $(FLA
 bench/raydump: bench/raydump.c bench/bench.c bench/bench.h $(LIB_OBJS) $(FLAGS_STAMP)
 	$(CC) $(BENCH_CFLAGS) -o $@ bench/raydump.c bench/bench.c $(LIB_OBJS) $(LDLIBS_ALL)
 
+# bench/packetbench: a render with camera packets against one with single camera rays
+bench/packetbench: bench/packetbench.c bench/bench.c bench/bench.h $(LIB_OBJS) $(FLAGS_STAMP)
+	$(CC) $(BENCH_CFLAGS) -o $@ bench/packetbench.c bench/bench.c $(LIB_OBJS) $(LDLIBS_ALL)
+
 bench/embree_bench: bench/embree_bench.c bench/bench.c bench/bench.h $(BENCH_OBJS) $(FLAGS_STAMP)
 	$(CC) $(BENCH_CFLAGS) $(EMBREE_CFLAGS) -o $@ bench/embree_bench.c bench/bench.c $(BENCH_OBJS) \
 	    $(EMBREE_LIBS) -lpthread -lm
@@ -232,7 +236,7 @@ BENCH_BASE ?= 1ca94b3
 BENCH_RENDER_RUNS ?= 5
 BENCH_THREADS ?= 1
 BENCH_BASE_DIR := $(BUILD)/bench-base/$(BENCH_BASE)
-bench-render: mcpt bench/raybench bench/raydump $(if $(BENCH_BASE),$(BENCH_BASE_DIR)/mcpt)
+bench-render: mcpt bench/raybench bench/raydump bench/packetbench $(if $(BENCH_BASE),$(BENCH_BASE_DIR)/mcpt)
 	python3 scripts/bench_render.py --mcpt ./mcpt --runs $(BENCH_RENDER_RUNS) \
 	    --threads $(BENCH_THREADS) $(if $(BENCH_BASE),--base $(BENCH_BASE_DIR)/mcpt)
 
@@ -260,6 +264,7 @@ bench-cycles:
 endif
 
 clean:
-	rm -rf build build-san build-fuzz build-vg mcpt bench/raybench bench/embree_bench bench/raydump
+	rm -rf build build-san build-fuzz build-vg mcpt bench/raybench bench/embree_bench bench/raydump \
+	    bench/packetbench
 
 -include $(wildcard $(BUILD)/*.d $(BUILD)/tests/*.d $(FUZZ_BUILD)/*.d)

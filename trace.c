@@ -29,11 +29,8 @@
 #include "material.h"
 
 /* Camera rays are intersected TRACE_PACKET at a time (a BVH packet), the samples of one pixel
- * (render_pixel); fewer than TRACE_PACKET_MIN go one by one.  docs/performance.md measures it.
- * Build with -DTRACE_CAMERA_PACKETS=0 for the single-ray path (same image to the bit). */
-#ifndef TRACE_CAMERA_PACKETS
-#define TRACE_CAMERA_PACKETS 1
-#endif
+ * (render_pixel); fewer than TRACE_PACKET_MIN go one by one, and so do all of them with
+ * trace_options.single_rays (the same image to the bit).  docs/performance.md measures it. */
 #define TRACE_PACKET BVH_PACKET_SIZE
 #define TRACE_PACKET_MIN 2
 
@@ -86,8 +83,8 @@ static void count_ray(const struct trace_options *opt, const struct ray *ray, bo
 static vec3 radiance(const struct trace_scene *ts, const struct trace_options *opt, struct ray ray,
                      const struct first_hit *first, struct sampler *sampler, uint64_t *n_rays);
 static bool intersect(const struct trace_scene *ts, const struct ray *ray, struct hit_record *hr);
-static bool intersect_camera_rays(const struct trace_scene *ts, const struct ray *rays, uint32_t n,
-                                  struct first_hit *first);
+static bool intersect_camera_rays(const struct trace_scene *ts, const struct trace_options *opt,
+                                  const struct ray *rays, uint32_t n, struct first_hit *first);
 static bool occluded(const struct trace_scene *ts, const struct ray *ray);
 static struct ray spawn_ray(const struct surface *sf, vec3 d);
 static struct ray spawn_ray_to(const struct surface *from, vec3 p_to, vec3 p_to_error, vec3 n_to);
@@ -324,7 +321,7 @@ static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, u
                                  u_lens);
         }
         struct first_hit first[TRACE_PACKET];
-        bool packet = intersect_camera_rays(job->ts, rays, n, first);
+        bool packet = intersect_camera_rays(job->ts, opt, rays, n, first);
         for (uint32_t i = 0; i < n; i++) {
             vec3 L = packet ? radiance(job->ts, opt, rays[i], &first[i], &samplers[i], &n_rays)
                             : trace_radiance(job->ts, opt, rays[i], &samplers[i], &n_rays);
@@ -715,12 +712,12 @@ static bool intersect(const struct trace_scene *ts, const struct ray *ray, struc
 
 /* The first hits of n <= TRACE_PACKET camera rays of one pixel, their triangles found as one
  * packet (bvh_intersect_packet reports each ray's bvh_intersect result).  Returns false, filling
- * nothing, where a packet does not pay: fewer than TRACE_PACKET_MIN rays, a scene without
- * triangles, or a build without camera packets (TRACE_CAMERA_PACKETS 0). */
-static bool intersect_camera_rays(const struct trace_scene *ts, const struct ray *rays, uint32_t n,
-                                  struct first_hit *first)
+ * nothing, where a packet does not pay (fewer than TRACE_PACKET_MIN rays, a scene without
+ * triangles) or is not wanted (opt->single_rays). */
+static bool intersect_camera_rays(const struct trace_scene *ts, const struct trace_options *opt,
+                                  const struct ray *rays, uint32_t n, struct first_hit *first)
 {
-    if (!TRACE_CAMERA_PACKETS || n < TRACE_PACKET_MIN || ts->scene->n_tris == 0)
+    if (opt->single_rays || n < TRACE_PACKET_MIN || ts->scene->n_tris == 0)
         return false;
     struct bvh_packet packet;
     for (uint32_t i = 0; i < n; i++)

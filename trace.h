@@ -59,6 +59,9 @@ struct trace_options {
      * writes them as ray files for bench/raybench. */
     void (*ray_hook)(void *user, const struct ray *ray, bool is_shadow);
     void *ray_hook_user;
+    /* benchmarking and tests: every camera ray intersected alone, not in the packets of
+     * render_pixel; the image is the same to the bit (bench/packetbench times the two) */
+    bool single_rays;
 };
 
 #define TRACE_RR_DEPTH_DEFAULT 2u /* as PBRT 4e: the first two bounces are never cut short */

@@ -14,7 +14,11 @@ after one warm-up each:
   - the render's rays/s as a fraction of raybench's on the same scene's own rays: bench/raydump
     writes a 4-spp render's rays (camera and bounce rays; shadow rays) and bench/raybench traces
     them, once per round (single rays, thread CPU time); the fraction needs a scene of triangles
-    only (raybench sees no analytic shape).
+    only (raybench sees no analytic shape);
+  - camera packets (trace.c, render_pixel) against single camera rays, end to end:
+    bench/packetbench renders the scene both ways on one thread, interleaved over the same number
+    of rounds, and prints the median time ratio single/packets (> 1: packets win) and whether
+    the two films are the same to the bit (they must be).
 Medians over the rounds; ratios current/baseline per round, then their median.
 
 References: `--make-refs` renders bench/ref/SCENE.exr with --sampler independent at
@@ -22,6 +26,7 @@ REF_FACTOR (16) times the scene's spp, seed 1000003 (the commands are printed).
 
 usage: scripts/bench_render.py [--mcpt ./mcpt] [--base OLD/mcpt] [--runs R] [--threads T]
                                [--scenes a,b] [--raybench bench/raybench] [--raydump bench/raydump]
+                               [--packetbench bench/packetbench]
                                [--json OUT.json] [--make-refs]
 Python standard library only.
 """
@@ -97,6 +102,24 @@ def kernel_rate(raybench, prefix):
     return n_rays / secs / 1e6 if secs > 0 else float("nan")
 
 
+PACKETS = re.compile(r"packets ([0-9.]+) ms .*single rays ([0-9.]+) ms .*single/packets "
+                     r"x([0-9.]+); films (\w+)")
+
+
+def packet_ratio(packetbench, scene, runs):
+    """bench/packetbench on the scene: the median time ratio single rays / packets."""
+    name, path, w, h, spp = scene
+    p = subprocess.run([packetbench, path, "--width", str(w), "--height", str(h), "--spp",
+                        str(spp), "--runs", str(runs)], stdout=subprocess.PIPE,
+                       stderr=subprocess.PIPE, text=True)
+    m = PACKETS.search(p.stdout)
+    if not m:
+        sys.exit("bench_render: packetbench failed (%d): %s%s" % (p.returncode, p.stdout,
+                                                                  p.stderr))
+    return {"packets_ms": float(m.group(1)), "single_ms": float(m.group(2)),
+            "single_over_packets": float(m.group(3)), "identical": m.group(4) == "identical"}
+
+
 def scene_has_only_triangles(path):
     with open(path) as f:
         return not any(re.match(r"\s*(sphere|quad|plane)\b", line) for line in f)
@@ -128,6 +151,7 @@ def main():
                     ",".join(s[0] for s in SCENES))
     ap.add_argument("--raybench", default="bench/raybench")
     ap.add_argument("--raydump", default="bench/raydump")
+    ap.add_argument("--packetbench", default="bench/packetbench")
     ap.add_argument("--json", help="write the figures here as JSON")
     ap.add_argument("--make-refs", action="store_true", help="(re)render bench/ref/*.exr")
     args = ap.parse_args()
@@ -201,6 +225,8 @@ def main():
                 res["ratio"]["efficiency"] = c["efficiency"] / b["efficiency"]
         for label, _ in bins:
             del res[label]["_secs"]
+        if os.path.exists(args.packetbench):
+            res["packets"] = packet_ratio(args.packetbench, s, args.runs)
         results[name] = res
         print_scene(name, res, [label for label, _ in bins])
     if args.json:
@@ -228,6 +254,11 @@ def print_scene(name, res, labels):
         print("  current/base: speed x%.3f%s" % (q["speed"], (", MSE x%.3f, efficiency x%.3f"
                                                            % (q["mse"], q["efficiency"]))
                                                           if "mse" in q else ""))
+    if "packets" in res:
+        q = res["packets"]
+        print("  camera packets: %.1f ms, single rays %.1f ms (1 thread): single/packets x%.3f; "
+              "films %s" % (q["packets_ms"], q["single_ms"], q["single_over_packets"],
+                            "identical" if q["identical"] else "DIFFER"))
     sys.stdout.flush()
 
 
