@@ -33,6 +33,7 @@ struct bvh_hit {
 
 struct bvh_stats {
     uint32_t n_tris;
+    uint32_t n_refs;     /* triangle references in the leaves: n_tris plus spatial splits' copies */
     uint32_t n_nodes;    /* binary nodes (the tree every layout is converted from) */
     uint32_t n_leaves;   /* binary leaves */
     uint32_t max_depth;  /* of the binary tree, root = 0 */
@@ -54,9 +55,17 @@ enum bvh_layout {
     BVH_LAYOUT_WIDE = 2,   /* 8-wide nodes, SoA boxes and leaves, converted from the binary tree */
 };
 
+/* How the binary tree is split (docs/bvh.md, "Build"). */
+enum bvh_quality {
+    BVH_QUALITY_DEFAULT = 0, /* what bvh_build uses: BVH_QUALITY_SPATIAL */
+    BVH_QUALITY_BINNED = 1,  /* object splits only: binned SAH (Wald 2007) */
+    BVH_QUALITY_SPATIAL = 2, /* object and spatial splits (Stich, Friedrich, Dietrich 2009) */
+};
+
 struct bvh_build_options {
-    int n_threads;    /* <= 1: build on the calling thread; the tree is the same for any count */
-    unsigned layouts; /* OR of enum bvh_layout; 0 means BVH_LAYOUT_WIDE */
+    int n_threads;            /* <= 1: build on the calling thread; the tree is the same for any */
+    unsigned layouts;         /* OR of enum bvh_layout; 0 means BVH_LAYOUT_WIDE */
+    enum bvh_quality quality; /* 0: the default */
 };
 
 /* Builds a BVH over n_tris triangles whose vertex indices are indices[3i .. 3i+2] into

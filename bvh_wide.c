@@ -293,15 +293,21 @@ static uint32_t emit_triangles(struct convert *cv, const uint32_t *tris, uint32_
     return w;
 }
 
-/* The wide leaf of binary subtree idx without its degenerate triangles; false when none is
- * left (the leaf is dropped). */
+/* The wide leaf of binary subtree idx without its degenerate triangles, and with each triangle
+ * once (the two parts of a triangle cut by a spatial split may meet again in one leaf); false
+ * when none is left (the leaf is dropped). */
 static bool emit_subtree_leaf(struct convert *cv, uint32_t idx, uint32_t *ref)
 {
     const struct collapse_entry *e = &cv->dp[idx];
+    const uint32_t *prim_idx = cv->bvh->prim_idx;
     uint32_t n = 0;
-    for (uint32_t i = e->first; i < e->first + e->n_tris; i++)
-        if (!cv->degenerate[i])
+    for (uint32_t i = e->first; i < e->first + e->n_tris; i++) {
+        bool seen = cv->degenerate[i];
+        for (uint32_t j = 0; j < n && !seen; j++)
+            seen = prim_idx[cv->scratch[j]] == prim_idx[i];
+        if (!seen)
             cv->scratch[n++] = i;
+    }
     if (n == 0)
         return false;
     struct box unused = empty_box;
@@ -383,7 +389,7 @@ bool bvh_wide_convert(struct bvh *bvh, const vec3 *positions, const uint32_t *in
 {
     bool ok = false;
     struct collapse_entry *dp = bvh_alloc_array(bvh->n_nodes, sizeof *dp);
-    uint32_t *scratch = bvh_alloc_array(bvh->n_tris, sizeof *scratch);
+    uint32_t *scratch = bvh_alloc_array(bvh->n_refs, sizeof *scratch);
     if (!dp || !scratch)
         goto done;
     collapse_costs(bvh, dp);
@@ -1217,7 +1223,8 @@ static ALWAYS_INLINE bool wide_any(const struct bvh *bvh, uint32_t root, struct 
         if (!(ref & WIDE_LEAF)) {
             const struct wide_node *node = &v->wide[ref];
             struct f8 t_entry;
-            uint32_t mask = m8_bits(wide_box_hit(node, v, fast, t_max, &t_entry));
+            struct m8 hit_m = wide_box_hit(node, v, fast, t_max, &t_entry);
+            uint32_t mask = m8_bits(hit_m);
             if (mask) {
                 ref = node->child[lowest_bit(mask)];
                 assert(n_stack + 8 <= WIDE_STACK_SIZE);
