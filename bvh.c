@@ -633,8 +633,10 @@ static void spatial_bins_fill_parallel(struct spatial_bins *sb, const struct bui
         return;
     }
     for (int i = 0; i < n_threads; i++)
-        jobs[i] = (struct spatial_job){ctx, slice_begin(begin, end - begin, i, n_threads),
-                                       slice_begin(begin, end - begin, i + 1, n_threads), g};
+        jobs[i] = (struct spatial_job){.ctx = ctx,
+                                       .begin = slice_begin(begin, end - begin, i, n_threads),
+                                       .end = slice_begin(begin, end - begin, i + 1, n_threads),
+                                       .grid = g};
     run_jobs(n_threads, spatial_job_run, jobs, sizeof *jobs);
     for (int i = 0; i < n_threads; i++) {
         for (int a = 0; a < 3; a++) {
@@ -1314,7 +1316,7 @@ static void compute_stats(struct bvh *bvh);
 struct bvh *bvh_build(const vec3 *positions, const uint32_t *indices, uint32_t n_tris,
                       int n_threads)
 {
-    struct bvh_build_options opt = {n_threads, BVH_LAYOUT_WIDE};
+    struct bvh_build_options opt = {n_threads, BVH_LAYOUT_WIDE, BVH_QUALITY_DEFAULT};
     return bvh_build_with(positions, indices, n_tris, &opt);
 }
 
@@ -1322,7 +1324,8 @@ struct bvh *bvh_build_with(const vec3 *positions, const uint32_t *indices, uint3
                            const struct bvh_build_options *opt)
 {
     double t_start_ms = now_ms();
-    struct bvh_build_options o = opt ? *opt : (struct bvh_build_options){1, BVH_LAYOUT_WIDE};
+    struct bvh_build_options o =
+        opt ? *opt : (struct bvh_build_options){1, BVH_LAYOUT_WIDE, BVH_QUALITY_DEFAULT};
     unsigned layouts = o.layouts ? o.layouts : BVH_LAYOUT_WIDE;
     if (n_tris >= BVH_WIDE_MAX_TRIS)
         layouts = BVH_LAYOUT_BINARY;

@@ -87,7 +87,7 @@ static struct bvh *timed_build(const struct bench_mesh *mesh, int n_threads, uns
                                int build_runs, double *build_ms)
 {
     double times[64];
-    struct bvh_build_options bo = {n_threads, layouts};
+    struct bvh_build_options bo = {n_threads, layouts, BVH_QUALITY_DEFAULT};
     struct bvh *bvh = bvh_build_with(mesh->positions, mesh->indices, mesh->n_tris, &bo);
     int n = build_runs < 64 ? build_runs : 64;
     for (int r = 0; r < n && bvh; r++) {
