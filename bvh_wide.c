@@ -746,6 +746,15 @@ static inline struct f8 f8_permute(struct f8 a, struct i8 idx)
     F8_MAP(a.v[idx.v[i]]);
 #endif
 }
+/* every lane: lane `lane` of a */
+static inline struct f8 f8_splat_lane(struct f8 a, int lane)
+{
+#if BVH_AVX2
+    return (struct f8){_mm256_permutevar8x32_ps(a.v, _mm256_set1_epi32(lane))};
+#else
+    F8_MAP(a.v[lane]);
+#endif
+}
 static inline struct m8 m8_permute(struct m8 a, struct i8 idx)
 {
 #if BVH_AVX2
@@ -1468,6 +1477,8 @@ struct packet_pre {
     int far_row[3];
     bool uniform_k;  /* every lane has the same (kx, ky, kz) */
     int k[3];        /* when uniform_k */
+    struct f8 d[3];  /* directions (inactive lanes: the first active ray's) */
+    uint32_t finite; /* lanes whose slab constants are all finite (the fused form applies) */
 };
 
 /* m ? x : (n ? y : z) per lane */
@@ -1515,8 +1526,38 @@ static void packet_setup(const struct bvh_packet *p, uint32_t active, struct pac
         pp->near_row[a] = 2 * a + (neg ? 1 : 0);
         pp->far_row[a] = 2 * a + 1 - (neg ? 1 : 0);
     }
-    coherent = coherent && m8_bits(f8_le(magnitude, f8_set1(FLT_MAX))) == all;
+    pp->finite = m8_bits(f8_le(magnitude, f8_set1(FLT_MAX)));
+    coherent = coherent && pp->finite == all;
     pp->coherent = BVH_FUSED_SLABS && coherent;
+    for (int a = 0; a < 3; a++)
+        pp->d[a] = d[a];
+}
+
+/* Which active lanes hit the tree's box (the slab test of box_hit on each lane, NaN-aware),
+ * before Woop's constants are computed: most camera rays of a small object miss it. */
+static uint32_t packet_root_hit(const struct bvh *bvh, const struct packet_pre *pp,
+                                const float t_max[BVH_PACKET_SIZE])
+{
+    struct f8 t0 = pp->t_min;
+    struct f8 t1 = f8_loadu(t_max);
+    for (int a = 0; a < 3; a++) {
+        struct f8 lo = f8_set1(bvh->bounds.min[a]);
+        struct f8 hi = f8_set1(bvh->bounds.max[a]);
+        struct f8 near = f8_select(pp->is_neg[a], hi, lo);
+        struct f8 far = f8_select(pp->is_neg[a], lo, hi);
+        t0 = f8_max_num(t0, f8_mul(f8_sub(near, pp->o[a]), pp->inv_d[a]));
+        t1 = f8_min_num(t1, f8_mul(f8_sub(far, pp->o[a]), pp->inv_d_far[a]));
+    }
+    return m8_bits(f8_le(t0, t1));
+}
+
+/* Woop's constants of every lane (ray_setup_woop's operations, lane by lane), at the packet's
+ * first leaf. */
+static void packet_setup_woop(struct packet_pre *pp)
+{
+    const struct f8 zero = f8_set1(0.0f);
+    const uint32_t all = (1u << BVH_PACKET_SIZE) - 1u;
+    const struct f8 *d = pp->d;
     /* Woop's permutation (ray_setup_woop): kz = argmax |d|, kx, ky the next two, swapped when
      * d[kz] < 0 */
     struct f8 ad0 = f8_abs(d[0]);
@@ -1572,6 +1613,37 @@ static void packet_lane_ray(const struct bvh_packet *p, int lane, struct ray_pre
     struct ray r = packet_lane(p, lane);
     ray_setup_box(&r, rp);
     wide_ray_setup(rp, r.t_min, wr);
+}
+
+/* A lane leaving the packet, with finite constants: its single-ray constants for
+ * wide_closest_fast / wide_any_fast are the packet's lane (packet_setup computed them with
+ * wide_ray_setup's operations, so they are the same bits), broadcast, instead of the scalar
+ * setup.  false for the other lanes, which take packet_lane_ray. */
+static inline bool packet_lane_fast(const struct bvh *bvh, const struct bvh_packet *p,
+                                    const struct packet_pre *pp, int lane, struct ray_pre *rp,
+                                    struct wide_ray8 *v)
+{
+    if (!BVH_FUSED_SLABS || !(pp->finite >> lane & 1u))
+        return false;
+    int neg = 0;
+    for (int a = 0; a < 3; a++) {
+        v->o[a] = f8_splat_lane(pp->o[a], lane);
+        v->inv_d[a] = f8_splat_lane(pp->inv_d[a], lane);
+        v->inv_d_far[a] = f8_splat_lane(pp->inv_d_far[a], lane);
+        v->c_near[a] = f8_splat_lane(pp->c_near[a], lane);
+        v->c_far[a] = f8_splat_lane(pp->c_far[a], lane);
+        int is_neg = (int)(m8_bits(pp->is_neg[a]) >> lane & 1u);
+        v->near_off[a] = (size_t)(2 * a + is_neg) * sizeof(float) * BVH_WIDTH;
+        v->far_off[a] = (size_t)(2 * a + 1 - is_neg) * sizeof(float) * BVH_WIDTH;
+        neg |= is_neg << a;
+        rp->o[a] = p->o[a][lane];
+        rp->d[a] = p->d[a][lane];
+    }
+    v->t_min = f8_splat_lane(pp->t_min, lane);
+    v->order_shift = 3 * neg;
+    v->wide = bvh->wide;
+    v->rp = rp;
+    return true;
 }
 
 /* Slab test of child `lane` of node against every ray; returns the mask of rays hitting it.
@@ -1667,6 +1739,7 @@ static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh,
         v_hit[lane] = 0.0f;
     }
     struct f8 t_hit8 = f8_loadu(t_hit);
+    bool woop_ready = false; /* Woop's constants are computed at the first leaf */
     /* a node's entry is pushed at most once per visit of its parent: 7 per level */
     struct packet_entry stack[WIDE_STACK_SIZE];
     uint32_t n_stack = 0;
@@ -1678,10 +1751,15 @@ static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh,
             for (uint32_t bits = cur.mask; bits; bits &= bits - 1) {
                 int lane = lowest_bit(bits);
                 struct ray_pre rp;
-                struct wide_ray wr;
-                packet_lane_ray(packet, lane, &rp, &wr);
                 struct wide_hit h = {t_hit[lane], u_hit[lane], v_hit[lane], tri_hit_idx[lane]};
-                wide_closest_ray(bvh, cur.ref, &wr, &h);
+                struct wide_ray8 v;
+                if (packet_lane_fast(bvh, packet, pp, lane, &rp, &v)) {
+                    wide_closest_fast(bvh, cur.ref, &v, &h);
+                } else {
+                    struct wide_ray wr;
+                    packet_lane_ray(packet, lane, &rp, &wr);
+                    wide_closest_ray(bvh, cur.ref, &wr, &h);
+                }
                 t_hit[lane] = h.t;
                 u_hit[lane] = h.u;
                 v_hit[lane] = h.v;
@@ -1708,6 +1786,10 @@ static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh,
                 stack[i] = e;
             }
         } else {
+            if (!woop_ready) {
+                packet_setup_woop(pp);
+                woop_ready = true;
+            }
             uint32_t first = (cur.ref & ~WIDE_LEAF) >> 3;
             uint32_t n = (cur.ref & 7u) + 1;
             for (uint32_t i = 0; i < n; i++) {
@@ -1781,6 +1863,9 @@ uint32_t bvh_intersect_packet(const struct bvh *bvh, const struct bvh_packet *pa
     struct packet_pre pp;
     float t_hit[8];
     packet_setup(packet, active, &pp, t_hit);
+    active &= packet_root_hit(bvh, &pp, t_hit);
+    if (!active)
+        return 0;
     return pp.coherent ? packet_closest(bvh, packet, active, &pp, t_hit, hit, true)
                        : packet_closest(bvh, packet, active, &pp, t_hit, hit, false);
 }
@@ -1791,6 +1876,7 @@ static ALWAYS_INLINE uint32_t packet_any(const struct bvh *bvh, const struct bvh
                                          const float t_max[8], const bool coherent)
 {
     const struct f8 t_max8 = f8_loadu(t_max);
+    bool woop_ready = false; /* Woop's constants are computed at the first leaf */
     uint32_t occluded = 0;
     struct packet_entry stack[WIDE_STACK_SIZE];
     uint32_t n_stack = 0;
@@ -1803,9 +1889,16 @@ static ALWAYS_INLINE uint32_t packet_any(const struct bvh *bvh, const struct bvh
             for (uint32_t bits = cur.mask; bits; bits &= bits - 1) {
                 int lane = lowest_bit(bits);
                 struct ray_pre rp;
-                struct wide_ray wr;
-                packet_lane_ray(packet, lane, &rp, &wr);
-                if (wide_any_ray(bvh, cur.ref, &wr, packet->t_max[lane]))
+                struct wide_ray8 v;
+                bool is_occluded;
+                if (packet_lane_fast(bvh, packet, pp, lane, &rp, &v)) {
+                    is_occluded = wide_any_fast(bvh, cur.ref, &v, packet->t_max[lane]);
+                } else {
+                    struct wide_ray wr;
+                    packet_lane_ray(packet, lane, &rp, &wr);
+                    is_occluded = wide_any_ray(bvh, cur.ref, &wr, packet->t_max[lane]);
+                }
+                if (is_occluded)
                     occluded |= 1u << lane;
             }
         } else if (!(cur.ref & WIDE_LEAF)) {
@@ -1818,6 +1911,10 @@ static ALWAYS_INLINE uint32_t packet_any(const struct bvh *bvh, const struct bvh
                     stack[n_stack++] = (struct packet_entry){node->child[c], mask, 0.0f};
             }
         } else {
+            if (!woop_ready) {
+                packet_setup_woop(pp);
+                woop_ready = true;
+            }
             uint32_t first = (cur.ref & ~WIDE_LEAF) >> 3;
             uint32_t n = (cur.ref & 7u) + 1;
             for (uint32_t i = 0; i < n && (cur.mask & ~occluded); i++) {
@@ -1849,6 +1946,9 @@ uint32_t bvh_occluded_packet(const struct bvh *bvh, const struct bvh_packet *pac
     struct packet_pre pp;
     float t_max[8];
     packet_setup(packet, active, &pp, t_max);
+    active &= packet_root_hit(bvh, &pp, t_max);
+    if (!active)
+        return 0;
     return pp.coherent ? packet_any(bvh, packet, active, &pp, t_max, true)
                        : packet_any(bvh, packet, active, &pp, t_max, false);
 }

@@ -360,44 +360,86 @@ int main(int argc, char **argv)
     printf("model: %s: %u triangles; load average %.2f on %d CPUs; mcpt kernels %s; Embree %s%s\n",
            model, mesh.n_tris, bench_loadavg(), bench_n_cpus(), bvh_simd_name(),
            RTC_VERSION_STRING, robust ? " (robust)" : "");
-    /* builds, interleaved: mcpt 1 thread, Embree 1 thread, mcpt all, Embree all */
-    double b_mcpt[2][64];
-    double b_embree[2][64];
+    /* builds, interleaved, 1 thread then all threads: mcpt's default (spatial splits) and
+     * binned builds, Embree's high-quality (spatial splits) and medium (binned) builds; the
+     * BVHs traced below are mcpt's default and Embree's at `quality` */
+    enum { MCPT_SPATIAL, MCPT_BINNED, EMBREE_HIGH, EMBREE_MEDIUM, N_BUILDS };
+    static const char *const build_names[N_BUILDS] = {
+        "mcpt spatial splits (default)", "mcpt binned", "Embree high quality",
+        "Embree medium quality"};
+    double build_ms[N_BUILDS][2][64];
+    double bytes_per_tri[N_BUILDS];
     struct bvh *bvh = NULL;
     struct embree emb = {0};
-    long long embree_scene_bytes = 0;
     for (int r = 0; r <= runs; r++) { /* r == 0: warm-up */
         for (int mt = 0; mt < 2; mt++) {
             int threads = mt ? n_threads : 1;
-            bvh_free(bvh);
-            bvh = bvh_build(mesh.positions, mesh.indices, mesh.n_tris, threads);
-            embree_free(&emb);
-            if (!bvh || !embree_build(&mesh, threads, robust, quality, &emb)) {
-                fprintf(stderr, "embree_bench: build failed\n");
-                return 1;
-            }
-            embree_scene_bytes = emb.bytes;
-            if (r > 0) {
-                b_mcpt[mt][r - 1] = bvh_get_stats(bvh).build_ms;
-                b_embree[mt][r - 1] = emb.build_ms;
+            for (int k = 0; k < N_BUILDS; k++) {
+                double ms;
+                if (k == MCPT_SPATIAL || k == MCPT_BINNED) {
+                    struct bvh_build_options o = {threads, BVH_LAYOUT_WIDE,
+                                                  k == MCPT_SPATIAL ? BVH_QUALITY_SPATIAL
+                                                                    : BVH_QUALITY_BINNED};
+                    struct bvh *b = bvh_build_with(mesh.positions, mesh.indices, mesh.n_tris, &o);
+                    if (!b) {
+                        fprintf(stderr, "embree_bench: build failed\n");
+                        return 1;
+                    }
+                    struct bvh_stats st = bvh_get_stats(b);
+                    ms = st.build_ms;
+                    bytes_per_tri[k] = (double)st.bytes / (double)mesh.n_tris;
+                    if (k == MCPT_SPATIAL) {
+                        bvh_free(bvh);
+                        bvh = b;
+                    } else {
+                        bvh_free(b);
+                    }
+                } else {
+                    enum RTCBuildQuality q =
+                        k == EMBREE_HIGH ? RTC_BUILD_QUALITY_HIGH : RTC_BUILD_QUALITY_MEDIUM;
+                    struct embree e = {0};
+                    if (!embree_build(&mesh, threads, robust, q, &e)) {
+                        fprintf(stderr, "embree_bench: Embree build failed\n");
+                        return 1;
+                    }
+                    ms = e.build_ms;
+                    bytes_per_tri[k] = (double)e.bytes / (double)mesh.n_tris;
+                    embree_free(&e);
+                }
+                if (r > 0)
+                    build_ms[k][mt][r - 1] = ms;
             }
         }
     }
-    double mcpt_build[2] = {bench_median(b_mcpt[0], runs), bench_median(b_mcpt[1], runs)};
-    double embree_build_ms[2] = {bench_median(b_embree[0], runs), bench_median(b_embree[1], runs)};
+    if (!embree_build(&mesh, n_threads, robust, quality, &emb)) {
+        fprintf(stderr, "embree_bench: Embree build failed\n");
+        return 1;
+    }
+    double build_median[N_BUILDS][2];
+    for (int k = 0; k < N_BUILDS; k++) {
+        for (int mt = 0; mt < 2; mt++)
+            build_median[k][mt] = bench_median(build_ms[k][mt], runs);
+        printf("build %-30s %8.1f ms 1 thread, %8.1f ms %d threads; %5.1f bytes/triangle\n",
+               build_names[k], build_median[k][0], build_median[k][1], n_threads,
+               bytes_per_tri[k]);
+    }
+    printf("build ratios mcpt / Embree, 1 thread (< 1: mcpt faster): spatial / high %.2f, "
+           "binned / medium %.2f\n",
+           build_median[MCPT_SPATIAL][0] / build_median[EMBREE_HIGH][0],
+           build_median[MCPT_BINNED][0] / build_median[EMBREE_MEDIUM][0]);
     struct bvh_stats st = bvh_get_stats(bvh);
-    double mcpt_bpt = (double)st.bytes / (double)mesh.n_tris;
-    double embree_bpt = (double)embree_scene_bytes / (double)mesh.n_tris;
     const char *quality_name = quality == RTC_BUILD_QUALITY_HIGH     ? "high"
                                : quality == RTC_BUILD_QUALITY_MEDIUM ? "medium"
                                                                      : "low";
-    printf("build 1 thread: mcpt %.1f ms, Embree %s quality %.1f ms: ratio %.2f (< 1: mcpt "
-           "faster)\n",
-           mcpt_build[0], quality_name, embree_build_ms[0], mcpt_build[0] / embree_build_ms[0]);
-    printf("build %d threads: mcpt %.1f ms, Embree %.1f ms: ratio %.2f\n", n_threads,
-           mcpt_build[1], embree_build_ms[1], mcpt_build[1] / embree_build_ms[1]);
-    printf("memory: mcpt %.1f bytes/triangle, Embree %.1f; mcpt SAH cost %.2f\n", mcpt_bpt,
-           embree_bpt, st.sah_cost);
+    double mcpt_bpt = bytes_per_tri[MCPT_SPATIAL];
+    double embree_bpt = (double)emb.bytes / (double)mesh.n_tris;
+    double mcpt_build[2] = {build_median[MCPT_SPATIAL][0], build_median[MCPT_SPATIAL][1]};
+    double embree_build_ms[2] = {
+        build_median[quality == RTC_BUILD_QUALITY_HIGH ? EMBREE_HIGH : EMBREE_MEDIUM][0],
+        build_median[quality == RTC_BUILD_QUALITY_HIGH ? EMBREE_HIGH : EMBREE_MEDIUM][1]};
+    printf("traced: mcpt spatial splits (%u refs for %u triangles, SAH cost %.2f), Embree %s "
+           "quality (%.1f bytes/triangle)\n",
+           st.n_refs, st.n_tris, st.sah_cost, quality_name, embree_bpt);
     int status = 0;
     for (int f = optind + 1; f < argc; f++) {
         struct bench_rays rays;
@@ -481,11 +523,16 @@ int main(int argc, char **argv)
         printf("{\"model\":\"%s\",\"rays_file\":\"%s\",\"triangles\":%u,\"kind\":\"%s\","
                "\"rays\":%llu,\"build_ms\":%.3f,\"build_ms_embree\":%.3f,\"build_ms_mt\":%.3f,"
                "\"build_ms_mt_embree\":%.3f,\"bytes_per_tri\":%.2f,\"bytes_per_tri_embree\":%.2f,"
-               "\"sah_cost\":%.4f,\"hits\":%llu,\"hits_embree\":%llu,\"t_sum\":%.6e,"
-               "\"t_sum_embree\":%.6e,\"prim_sum\":%llu,\"prim_sum_embree\":%llu,",
+               "\"sah_cost\":%.4f,\"refs\":%u,\"build_ms_binned\":%.3f,"
+               "\"build_ms_embree_medium\":%.3f,\"bytes_per_tri_binned\":%.2f,"
+               "\"bytes_per_tri_embree_medium\":%.2f,\"hits\":%llu,\"hits_embree\":%llu,"
+               "\"t_sum\":%.6e,\"t_sum_embree\":%.6e,\"prim_sum\":%llu,"
+               "\"prim_sum_embree\":%llu,",
                model, argv[f], mesh.n_tris, occlusion ? "occlusion" : "closest",
                (unsigned long long)rays.n, mcpt_build[0], embree_build_ms[0], mcpt_build[1],
-               embree_build_ms[1], mcpt_bpt, embree_bpt, st.sah_cost,
+               embree_build_ms[1], mcpt_bpt, embree_bpt, st.sah_cost, st.n_refs,
+               build_median[MCPT_BINNED][0], build_median[EMBREE_MEDIUM][0],
+               bytes_per_tri[MCPT_BINNED], bytes_per_tri[EMBREE_MEDIUM],
                (unsigned long long)tr[0].sum.hits, (unsigned long long)tr[2].sum.hits,
                tr[0].sum.t_sum, tr[2].sum.t_sum, (unsigned long long)tr[0].sum.prim_sum,
                (unsigned long long)tr[2].sum.prim_sum);
