@@ -1,12 +1,13 @@
 /* bvh.c - the scalar reference BVH over triangles: 32-byte binary nodes in one flat array,
  * triangles permuted into BVH order, the binned-SAH build (Wald 2007, "On fast Construction of
- * SAH-based Bounding Volume Hierarchies") on several threads for large meshes, ordered
+ * SAH-based Bounding Volume Hierarchies") with spatial splits (Stich, Friedrich, Dietrich 2009,
+ * "Spatial Splits in Bounding Volume Hierarchies") on several threads for large meshes, ordered
  * traversal with a conservative slab test (PBRT 4e, ch. 6, "Conservative Ray-Bounds
  * Intersections"), the watertight triangle test (Woop, Benthin, Wald 2013, "Watertight
- * Ray/Triangle Intersection"), brute force and stats.  Reading order: layout, build,
- * traversal, triangle test, brute force, stats.  The fast 8-wide layout is converted from this
- * tree in bvh_wide.c, which is checked against it; bvh_internal.h is what the two share.
- * Measurements: docs/bvh.md. */
+ * Ray/Triangle Intersection"), brute force and stats.  Reading order: layout, build, spatial
+ * splits, traversal, triangle test, brute force, stats.  The fast 8-wide layout is converted
+ * from this tree in bvh_wide.c, which is checked against it; bvh_internal.h is what the two
+ * share.  Measurements: docs/bvh.md. */
 #include "bvh.h"
 
 #include <assert.h>
@@ -68,7 +69,8 @@
 #define BVH_SUBTREES_PER_THREAD 4   /* subtrees handed to the threads, per thread */
 #define BVH_MAX_THREADS 64
 
-/* What the build knows of one triangle: its box (the centre is derived from it). */
+/* What the build knows of one triangle, or of the part of one that a spatial split left on one
+ * side of its plane: its box (the centre is derived from it). */
 struct prim_ref {
     float min[3];      /* lower corner of the box of the stored vertices */
     uint32_t prim_idx; /* the caller's index of the triangle */
@@ -1343,6 +1345,8 @@ struct bvh *bvh_build_with(const vec3 *positions, const uint32_t *indices, uint3
         /* room for the copies of spatial splits: 2 cap nodes (2 cap - 1 and the unused
          * nodes[1]) must fit in uint32_t */
         uint64_t cap = n_tris + (spatial ? (uint64_t)((double)n_tris * BVH_SPLIT_BUDGET) : 0);
+        if ((layouts & BVH_LAYOUT_WIDE) && cap >= BVH_WIDE_MAX_TRIS) /* copies count there */
+            cap = BVH_WIDE_MAX_TRIS - 1 > n_tris ? BVH_WIDE_MAX_TRIS - 1 : n_tris;
         if (cap > UINT32_MAX / 2)
             goto fail;
         ctx.refs = bvh_alloc_aligned(cap, sizeof *ctx.refs);

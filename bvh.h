@@ -1,5 +1,6 @@
-/* bvh.h - bounding volume hierarchy over triangles: binned SAH build (Wald 2007), flattened
- * nodes, triangles stored in BVH order, watertight ray-triangle test (Woop, Benthin, Wald 2013).
+/* bvh.h - bounding volume hierarchy over triangles: binned SAH build (Wald 2007) with spatial
+ * splits (Stich et al. 2009), flattened nodes, triangles stored in BVH order (a triangle cut by
+ * a spatial split in each leaf it reaches), watertight ray-triangle test (Woop et al. 2013).
  * Two traversal layouts: the scalar binary reference (bvh.c), and an 8-wide layout (SoA child
  * boxes, SoA leaves, SIMD; bvh_wide.c) converted from it, which the renderer uses.  Analytic
  * shapes (spheres, quads, planes) are not in the BVH; trace.c tests them directly. */

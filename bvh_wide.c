@@ -1,12 +1,13 @@
 /* bvh_wide.c - the fast layout, converted from bvh.c's binary reference and checked against it
  * (tinybvh's way): the SAH-optimal collapse into 8-wide nodes (Ylitie, Karras, Laine 2017,
  * "Efficient Incoherent Ray Traversal on GPUs Through Compressed Wide BVHs", sec. 4.1) with SoA
- * child boxes and SoA leaves of up to 8 triangles; eight SIMD lanes (AVX2 intrinsics, or the
- * scalar loops that define them); Woop, Benthin, Wald 2013's watertight test on eight lanes;
- * single rays nearest child first (Wald et al. 2008, "Getting Rid of Packets") and 8-ray
- * packets (Benthin et al. 2012).  Every hit equals the reference's to the bit.  Reading order:
- * layout, conversion, SIMD lanes, woop8, wide traversal, packets, brute force over the leaves.
- * Public API in bvh.h; bvh_internal.h is what this file shares with bvh.c. */
+ * child boxes, a child order per ray octant (Fuetterling et al. 2017) and SoA leaves of up to 8
+ * triangles; eight SIMD lanes (AVX2 intrinsics, or the scalar loops that define them); Woop,
+ * Benthin, Wald 2013's watertight test on eight lanes; single rays near child first (Wald et
+ * al. 2008, "Getting Rid of Packets") and 8-ray packets (Benthin et al. 2012).  Every hit equals
+ * the reference's to the bit.  Reading order: layout, conversion, SIMD lanes, woop8, wide
+ * traversal, packets, brute force over the leaves.  Public API in bvh.h; bvh_internal.h is what
+ * this file shares with bvh.c. */
 #include "bvh_internal.h"
 
 #include <assert.h>
@@ -20,10 +21,12 @@
  * bounds[2 a + 1][lane] = max, so one ray meets all eight boxes in one SIMD slab test.
  * A child reference is a wide node index, or WIDE_LEAF | first << 3 | (n - 1) for a leaf of
  * n in 1..8 triangles starting at wide triangle `first`.  An unused lane has the empty box
- * (min +inf, max -inf), which no ray hits, whatever the signs of its direction.
- * A leaf holds the triangles of one binary subtree (at most 8) minus the degenerate ones (a
- * binary leaf of more than 8, which only the depth cap makes, becomes a small wide subtree of
- * 8-triangle leaves).  A leaf's triangles
+ * (min +inf, max -inf), which no ray hits, whatever the signs of its direction, and reference
+ * 0.  order[] holds, for each of the 8 octants of ray directions, the children from the
+ * farthest to the nearest along that octant's diagonal (wide_node_set_order).
+ * A leaf holds the triangles of one binary subtree (at most 8 references) minus the degenerate
+ * ones, each triangle once (a binary leaf of more than 8, which only the depth cap makes,
+ * becomes a small wide subtree of 8-triangle leaves).  A leaf's triangles
  * are SoA: leaf_tris[9 first + (3 k + a) n + i] is coordinate a of vertex k of its triangle i
  * (the same three vertices as struct bvh_tri, so the test stays watertight), and
  * wide_prim_idx[first + i] is the caller's index.  The array has 8 floats of padding at its end
