@@ -1,6 +1,9 @@
 # mcpt - a plain Makefile.  `make` builds ./mcpt; `make test` builds and runs the test suite;
 # `make check-sanitize` runs it under ASan + UBSan.  PORTABLE=1 builds without -march=native;
 # WERROR=1 turns warnings into errors (CI).  Objects go to build/ (build-san/ for sanitizers).
+# `make sobol-table` and `make ggx-table` regenerate the two checked-in tables.
+# Each build folder keeps the compiler and flags it was built with in flags.stamp; every object
+# depends on it, so changing CC, OPT_FLAGS, PORTABLE, WERROR or EXTRA_CFLAGS rebuilds all.
 
 CC ?= cc
 PKG_CONFIG ?= pkg-config
@@ -28,13 +31,30 @@ LDLIBS_ALL = $(EXR_LIBS) $(PNG_LIBS) -lpthread -lm
 
 BUILD ?= build
 LIB_SRCS := $(filter-out main.c,$(wildcard *.c))
-TEST_SRCS := $(wildcard tests/*_test.c)
+# tests/report.c: the list of skipped tests, with their reasons, at the end of the run
+TEST_SRCS := $(wildcard tests/*_test.c) tests/report.c
 LIB_OBJS := $(LIB_SRCS:%.c=$(BUILD)/%.o)
 TEST_OBJS := $(TEST_SRCS:%.c=$(BUILD)/%.o)
 
-.PHONY: all test check-sanitize check-valgrind fuzz clean sobol-table gallery install uninstall \
-        bench bench-embree
+.PHONY: all test check-sanitize check-valgrind fuzz clean sobol-table ggx-table gallery install \
+        uninstall bench bench-embree
 all: mcpt
+
+# The flags stamp: $(BUILD)/flags.stamp holds the command objects were compiled with, and every
+# object depends on it.  Where the file is missing or holds another command, the stamp depends
+# on FORCE and is rewritten, so every object is out of date; otherwise it is an ordinary
+# up-to-date file, and a second `make` (or `make -n`) does nothing.
+# $(call stamp_deps,FILE,TEXT): FORCE unless FILE holds TEXT; $(call stamp_write,FILE,TEXT).
+str_eq = $(and $(findstring $(1),$(2)),$(findstring $(2),$(1)))
+stamp_deps = $(if $(call str_eq,$(file <$(1)),$(2)),,FORCE)
+stamp_write = mkdir -p $(dir $(1)) && printf '%s\n' '$(subst ','\'',$(2))' > $(1)
+FLAGS_NOW = $(CC) $(CFLAGS_ALL) $(LDLIBS_ALL)
+FLAGS_STAMP := $(BUILD)/flags.stamp
+
+$(FLAGS_STAMP): $(call stamp_deps,$(FLAGS_STAMP),$(FLAGS_NOW))
+	@$(call stamp_write,$@,$(FLAGS_NOW))
+
+FORCE:
 
 mcpt: $(BUILD)/main.o $(LIB_OBJS)
 	$(CC) $(CFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
@@ -42,7 +62,7 @@ mcpt: $(BUILD)/main.o $(LIB_OBJS)
 $(BUILD)/mcpt: $(BUILD)/main.o $(LIB_OBJS)
 	$(CC) $(CFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
 
-$(BUILD)/%.o: %.c
+$(BUILD)/%.o: %.c $(FLAGS_STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS_ALL) -c $< -o $@
 
@@ -81,12 +101,18 @@ FUZZ_BUILD := build-fuzz
 FUZZ_CFLAGS = -std=c11 -D_DEFAULT_SOURCE -g -O1 -fno-omit-frame-pointer -I. $(EXR_CFLAGS) \
               $(PNG_CFLAGS) -fsanitize=address,undefined -fno-sanitize-recover=undefined -MMD -MP
 FUZZ_LIB_OBJS := $(LIB_SRCS:%.c=$(FUZZ_BUILD)/%.o)
+FUZZ_STAMP := $(FUZZ_BUILD)/flags.stamp
 
-$(FUZZ_BUILD)/%.o: %.c
+FUZZ_FLAGS_NOW = $(FUZZ_CC) $(FUZZ_CFLAGS)
+
+$(FUZZ_STAMP): $(call stamp_deps,$(FUZZ_STAMP),$(FUZZ_FLAGS_NOW))
+	@$(call stamp_write,$@,$(FUZZ_FLAGS_NOW))
+
+$(FUZZ_BUILD)/%.o: %.c $(FUZZ_STAMP)
 	@mkdir -p $(dir $@)
 	$(FUZZ_CC) $(FUZZ_CFLAGS) -fsanitize=fuzzer-no-link -c $< -o $@
 
-$(FUZZ_BUILD)/fuzz_%: fuzz/fuzz_%.c $(FUZZ_LIB_OBJS)
+$(FUZZ_BUILD)/fuzz_%: fuzz/fuzz_%.c $(FUZZ_LIB_OBJS) $(FUZZ_STAMP)
 	$(FUZZ_CC) $(FUZZ_CFLAGS) -fsanitize=fuzzer -o $@ $(filter %.c %.o,$^) $(LDLIBS_ALL)
 
 fuzz: $(FUZZ_BUILD)/fuzz_scene $(FUZZ_BUILD)/fuzz_obj
@@ -99,6 +125,18 @@ sobol-table:
 	python3 scripts/gen_sobol_table.py $(SOBOL_DIRECTIONS) 16 > sobol_matrices.h.tmp
 	mv sobol_matrices.h.tmp sobol_matrices.h
 
+# Regenerates the checked-in material_ggx_table.inc, the GGX coat albedo table of material.c,
+# with tests/data/trace/ggx_albedo_gen.c (nested adaptive Simpson over material.c's own VNDF
+# warp, G1 and G2; takes minutes).  Only when those functions change.  Fixed flags, not
+# OPT_FLAGS: the generated file must not depend on the machine that ran it.
+GGX_GEN_CFLAGS = -std=c11 -D_DEFAULT_SOURCE -O2 -I.
+ggx-table:
+	@mkdir -p $(BUILD)
+	$(CC) $(GGX_GEN_CFLAGS) -o $(BUILD)/ggx_albedo_gen tests/data/trace/ggx_albedo_gen.c \
+	    material.c sample.c -lm
+	./$(BUILD)/ggx_albedo_gen > material_ggx_table.inc.tmp
+	mv material_ggx_table.inc.tmp material_ggx_table.inc
+
 # The gallery: renders every scene at its default spp (GALLERY_THREADS threads, default 2) and
 # writes docs/gallery.md with docs/gallery/*.png and each render's time (scripts/gallery.sh).
 GALLERY_THREADS ?= 2
@@ -107,15 +145,32 @@ gallery: mcpt
 	    scripts/gallery.sh
 
 # `make install PREFIX=/opt/mcpt` (DESTDIR for staged installs): the binary to PREFIX/bin, the
-# man page (docs/mcpt.1) to PREFIX/share/man/man1.
+# man page to PREFIX/share/man/man1 (its FILES section rewritten to PREFIX), the README and
+# docs (with their pictures) to PREFIX/share/doc/mcpt, and the example scenes with their
+# models to PREFIX/share/mcpt/scenes, where they render as they do here:
+#   mcpt PREFIX/share/mcpt/scenes/cornell-box.txt
+# `make uninstall` (same PREFIX and DESTDIR) removes all of it.  INSTALL_BIN names another
+# binary to install (the test of this target passes the one it tests, without building).
 PREFIX ?= /usr/local
-install: mcpt
-	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/man/man1
-	install -m 755 mcpt $(DESTDIR)$(PREFIX)/bin/mcpt
-	install -m 644 docs/mcpt.1 $(DESTDIR)$(PREFIX)/share/man/man1/mcpt.1
+DOCDIR = $(PREFIX)/share/doc/mcpt
+SCENEDIR = $(PREFIX)/share/mcpt/scenes
+INSTALL_BIN ?= mcpt
+install: $(INSTALL_BIN)
+	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/man/man1 \
+	    $(DESTDIR)$(DOCDIR)/gallery $(DESTDIR)$(DOCDIR)/convergence $(DESTDIR)$(SCENEDIR)/models
+	install -m 755 $(INSTALL_BIN) $(DESTDIR)$(PREFIX)/bin/mcpt
+	sed 's|/usr/local/|$(PREFIX)/|g' docs/mcpt.1 > $(DESTDIR)$(PREFIX)/share/man/man1/mcpt.1
+	chmod 644 $(DESTDIR)$(PREFIX)/share/man/man1/mcpt.1
+	install -m 644 README.md docs/*.md $(DESTDIR)$(DOCDIR)
+	install -m 644 docs/gallery/* $(DESTDIR)$(DOCDIR)/gallery
+	install -m 644 docs/convergence/* $(DESTDIR)$(DOCDIR)/convergence
+	install -m 644 scenes/*.txt $(DESTDIR)$(SCENEDIR)
+	install -m 644 scenes/models/* $(DESTDIR)$(SCENEDIR)/models
 
 uninstall:
 	rm -f $(DESTDIR)$(PREFIX)/bin/mcpt $(DESTDIR)$(PREFIX)/share/man/man1/mcpt.1
+	rm -rf $(DESTDIR)$(DOCDIR) $(DESTDIR)$(SCENEDIR)
+	-rmdir $(DESTDIR)$(PREFIX)/share/mcpt 2>/dev/null
 
 # Ray-throughput benchmark (issue 3, docs/bvh.md): bench/raybench builds the BVH of each model
 # and traces the standard ray sets of ../shared/BENCHMARKS.md, written once into $(BUILD)/bench/
@@ -134,10 +189,10 @@ EMBREE_CFLAGS := $(shell $(PKG_CONFIG) --cflags embree3 2>/dev/null)
 EMBREE_LIBS := $(shell $(PKG_CONFIG) --libs embree3 2>/dev/null || echo -lembree3)
 BENCH_CFLAGS = $(filter-out -MMD -MP,$(CFLAGS_ALL))
 
-bench/raybench: bench/raybench.c bench/bench.c bench/bench.h $(BENCH_OBJS)
+bench/raybench: bench/raybench.c bench/bench.c bench/bench.h $(BENCH_OBJS) $(FLAGS_STAMP)
 	$(CC) $(BENCH_CFLAGS) -o $@ bench/raybench.c bench/bench.c $(BENCH_OBJS) -lpthread -lm
 
-bench/embree_bench: bench/embree_bench.c bench/bench.c bench/bench.h $(BENCH_OBJS)
+bench/embree_bench: bench/embree_bench.c bench/bench.c bench/bench.h $(BENCH_OBJS) $(FLAGS_STAMP)
 	$(CC) $(BENCH_CFLAGS) $(EMBREE_CFLAGS) -o $@ bench/embree_bench.c bench/bench.c $(BENCH_OBJS) \
 	    $(EMBREE_LIBS) -lpthread -lm
 

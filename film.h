@@ -3,7 +3,8 @@
  * the variance of the mean (for error bars, adaptive sampling and convergence snapshots), and an
  * exact merge of renders of disjoint sample ranges.  A pixel is only ever touched by the thread
  * that owns its tile, and its samples are added in sample-index order, so sums are bit-identical
- * for any thread count.  Sample indices of a pixel run 0 .. n + n_dropped - 1. */
+ * for any thread count.  Sample indices of a pixel run 0 .. n + n_dropped - 1.  The film is
+ * written as images by output.c and partial.c, and saved for --resume by checkpoint.c. */
 #ifndef MCPT_FILM_H
 #define MCPT_FILM_H
 
@@ -12,12 +13,12 @@
 #include "vec.h"
 
 struct film_pixel {
-    double sum[3];     /* sum of sample RGB */
-    double sum_sq[3];  /* sum of squared sample RGB, per channel */
-    double sum_lum_sq; /* sum of squared sample luminance (Rec. 709) */
-    uint32_t n;        /* samples accumulated */
+    double sum[3];      /* sum of sample RGB */
+    double sum_sq[3];   /* sum of squared sample RGB, per channel */
+    double sum_lum_sq;  /* sum of squared sample luminance (Rec. 709) */
+    uint32_t n;         /* samples accumulated */
     uint32_t n_dropped; /* samples taken but not added: NaN or infinite (counted, reported) */
-}; /* 64 bytes */
+};                      /* 64 bytes */
 
 struct film {
     int width;
@@ -29,9 +30,9 @@ struct film {
  * (half of it).  film_init refuses anything larger with a clear message. */
 size_t film_max_bytes(void);
 
-/* Allocates a zeroed film.  Fails (err: file/line unset, msg says how much memory it needs
- * against how much is allowed) when width * height * 64 bytes overflows or exceeds
- * film_max_bytes(), or when allocation fails. */
+/* Allocates a zeroed film.  Fails (err: file/line unset) with a bad-input error saying how
+ * much memory it needs against how much is allowed when width * height * 64 bytes overflows or
+ * exceeds film_max_bytes(), and with a runtime error when the allocation fails. */
 bool film_init(struct film *film, int width, int height, struct mcpt_error *err);
 void film_free(struct film *film);
 
@@ -67,41 +68,5 @@ double film_var_of_mean(const struct film_pixel *p, int c);
  * variance of the mean RGB and the sample count.  Values beyond float range are stored as
  * +-FLT_MAX, so no image holds an infinity. */
 void film_resolve(const struct film *film, float *mean[3], float *var_of_mean[3], float *count);
-
-/* ---- checkpoints: an interrupted render's film, to be resumed bit-identically ---- */
-
-#define FILM_CHECKPOINT_VERSION 1u
-#define FILM_CHECKPOINT_PATH_BYTES 1024 /* scene path stored for messages, incl. NUL */
-#define FILM_CHECKPOINT_ARGS_BYTES 4096 /* the run's options, NUL-separated words */
-
-/* The render parameters a resumed run must reproduce exactly: with them, each pixel continues
- * from its own count with the same sample indices, so the result is bit-identical to an
- * uninterrupted run. */
-struct film_checkpoint_info {
-    uint64_t scene_hash;    /* FNV-1a 64 of the scene file's bytes */
-    uint64_t seed;          /* render seed */
-    uint32_t spp;           /* target samples per pixel */
-    uint32_t max_depth;     /* path segments, TRACE_DEPTH_INFINITE allowed */
-    uint32_t sampler;       /* enum sampler_kind */
-    uint32_t sample_offset; /* sample index of a pixel's first film sample */
-    char scene_path[FILM_CHECKPOINT_PATH_BYTES]; /* as given on the command line */
-    uint32_t args_bytes;                          /* bytes of args in use */
-    char args[FILM_CHECKPOINT_ARGS_BYTES];        /* options of the run, each word NUL-ended */
-};
-
-/* Writes film and info to path atomically (a temporary file in the same folder, fsync, rename),
- * so a reader sees the old file or the new one, never a mix.  Format (docs/reliability.md):
- * magic "MCPTCKPT", version, byte-order mark, pixel record size, film size, info, the raw
- * pixel records, then an FNV-1a 64 checksum of everything before it.  Returns false with *err
- * (file = path, no line) on an I/O failure; nothing is left behind then. */
-bool film_save_checkpoint(const char *path, const struct film *film,
-                          const struct film_checkpoint_info *info, struct mcpt_error *err);
-
-/* Reads a checkpoint written by film_save_checkpoint into a new film (free with film_free) and
- * *info.  Every field is checked (magic, version, byte order, record size, film size against
- * memory, string lengths, per-pixel counts at most spp, exact file length, checksum); on any
- * mismatch returns false with *film zeroed and *err naming path and what was expected. */
-bool film_load_checkpoint(const char *path, struct film *film, struct film_checkpoint_info *info,
-                          struct mcpt_error *err);
 
 #endif

@@ -3,10 +3,11 @@
  * and read chunk by chunk with the encode/decode pipelines; layout per "OpenEXR File Layout"
  * (openexr.com).  Reading accepts scanline and tiled parts with half, float or uint channels.
  * PNG: 8-bit RGB; the preview encodes linear values with the sRGB transfer function of
- * IEC 61966-2-1:1999.
- * Every write goes to "<path>.tmp.<pid>.<n>" in the destination's folder, is fsync'd, and is
- * then renamed over the destination: rename(2) replaces a file atomically (POSIX.1-2008), so a
- * reader sees the old image or the new one, never a truncated one. */
+ * IEC 61966-2-1:1999, after an exposure and a tone curve (clamp; Reinhard et al. 2002,
+ * "Photographic Tone Reproduction for Digital Images", eq. 3; Narkowicz 2016, "ACES Filmic
+ * Tone Mapping Curve").
+ * Every write goes through file.h: a temporary beside the destination, fsync'd, then renamed
+ * over it, so a reader sees the old image or the new one, never a truncated one. */
 #define _POSIX_C_SOURCE 200809L
 
 #include "image.h"
@@ -18,66 +19,11 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "file.h"
+
 #include <openexr.h>
 #include <png.h>
 #include <zlib.h>
-
-/* ---- atomic replacement: temporary file, fsync, rename ------------------------------------ */
-
-struct atomic_file {
-    char tmp_path[4160]; /* "<path>.tmp.<pid>.<n>"; PATH_MAX (4096) plus the suffix */
-    int fd;              /* open for writing, -1 once closed */
-};
-
-/* Creates a fresh temporary file next to path (O_EXCL, so two writers never share one). */
-static bool atomic_open(const char *path, struct atomic_file *af, struct mcpt_error *err)
-{
-    af->fd = -1;
-    for (int n = 0; n < 100; n++) {
-        int len = snprintf(af->tmp_path, sizeof af->tmp_path, "%s.tmp.%ld.%d", path,
-                           (long)getpid(), n);
-        if (len < 0 || (size_t)len >= sizeof af->tmp_path) {
-            mcpt_error_set(err, path, 0, 0, "cannot write: %s", strerror(ENAMETOOLONG));
-            return false;
-        }
-        af->fd = open(af->tmp_path, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
-        if (af->fd >= 0)
-            return true;
-        if (errno != EEXIST)
-            break;
-    }
-    mcpt_error_set(err, path, 0, 0, "cannot write: %s", strerror(errno));
-    return false;
-}
-
-/* Discards the temporary file; the destination is untouched. */
-static void atomic_abort(struct atomic_file *af)
-{
-    if (af->fd >= 0)
-        close(af->fd);
-    af->fd = -1;
-    unlink(af->tmp_path);
-}
-
-/* Makes the temporary file durable, then renames it over path. */
-static bool atomic_commit(const char *path, struct atomic_file *af, struct mcpt_error *err)
-{
-    int fd = af->fd;
-    int error = 0;
-    af->fd = -1;
-    if (fsync(fd) != 0)
-        error = errno;
-    if (close(fd) != 0 && !error)
-        error = errno;
-    if (!error && rename(af->tmp_path, path) != 0)
-        error = errno;
-    if (error) {
-        mcpt_error_set(err, path, 0, 0, "cannot write: %s", strerror(error));
-        unlink(af->tmp_path);
-        return false;
-    }
-    return true;
-}
 
 /* Writes all n_bytes (write may write less than asked). */
 static bool write_all(int fd, const void *buf, size_t n_bytes)
@@ -164,8 +110,7 @@ static int64_t exr_stream_size(exr_const_context_t ctxt, void *user)
 }
 
 static int64_t exr_stream_write(exr_const_context_t ctxt, void *user, const void *buffer,
-                                uint64_t sz, uint64_t offset,
-                                exr_stream_error_func_ptr_t error_cb)
+                                uint64_t sz, uint64_t offset, exr_stream_error_func_ptr_t error_cb)
 {
     struct exr_stream *s = user;
     if (!pwrite_all(s->fd, buffer, (size_t)sz, (off_t)offset)) {
@@ -183,12 +128,15 @@ static void exr_error_set(struct mcpt_error *err, const char *path, const char *
                           const struct exr_stream *s, exr_result_t rv)
 {
     if (s->io_errno)
-        mcpt_error_set(err, path, 0, 0, "cannot %s: %s", s->size_bytes < 0 ? "write" : "read",
-                       strerror(s->io_errno));
+        mcpt_error_runtime(err, path, "cannot %s: %s", s->size_bytes < 0 ? "write" : "read",
+                           strerror(s->io_errno));
     else if (s->first_msg[0])
         mcpt_error_set(err, path, 0, 0, "%s: %s", what, s->first_msg);
     else
         mcpt_error_set(err, path, 0, 0, "%s: %s", what, exr_get_default_error_message(rv));
+    /* a file that could not be written, or memory that ran out, is no fault of the input */
+    if (err && (s->size_bytes < 0 || rv == EXR_ERR_OUT_OF_MEMORY))
+        err->kind = MCPT_ERROR_RUNTIME;
 }
 
 /* ---- EXR writing ----------------------------------------------------------------------------- */
@@ -197,57 +145,55 @@ static void exr_error_set(struct mcpt_error *err, const char *path, const char *
 static bool image_is_writable(const char *path, const struct image *img, struct mcpt_error *err)
 {
     if (img->width < 1 || img->height < 1) {
-        mcpt_error_set(err, path, 0, 0, "expected a positive image size, got %dx%d", img->width,
-                       img->height);
+        mcpt_error_runtime(err, path, "expected a positive image size, got %dx%d", img->width,
+                           img->height);
         return false;
     }
     if (img->n_channels < 1 || img->n_channels > IMAGE_MAX_CHANNELS) {
-        mcpt_error_set(err, path, 0, 0, "expected 1 to %d channels, got %d", IMAGE_MAX_CHANNELS,
-                       img->n_channels);
+        mcpt_error_runtime(err, path, "expected 1 to %d channels, got %d", IMAGE_MAX_CHANNELS,
+                           img->n_channels);
         return false;
     }
     for (int c = 0; c < img->n_channels; c++) {
         size_t len = strnlen(img->names[c], sizeof img->names[c]);
         if (len == 0 || len == sizeof img->names[c] || !img->data[c]) {
-            mcpt_error_set(err, path, 0, 0,
-                           "expected channel %d to have a name of 1 to 31 characters and data", c);
+            mcpt_error_runtime(err, path,
+                               "expected channel %d to have a name of 1 to 31 "
+                               "characters and data",
+                               c);
             return false;
         }
         for (int k = 0; k < c; k++) {
             if (strcmp(img->names[k], img->names[c]) == 0) {
-                mcpt_error_set(err, path, 0, 0, "expected unique channel names, got '%s' twice",
-                               img->names[c]);
+                mcpt_error_runtime(err, path, "expected unique channel names, got '%s' twice",
+                                   img->names[c]);
                 return false;
             }
         }
     }
     if (img->n_attrs < 0 || img->n_attrs > IMAGE_MAX_ATTRS) {
-        mcpt_error_set(err, path, 0, 0, "expected 0 to %d attributes, got %d", IMAGE_MAX_ATTRS,
-                       img->n_attrs);
+        mcpt_error_runtime(err, path, "expected 0 to %d attributes, got %d", IMAGE_MAX_ATTRS,
+                           img->n_attrs);
         return false;
     }
     for (int a = 0; a < img->n_attrs; a++) {
         size_t len = strnlen(img->attr_names[a], sizeof img->attr_names[a]);
         if (len == 0 || len == sizeof img->attr_names[a] ||
             strnlen(img->attr_values[a], IMAGE_ATTR_BYTES) == IMAGE_ATTR_BYTES) {
-            mcpt_error_set(err, path, 0, 0, "expected attribute %d to have a name of 1 to 31 "
-                           "characters and a NUL-terminated value", a);
+            mcpt_error_runtime(err, path,
+                               "expected attribute %d to have a name of 1 to 31 "
+                               "characters and a NUL-terminated value",
+                               a);
             return false;
         }
     }
     return true;
 }
 
-bool image_write_exr(const char *path, const struct image *img, struct mcpt_error *err)
+/* Encodes img as a scanline EXR onto fd, a fresh file; false with *err (file = path). */
+static bool exr_encode(int fd, const char *path, const struct image *img, struct mcpt_error *err)
 {
-    if (!image_is_writable(path, img, err))
-        return false;
-
-    struct atomic_file af;
-    if (!atomic_open(path, &af, err))
-        return false;
-
-    struct exr_stream s = {.fd = af.fd, .size_bytes = -1};
+    struct exr_stream s = {.fd = fd, .size_bytes = -1};
     exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
     init.user_data = &s;
     init.write_fn = exr_stream_write;
@@ -275,6 +221,13 @@ bool image_write_exr(const char *path, const struct image *img, struct mcpt_erro
                              EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1);
     for (int a = 0; a < img->n_attrs && rv == EXR_ERR_SUCCESS; a++)
         rv = exr_attr_set_string(ctxt, part_idx, img->attr_names[a], img->attr_values[a]);
+    /* the standard attribute that says which RGB the values are in ("OpenEXR Standard
+     * Attributes": chromaticities); without it a reader must assume Rec. 709 anyway */
+    static const float REC709[8] = IMAGE_REC709_CHROMATICITIES;
+    const exr_attr_chromaticities_t chroma = {REC709[0], REC709[1], REC709[2], REC709[3],
+                                              REC709[4], REC709[5], REC709[6], REC709[7]};
+    if (rv == EXR_ERR_SUCCESS)
+        rv = exr_attr_set_chromaticities(ctxt, part_idx, "chromaticities", &chroma);
     if (rv == EXR_ERR_SUCCESS)
         rv = exr_write_header(ctxt);
     if (rv == EXR_ERR_SUCCESS)
@@ -314,7 +267,7 @@ bool image_write_exr(const char *path, const struct image *img, struct mcpt_erro
     rv = exr_finish(&ctxt); /* writes the chunk offset table */
     if (rv != EXR_ERR_SUCCESS)
         goto fail;
-    return atomic_commit(path, &af, err);
+    return true;
 
 fail:
     exr_error_set(err, path, "cannot write OpenEXR", &s, rv);
@@ -322,8 +275,19 @@ fail:
         exr_encoding_destroy(ctxt, &encode);
         exr_finish(&ctxt);
     }
-    atomic_abort(&af);
     return false;
+}
+
+bool image_write_exr(const char *path, const struct image *img, struct mcpt_error *err)
+{
+    struct file_atomic af;
+    if (!image_is_writable(path, img, err) || !file_atomic_open(&af, path, err))
+        return false;
+    if (!exr_encode(af.fd, path, img, err)) {
+        file_atomic_abort(&af);
+        return false;
+    }
+    return file_atomic_commit(&af, err);
 }
 
 /* ---- EXR reading ----------------------------------------------------------------------------- */
@@ -378,8 +342,7 @@ static exr_result_t decode_part(exr_context_t ctxt, exr_storage_t storage,
         rv = exr_get_scanlines_per_chunk(ctxt, 0, &lines_per_chunk);
         if (rv == EXR_ERR_SUCCESS && lines_per_chunk < 1)
             rv = EXR_ERR_INVALID_ATTR;
-        for (int64_t y = dw->min.y; y <= dw->max.y && rv == EXR_ERR_SUCCESS;
-             y += lines_per_chunk) {
+        for (int64_t y = dw->min.y; y <= dw->max.y && rv == EXR_ERR_SUCCESS; y += lines_per_chunk) {
             rv = exr_read_scanline_chunk_info(ctxt, 0, (int)y, &chunk);
             if (rv == EXR_ERR_SUCCESS)
                 rv = decode_chunk(ctxt, &chunk, chunk.start_x - dw->min.x,
@@ -450,7 +413,7 @@ static bool image_alloc_from_header(const char *path, exr_storage_t storage,
         /* calloc: a chunk the file lacks reads as 0, never as stale memory */
         img->data[c] = calloc((size_t)width * (size_t)height, sizeof(float));
         if (!img->data[c]) {
-            mcpt_error_set(err, path, 0, 0, "cannot read: %s", strerror(ENOMEM));
+            mcpt_error_runtime(err, path, "cannot read: %s", strerror(ENOMEM));
             return false;
         }
         img->n_channels = c + 1;
@@ -530,6 +493,13 @@ bool image_read_exr(const char *path, struct image *img, struct mcpt_error *err)
     if (!image_alloc_from_header(path, storage, &dw, chlist, img, err))
         goto fail;
     read_string_attrs(ctxt, img);
+    exr_attr_chromaticities_t chroma;
+    if (exr_attr_get_chromaticities(ctxt, 0, "chromaticities", &chroma) == EXR_ERR_SUCCESS) {
+        const float xy[8] = {chroma.red_x,  chroma.red_y,  chroma.green_x, chroma.green_y,
+                             chroma.blue_x, chroma.blue_y, chroma.white_x, chroma.white_y};
+        memcpy(img->chromaticities, xy, sizeof xy);
+        img->has_chromaticities = true;
+    }
     rv = decode_part(ctxt, storage, &dw, img);
     if (rv != EXR_ERR_SUCCESS) {
         exr_error_set(err, path, "cannot read OpenEXR pixels", &s, rv);
@@ -604,17 +574,14 @@ static void png_write_fn(png_structp png, png_bytep data, size_t n_bytes)
     }
 }
 
-static void png_flush_fn(png_structp png)
-{
-    (void)png;
-}
+static void png_flush_fn(png_structp png) { (void)png; }
 
 /* Encodes width x height interleaved RGB bytes to sink->fd; is_srgb adds an sRGB chunk. */
 static bool png_encode(struct png_sink *sink, int width, int height, const uint8_t *rgb8,
                        bool is_srgb)
 {
-    png_structp png =
-        png_create_write_struct(PNG_LIBPNG_VER_STRING, sink, png_error_fn, png_warning_fn);
+    png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, sink, png_error_fn,
+                                              png_warning_fn);
     if (!png) {
         snprintf(sink->msg, sizeof sink->msg, "%s", strerror(ENOMEM));
         return false;
@@ -652,27 +619,26 @@ static bool png_encode(struct png_sink *sink, int width, int height, const uint8
 static bool png_write_atomic(const char *path, int width, int height, const uint8_t *rgb8,
                              bool is_srgb, struct mcpt_error *err)
 {
-    struct atomic_file af;
-    if (!atomic_open(path, &af, err))
+    struct file_atomic af;
+    if (!file_atomic_open(&af, path, err))
         return false;
     struct png_sink sink = {.fd = af.fd};
     if (!png_encode(&sink, width, height, rgb8, is_srgb)) {
         if (sink.io_errno)
-            mcpt_error_set(err, path, 0, 0, "cannot write: %s", strerror(sink.io_errno));
+            mcpt_error_runtime(err, path, "cannot write: %s", strerror(sink.io_errno));
         else
-            mcpt_error_set(err, path, 0, 0, "cannot write PNG: %s", sink.msg);
-        atomic_abort(&af);
+            mcpt_error_runtime(err, path, "cannot write PNG: %s", sink.msg);
+        file_atomic_abort(&af);
         return false;
     }
-    return atomic_commit(path, &af, err);
+    return file_atomic_commit(&af, err);
 }
 
 /* Checks the size and that width * height * 3 bytes fit in size_t. */
 static bool png_size_is_valid(const char *path, int width, int height, struct mcpt_error *err)
 {
     if (width < 1 || height < 1 || (size_t)width > SIZE_MAX / 3 / (size_t)height) {
-        mcpt_error_set(err, path, 0, 0, "expected a positive image size, got %dx%d", width,
-                       height);
+        mcpt_error_runtime(err, path, "expected a positive image size, got %dx%d", width, height);
         return false;
     }
     return true;
@@ -695,39 +661,101 @@ bool image_write_png_rgb8(const char *path, int width, int height, const uint8_t
  *     t[k] = ((V_k + 0.055) / 1.055)^2.4      otherwise,   V_k = (k - 0.5) / 255.
  * The byte is then the number of thresholds at or below v: an 8-step binary search, exact to
  * double precision, with no pow per pixel.  NaN passes no comparison and gives 0. */
-static void srgb_thresholds(double t[256])
+void image_srgb_init(struct image_srgb *s)
 {
-    t[0] = -INFINITY; /* every v counts byte 0 */
+    s->t[0] = -INFINITY; /* every v counts byte 0 */
     for (int k = 1; k < 256; k++) {
         double V_k = (k - 0.5) / 255.0;
-        t[k] = V_k <= 0.04045 ? V_k / 12.92 : pow((V_k + 0.055) / 1.055, 2.4);
+        s->t[k] = V_k <= 0.04045 ? V_k / 12.92 : pow((V_k + 0.055) / 1.055, 2.4);
     }
 }
 
-static uint8_t srgb_byte(const double t[256], float v)
+uint8_t image_srgb8(const struct image_srgb *s, double v)
 {
     unsigned k = 0;
     for (unsigned step = 128; step > 0; step >>= 1)
-        k += (double)v >= t[k + step] ? step : 0;
+        k += v >= s->t[k + step] ? step : 0;
     return (uint8_t)k;
 }
 
+/* ---- tone curves ---- */
+
+static const char *const TONEMAP_NAMES[] = {"clamp", "reinhard", "aces"};
+
+bool image_tonemap_parse(const char *name, enum image_tonemap *out)
+{
+    for (int t = 0; t < (int)(sizeof TONEMAP_NAMES / sizeof TONEMAP_NAMES[0]); t++)
+        if (strcmp(name, TONEMAP_NAMES[t]) == 0) {
+            *out = (enum image_tonemap)t;
+            return true;
+        }
+    return false;
+}
+
+const char *image_tonemap_name(enum image_tonemap t)
+{
+    return (unsigned)t < sizeof TONEMAP_NAMES / sizeof TONEMAP_NAMES[0] ? TONEMAP_NAMES[t] : "?";
+}
+
+void image_tonemap_rgb(enum image_tonemap t, const double rgb[3], double out[3])
+{
+    switch (t) {
+    case IMAGE_TONEMAP_REINHARD: {
+        /* Reinhard et al. 2002, eq. 3: L_d = L / (1 + L), on the luminance Y of linear
+         * Rec. 709 (ITU-R BT.709 weights), each channel scaled by L_d / L = 1 / (1 + Y) so the
+         * colour is kept.  The key scaling of their eq. 2 is left to the exposure. */
+        double Y = 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2];
+        double s = 1.0 / (1.0 + (Y > 0.0 ? Y : 0.0));
+        for (int c = 0; c < 3; c++)
+            out[c] = rgb[c] * s;
+        return;
+    }
+    case IMAGE_TONEMAP_ACES:
+        /* Narkowicz 2016, "ACES Filmic Tone Mapping Curve" (knarkowicz.wordpress.com,
+         * 2016-01-06): a rational fit of the ACES reference rendering + Rec. 709 output
+         * transforms, pre-exposed so that 1 maps to about 0.8, applied per channel and
+         * clamped ("saturate") to [0, 1] */
+        for (int c = 0; c < 3; c++) {
+            double x = rgb[c];
+            if (isnan(x) || x <= 0.0 || isinf(x)) {
+                out[c] = isnan(x) ? x : x > 0.0; /* NaN stays NaN; -inf..0 -> 0; inf -> 1 */
+                continue;
+            }
+            double y = x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14);
+            out[c] = y < 1.0 ? y : 1.0;
+        }
+        return;
+    case IMAGE_TONEMAP_CLAMP:
+    default:
+        for (int c = 0; c < 3; c++)
+            out[c] = rgb[c];
+        return;
+    }
+}
+
 bool image_write_png_srgb(const char *path, int width, int height, const float *rgb,
-                          float exposure, struct mcpt_error *err)
+                          const struct image_look *look, struct mcpt_error *err)
 {
     if (!png_size_is_valid(path, width, height, err))
         return false;
-    size_t n_values = (size_t)width * (size_t)height * 3;
-    uint8_t *rgb8 = malloc(n_values);
+    size_t n_pixels = (size_t)width * (size_t)height;
+    uint8_t *rgb8 = malloc(n_pixels * 3);
     if (!rgb8) {
-        mcpt_error_set(err, path, 0, 0, "cannot write: %s", strerror(ENOMEM));
+        mcpt_error_runtime(err, path, "cannot write: %s", strerror(ENOMEM));
         return false;
     }
-    double t[256];
-    srgb_thresholds(t);
-    const float scale = exp2f(exposure); /* exposure in stops */
-    for (size_t i = 0; i < n_values; i++)
-        rgb8[i] = srgb_byte(t, rgb[i] * scale);
+    struct image_srgb srgb;
+    image_srgb_init(&srgb);
+    const float scale = exp2f(look ? look->exposure : 0.0f); /* exposure in stops */
+    const enum image_tonemap curve = look ? look->tonemap : IMAGE_TONEMAP_CLAMP;
+    for (size_t i = 0; i < n_pixels; i++) {
+        double v[3], d[3];
+        for (int c = 0; c < 3; c++)
+            v[c] = rgb[3 * i + c] * scale; /* float product, as before tone curves existed */
+        image_tonemap_rgb(curve, v, d);
+        for (int c = 0; c < 3; c++)
+            rgb8[3 * i + c] = image_srgb8(&srgb, d[c]);
+    }
     bool ok = png_write_atomic(path, width, height, rgb8, true, err);
     free(rgb8);
     return ok;

@@ -22,19 +22,19 @@ enum mat_kind {
 };
 
 struct material {
-    char name[64];     /* unique within a scene */
+    char name[64]; /* unique within a scene */
     enum mat_kind kind;
-    vec3 albedo;       /* diffuse reflectance (diffuse kinds, the plastic's base) */
-    vec3 specular;     /* reflectance tint (MAT_MIRROR), transmission tint (MAT_DIELECTRIC),
+    vec3 albedo;             /* diffuse reflectance (diffuse kinds, the plastic's base) */
+    vec3 specular;           /* reflectance tint (MAT_MIRROR), transmission tint (MAT_DIELECTRIC),
                           normal-incidence reflectance F0 (MAT_CONDUCTOR, MAT_PLASTIC) */
-    vec3 Le;           /* emitted radiance, one-sided (front = geometric normal side) */
-    float ior;         /* index of refraction inside / outside (MAT_DIELECTRIC) */
+    vec3 Le;                 /* emitted radiance, one-sided (front = geometric normal side) */
+    float ior;               /* index of refraction inside / outside (MAT_DIELECTRIC) */
     bool two_sided_emission; /* emits from both sides when true */
-    float roughness;   /* perceptual roughness r in [0, 1] (MAT_CONDUCTOR, MAT_PLASTIC); GGX
+    float roughness;         /* perceptual roughness r in [0, 1] (MAT_CONDUCTOR, MAT_PLASTIC); GGX
                           alpha = r^2; alpha < MAT_ALPHA_SMOOTH is a perfectly smooth surface */
-    vec3 checker_albedo;  /* the checker texture's second albedo */
-    float checker_scale;  /* checker cell size (scene units, or uv units); 0 = no texture */
-    bool checker_uv;      /* checker over the surface (u, v) instead of world space */
+    vec3 checker_albedo;     /* the checker texture's second albedo */
+    float checker_scale;     /* checker cell size (scene units, or uv units); 0 = no texture */
+    bool checker_uv;         /* checker over the surface (u, v) instead of world space */
 };
 
 /* GGX alpha below which a surface is treated as perfectly smooth (a delta lobe), as PBRT 4e

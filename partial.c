@@ -26,17 +26,16 @@ enum {
 };
 
 /* hi channels (hi = (float)x); "samples" is also the count channel of every mcpt render */
-static const char *const HI_NAMES[PART_N_VALUES] = {
-    "sum.R", "sum.G", "sum.B", "sum_sq.R", "sum_sq.G", "sum_sq.B", "sum_lum_sq.Y", "samples",
-    "dropped"};
+static const char *const HI_NAMES[PART_N_VALUES] = {"sum.R",        "sum.G",    "sum.B",
+                                                    "sum_sq.R",     "sum_sq.G", "sum_sq.B",
+                                                    "sum_lum_sq.Y", "samples",  "dropped"};
 /* lo channels (lo = (float)(x - hi)) */
-static const char *const LO_NAMES[PART_N_VALUES] = {
-    "sum_lo.R", "sum_lo.G", "sum_lo.B", "sum_sq_lo.R", "sum_sq_lo.G", "sum_sq_lo.B",
-    "sum_lum_sq_lo.Y", "samples_lo", "dropped_lo"};
+static const char *const LO_NAMES[PART_N_VALUES] = {"sum_lo.R",        "sum_lo.G",    "sum_lo.B",
+                                                    "sum_sq_lo.R",     "sum_sq_lo.G", "sum_sq_lo.B",
+                                                    "sum_lum_sq_lo.Y", "samples_lo",  "dropped_lo"};
 
 /* The channels every mcpt render has besides "samples" (main.c writes the same). */
-static const char *const STD_NAMES[6] = {"R", "G", "B", "variance.R", "variance.G",
-                                         "variance.B"};
+static const char *const STD_NAMES[6] = {"R", "G", "B", "variance.R", "variance.G", "variance.B"};
 #define PART_N_CHANNELS (6 + 2 * PART_N_VALUES) /* 24 */
 _Static_assert(PART_N_CHANNELS <= IMAGE_MAX_CHANNELS, "a partial render's channels must fit");
 
@@ -105,6 +104,14 @@ uint64_t partial_n_samples(const struct partial_info *info)
     return n;
 }
 
+bool partial_is_whole(const struct partial_info *info)
+{
+    const char *spp_word = strstr(info->render, " spp=");
+    unsigned spp_total = 0;
+    return spp_word && sscanf(spp_word, " spp=%u", &spp_total) == 1 && info->n_ranges == 1 &&
+           info->ranges[0].begin == 0 && info->ranges[0].end == spp_total;
+}
+
 void partial_format_ranges(const struct partial_info *info, char *out, size_t out_bytes)
 {
     size_t used = 0;
@@ -159,15 +166,16 @@ bool partial_write_exr(const char *path, const struct film *film, const struct p
     bool ok = false;
     if (!img || n_pixels > SIZE_MAX / sizeof(float) / PART_N_CHANNELS ||
         !(planes = malloc(sizeof(float) * n_pixels * PART_N_CHANNELS))) {
-        mcpt_error_set(err, path, 0, 0, "out of memory writing the image");
+        mcpt_error_runtime(err, path, "out of memory writing the image");
         goto done;
     }
     img->width = film->width;
     img->height = film->height;
     img->n_channels = PART_N_CHANNELS;
     for (int c = 0; c < PART_N_CHANNELS; c++) {
-        const char *name = c < 6 ? STD_NAMES[c] : c < 6 + PART_N_VALUES ? HI_NAMES[c - 6]
-                                                                        : LO_NAMES[c - 15];
+        const char *name = c < 6                   ? STD_NAMES[c]
+                           : c < 6 + PART_N_VALUES ? HI_NAMES[c - 6]
+                                                   : LO_NAMES[c - 15];
         snprintf(img->names[c], sizeof img->names[c], "%s", name);
         img->data[c] = planes + (size_t)c * n_pixels;
     }
@@ -177,9 +185,11 @@ bool partial_write_exr(const char *path, const struct film *film, const struct p
         for (int k = 0; k < PART_N_VALUES; k++) {
             double x = pixel_value(&film->pixels[i], k);
             if (!(fabs(x) <= FLT_MAX)) {
-                mcpt_error_set(err, path, 0, 0, "expected per-pixel sums within float range "
-                               "(3.4e38) to store them, got %g in '%s' at pixel %zu,%zu", x,
-                               HI_NAMES[k], i % (size_t)film->width, i / (size_t)film->width);
+                mcpt_error_runtime(err, path,
+                                   "expected per-pixel sums within float range "
+                                   "(3.4e38) to store them, got %g in '%s' at pixel %zu,%zu",
+                                   x, HI_NAMES[k], i % (size_t)film->width,
+                                   i / (size_t)film->width);
                 goto done;
             }
             /* the double-float pair: hi carries 24 bits, lo the next 24 (Dekker 1971) */
@@ -210,7 +220,7 @@ bool partial_read_exr(const char *path, struct film *film, struct partial_info *
     memset(info, 0, sizeof *info);
     struct image *img = calloc(1, sizeof *img);
     if (!img) {
-        mcpt_error_set(err, path, 0, 0, "out of memory reading the image");
+        mcpt_error_runtime(err, path, "out of memory reading the image");
         return false;
     }
     if (!image_read_exr(path, img, err)) {
@@ -223,7 +233,8 @@ bool partial_read_exr(const char *path, struct film *film, struct partial_info *
         hi[k] = image_find_channel(img, HI_NAMES[k]);
         lo[k] = image_find_channel(img, LO_NAMES[k]);
         if (hi[k] < 0 || lo[k] < 0) {
-            mcpt_error_set(err, path, 0, 0, "expected a partial render (mcpt --sample-range) "
+            mcpt_error_set(err, path, 0, 0,
+                           "expected a partial render (mcpt --sample-range) "
                            "with channel '%s', got an image without it",
                            hi[k] < 0 ? HI_NAMES[k] : LO_NAMES[k]);
             goto done;
@@ -232,15 +243,17 @@ bool partial_read_exr(const char *path, struct film *film, struct partial_info *
     const char *ranges = image_find_attr(img, PARTIAL_ATTR_RANGES);
     const char *render = image_find_attr(img, PARTIAL_ATTR_RENDER);
     if (!ranges || !render) {
-        mcpt_error_set(err, path, 0, 0, "expected a partial render (mcpt --sample-range) with "
+        mcpt_error_set(err, path, 0, 0,
+                       "expected a partial render (mcpt --sample-range) with "
                        "attribute '%s', got an image without it",
                        !ranges ? PARTIAL_ATTR_RANGES : PARTIAL_ATTR_RENDER);
         goto done;
     }
     if (!parse_ranges(ranges, info)) {
-        mcpt_error_set(err, path, 0, 0, "expected attribute '%s' to hold at most %d sorted, "
-                       "disjoint ranges A:B[,A:B...], got '%.100s'", PARTIAL_ATTR_RANGES,
-                       PARTIAL_MAX_RANGES, ranges);
+        mcpt_error_set(err, path, 0, 0,
+                       "expected attribute '%s' to hold at most %d sorted, "
+                       "disjoint ranges A:B[,A:B...], got '%.100s'",
+                       PARTIAL_ATTR_RANGES, PARTIAL_MAX_RANGES, ranges);
         goto done;
     }
     snprintf(info->render, sizeof info->render, "%s", render);
@@ -258,18 +271,21 @@ bool partial_read_exr(const char *path, struct film *film, struct partial_info *
             double v = (double)h + (double)l; /* exact: 48 bits fit in a double's 53 */
             if (!isfinite(h) || !isfinite(l) ||
                 (k >= PART_N && !(v >= 0.0 && v <= UINT32_MAX && v == floor(v)))) {
-                mcpt_error_set(err, path, 0, 0, "expected %s in '%s' and '%s', got %g and %g at "
-                               "pixel %zu,%zu", k >= PART_N ? "a count in 0..4294967295"
-                                                            : "a finite sum",
+                mcpt_error_set(err, path, 0, 0,
+                               "expected %s in '%s' and '%s', got %g and %g at "
+                               "pixel %zu,%zu",
+                               k >= PART_N ? "a count in 0..4294967295" : "a finite sum",
                                HI_NAMES[k], LO_NAMES[k], (double)h, (double)l, x, y);
                 goto done;
             }
             pixel_set(p, k, v);
         }
         if ((uint64_t)p->n + p->n_dropped != n_expected) {
-            mcpt_error_set(err, path, 0, 0, "expected the %llu samples of ranges %.100s at every "
+            mcpt_error_set(err, path, 0, 0,
+                           "expected the %llu samples of ranges %.100s at every "
                            "pixel, got %llu at pixel %zu,%zu (an interrupted render? finish it "
-                           "with --resume first)", (unsigned long long)n_expected, ranges,
+                           "with --resume first)",
+                           (unsigned long long)n_expected, ranges,
                            (unsigned long long)p->n + p->n_dropped, x, y);
             goto done;
         }
@@ -290,13 +306,17 @@ bool partial_merge(struct film *dst, struct partial_info *dst_info, const struct
                    struct mcpt_error *err)
 {
     if (src->width != dst->width || src->height != dst->height) {
-        mcpt_error_set(err, src_path, 0, 0, "expected a %dx%d image like the parts before it, "
-                       "got %dx%d", dst->width, dst->height, src->width, src->height);
+        mcpt_error_set(err, src_path, 0, 0,
+                       "expected a %dx%d image like the parts before it, "
+                       "got %dx%d",
+                       dst->width, dst->height, src->width, src->height);
         return false;
     }
     if (strcmp(src_info->render, dst_info->render) != 0) {
-        mcpt_error_set(err, src_path, 0, 0, "expected the render settings of the parts before "
-                       "it ('%.100s'), got '%.100s'", dst_info->render, src_info->render);
+        mcpt_error_set(err, src_path, 0, 0,
+                       "expected the render settings of the parts before "
+                       "it ('%.100s'), got '%.100s'",
+                       dst_info->render, src_info->render);
         return false;
     }
     struct partial_range all[2 * PARTIAL_MAX_RANGES];
@@ -310,9 +330,10 @@ bool partial_merge(struct film *dst, struct partial_info *dst_info, const struct
             if (a->begin < b->end && b->begin < a->end) {
                 char merged[PARTIAL_RENDER_BYTES];
                 partial_format_ranges(dst_info, merged, sizeof merged);
-                mcpt_error_set(err, src_path, 0, 0, "expected sample ranges disjoint from those "
-                               "of the parts before it (%.100s), got %u:%u", merged, b->begin,
-                               b->end);
+                mcpt_error_set(err, src_path, 0, 0,
+                               "expected sample ranges disjoint from those "
+                               "of the parts before it (%.100s), got %u:%u",
+                               merged, b->begin, b->end);
                 return false;
             }
         }
@@ -328,7 +349,8 @@ bool partial_merge(struct film *dst, struct partial_info *dst_info, const struct
             all[n_union++] = all[i];
     }
     if (n_union > PARTIAL_MAX_RANGES) {
-        mcpt_error_set(err, src_path, 0, 0, "expected the merged sample ranges to form at most "
+        mcpt_error_set(err, src_path, 0, 0,
+                       "expected the merged sample ranges to form at most "
                        "%d separate runs, got %u (merge neighbouring ranges first)",
                        PARTIAL_MAX_RANGES, n_union);
         return false;
@@ -343,7 +365,7 @@ bool partial_merge(struct film *dst, struct partial_info *dst_info, const struct
             d->sum_sq[c] += s->sum_sq[c];
         }
         d->sum_lum_sq += s->sum_lum_sq;
-        d->n += s->n;                 /* disjoint ranges below 2^32: no overflow */
+        d->n += s->n; /* disjoint ranges below 2^32: no overflow */
         d->n_dropped += s->n_dropped;
     }
     dst_info->n_ranges = n_union;
@@ -372,8 +394,10 @@ bool partial_merge_files(const char *const *paths, int n_paths, struct film *fil
     struct partial_info part_info;
     struct part_order *order = n_paths > 0 ? malloc(sizeof *order * (size_t)n_paths) : NULL;
     if (!order) {
-        mcpt_error_set(err, "", 0, 0, "%s", n_paths > 0 ? "out of memory"
-                                                        : "expected images to merge, got none");
+        if (n_paths > 0)
+            mcpt_error_runtime(err, NULL, "out of memory");
+        else
+            mcpt_error_set(err, "", 0, 0, "expected images to merge, got none");
         return false;
     }
     /* first pass: each part's first sample index (and every check on its own) */

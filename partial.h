@@ -7,8 +7,8 @@
 
 #include "film.h"
 
-#define PARTIAL_MAX_RANGES 8      /* separate runs of sample indices one image may hold */
-#define PARTIAL_RENDER_BYTES 256  /* the render-settings string, including the NUL */
+#define PARTIAL_MAX_RANGES 8     /* separate runs of sample indices one image may hold */
+#define PARTIAL_RENDER_BYTES 256 /* the render-settings string, including the NUL */
 #define PARTIAL_ATTR_RANGES "mcpt.sample-ranges" /* EXR string attribute: "A:B[,A:B...]" */
 #define PARTIAL_ATTR_RENDER "mcpt.render"        /* EXR string attribute: the settings */
 
@@ -16,7 +16,7 @@
 struct partial_range {
     uint32_t begin; /* first sample index */
     uint32_t end;   /* one past the last; begin < end */
-}; /* 8 bytes */
+};                  /* 8 bytes */
 
 /* What a partial render holds: its runs of sample indices, sorted, disjoint and never adjacent
  * (adjacent runs are joined), and the settings that made it.  Only renders with the same
@@ -33,19 +33,23 @@ bool partial_parse_range(const char *s, struct partial_range *r);
 /* Samples per pixel the info's ranges hold together. */
 uint64_t partial_n_samples(const struct partial_info *info);
 
+/* Whether the info's ranges are the whole render: one range 0:N, N the spp of its settings. */
+bool partial_is_whole(const struct partial_info *info);
+
 /* Writes film as an EXR: the channels of every mcpt render (R, G, B, variance.R/G/B, samples)
  * plus each double of every pixel's film_pixel split into two float channels, hi = (float)x
  * and lo = (float)(x - hi) (sum.R/G/B and sum_lo.R/G/B, sum_sq.*, sum_sq_lo.*, sum_lum_sq.Y,
  * sum_lum_sq_lo.Y, samples_lo, dropped, dropped_lo), and info as the string attributes
- * PARTIAL_ATTR_RANGES and PARTIAL_ATTR_RENDER.  False with *err (file = path) when a sum lies
- * beyond float range (it cannot be stored), when out of memory, or on an I/O failure. */
+ * PARTIAL_ATTR_RANGES and PARTIAL_ATTR_RENDER.  False with *err (runtime; file = path) when a
+ * sum lies beyond float range (it cannot be stored), when out of memory, or on an I/O failure. */
 bool partial_write_exr(const char *path, const struct film *film, const struct partial_info *info,
                        struct mcpt_error *err);
 
 /* Reads an EXR written by partial_write_exr into a new film (free with film_free) and *info.
  * Every value is checked: channels and attributes present, ranges well formed, sums finite,
  * counts whole numbers, and every pixel's n + n_dropped equal to the ranges' sample count (an
- * interrupted render's image fails here).  On failure *film is zeroed and *err names path. */
+ * interrupted render's image fails here).  On failure *film is zeroed and *err names path (bad
+ * input; a runtime error when out of memory). */
 bool partial_read_exr(const char *path, struct film *film, struct partial_info *info,
                       struct mcpt_error *err);
 

@@ -128,8 +128,8 @@ static uint32_t cmj_columns(uint32_t n_samples)
 
 static uint32_t sobol_joint_index(const struct sampler *s);
 
-void sample_start_spp(struct sampler *s, enum sampler_kind kind, uint64_t seed,
-                      uint32_t pixel_idx, uint32_t sample_idx, uint32_t set_spp)
+void sample_start_spp(struct sampler *s, enum sampler_kind kind, uint64_t seed, uint32_t pixel_idx,
+                      uint32_t sample_idx, uint32_t set_spp)
 {
     s->kind = kind;
     s->seed = seed;
@@ -173,10 +173,7 @@ static uint32_t dim_seed(const struct sampler *s, uint32_t dim, uint32_t tag)
 
 /* A 32-bit fraction x / 2^32 as a float in [0, 1): its top 24 bits, exact (so truncation, not
  * rounding: a value never crosses up into the next stratum or up to 1). */
-static float fraction_to_float(uint32_t x)
-{
-    return (float)(x >> 8) * 0x1p-24f;
-}
+static float fraction_to_float(uint32_t x) { return (float)(x >> 8) * 0x1p-24f; }
 
 /* -- stratified: correlated multi-jittered sampling, Kensler 2013, "Correlated Multi-Jittered
  * Sampling", Pixar Technical Memo 13-01 -- */
@@ -521,28 +518,69 @@ vec2 sample_invert_uniform_sphere(vec3 w)
     return (vec2){0.5f * (1.0f - w.z), azimuth_fraction(w.x, w.y)};
 }
 
-vec3 sample_uniform_cone(vec2 u, float cos_theta_max)
+/* sin^2(1.5 deg): below it a cone counts as narrow (PBRT 4e, ch. 6, "Spheres") */
+static const float CONE_NARROW_SIN2 = 0.00068523f;
+
+struct sample_cone sample_cone_from_cos(float cos_theta_max)
 {
-    /* cos theta uniform in [cos_theta_max, 1]: solid angle is linear in cos theta */
-    float cos_theta = (1.0f - u.x) + u.x * cos_theta_max;
-    float sin_theta = sqrtf(fmaxf(0.0f, 1.0f - cos_theta * cos_theta));
+    struct sample_cone c;
+    c.cos_theta_max = cos_theta_max;
+    c.sin2_theta_max = fmaxf(0.0f, 1.0f - cos_theta_max * cos_theta_max);
+    c.one_minus_cos_max = 1.0f - cos_theta_max;
+    c.is_narrow = false; /* the digits 1 - cos theta_max lost are gone already */
+    return c;
+}
+
+struct sample_cone sample_cone_from_sin2(float sin2_theta_max)
+{
+    struct sample_cone c;
+    c.sin2_theta_max = sin2_theta_max;
+    c.cos_theta_max = sqrtf(fmaxf(0.0f, 1.0f - sin2_theta_max));
+    c.is_narrow = sin2_theta_max < CONE_NARROW_SIN2;
+    /* Taylor: 1 - cos theta_max = 1 - sqrt(1 - s) ~ s / 2 */
+    c.one_minus_cos_max = c.is_narrow ? sin2_theta_max / 2.0f : 1.0f - c.cos_theta_max;
+    return c;
+}
+
+void sample_uniform_cone_theta(float u0, const struct sample_cone *cone, float *cos_theta,
+                               float *sin2_theta)
+{
+    if (cone->is_narrow) {
+        /* Taylor: sin^2 theta = 1 - cos^2 theta ~ 2 (1 - cos theta) = u0 sin^2 theta_max */
+        *sin2_theta = cone->sin2_theta_max * u0;
+        *cos_theta = sqrtf(1.0f - *sin2_theta);
+    } else {
+        /* cos theta uniform in [cos theta_max, 1]: solid angle is linear in cos theta */
+        *cos_theta = (cone->cos_theta_max - 1.0f) * u0 + 1.0f;
+        *sin2_theta = 1.0f - *cos_theta * *cos_theta;
+    }
+}
+
+vec3 sample_uniform_cone(vec2 u, const struct sample_cone *cone)
+{
+    float cos_theta, sin2_theta;
+    sample_uniform_cone_theta(u.x, cone, &cos_theta, &sin2_theta);
+    float sin_theta = sqrtf(fmaxf(0.0f, sin2_theta));
     float phi = 2.0f * MCPT_PI * u.y;
     return (vec3){sin_theta * cosf(phi), sin_theta * sinf(phi), cos_theta};
 }
 
-float pdf_uniform_cone(float cos_theta_max)
+float pdf_uniform_cone(const struct sample_cone *cone)
 {
-    return 1.0f / (2.0f * MCPT_PI * (1.0f - cos_theta_max));
+    return 1.0f / (2.0f * MCPT_PI * cone->one_minus_cos_max);
 }
 
-vec2 sample_invert_uniform_cone(vec3 w, float cos_theta_max)
+vec2 sample_invert_uniform_cone(vec3 w, const struct sample_cone *cone)
 {
-    return (vec2){(1.0f - w.z) / (1.0f - cos_theta_max), azimuth_fraction(w.x, w.y)};
+    /* u0 = (1 - cos theta) / (1 - cos theta_max); a narrow cone reads sin^2 theta = x^2 + y^2 */
+    float u0 = cone->is_narrow ? (w.x * w.x + w.y * w.y) / cone->sin2_theta_max
+                               : (1.0f - w.z) / cone->one_minus_cos_max;
+    return (vec2){u0, azimuth_fraction(w.x, w.y)};
 }
 
 vec2 sample_uniform_triangle(vec2 u)
 {
-    /* PBRT 4e, ch. 6, "Triangles": b0 = 1 - sqrt(u0), b1 = u1 sqrt(u0) */
+    /* PBRT 3e, ch. 13, "Sampling a Triangle": b0 = 1 - sqrt(u0), b1 = u1 sqrt(u0) */
     float su0 = sqrtf(u.x);
     return (vec2){1.0f - su0, u.y * su0};
 }

@@ -95,9 +95,9 @@ struct sampler {
     uint32_t sample_idx;
     uint32_t dim; /* next dimension to be returned */
     struct pcg32 rng;
-    uint32_t set_spp;    /* stratified: samples per stratified set (0 or 1: none) */
-    uint32_t cmj_cols;   /* stratified: columns m of the m x n multi-jittered grid */
-    uint64_t pixel_hash; /* hash of (seed, pixel_idx): root of every scrambling seed */
+    uint32_t set_spp;     /* stratified: samples per stratified set (0 or 1: none) */
+    uint32_t cmj_cols;    /* stratified: columns m of the m x n multi-jittered grid */
+    uint64_t pixel_hash;  /* hash of (seed, pixel_idx): root of every scrambling seed */
     uint32_t sobol_index; /* Sobol': the shuffled index of the joint dimensions */
 };
 
@@ -109,8 +109,8 @@ void sample_start(struct sampler *s, enum sampler_kind kind, uint64_t seed, uint
  * spp): sample indices k set_spp .. (k+1) set_spp - 1 form set k, whose points fill every
  * stratum once.  Only SAMPLER_STRATIFIED uses set_spp; Sobol' is stratified at every
  * power-of-two prefix without it. */
-void sample_start_spp(struct sampler *s, enum sampler_kind kind, uint64_t seed,
-                      uint32_t pixel_idx, uint32_t sample_idx, uint32_t set_spp);
+void sample_start_spp(struct sampler *s, enum sampler_kind kind, uint64_t seed, uint32_t pixel_idx,
+                      uint32_t sample_idx, uint32_t set_spp);
 /* Moves to dimension dim (>= the current one), skipping the values in between. */
 void sample_set_dim(struct sampler *s, uint32_t dim);
 /* The value of the next dimension, in [0, 1). */
@@ -141,13 +141,34 @@ vec2 sample_invert_uniform_hemisphere(vec3 w);
 vec3 sample_uniform_sphere(vec2 u);
 float pdf_uniform_sphere(void); /* 1 / (4 pi), per steradian */
 vec2 sample_invert_uniform_sphere(vec3 w);
-/* Uniform directions in the cone about +z of half-angle theta_max (cos_theta_max in [-1, 1)):
- * the directions to a sphere seen from outside it, PBRT 4e, ch. 6, "Spheres". */
-vec3 sample_uniform_cone(vec2 u, float cos_theta_max);
-float pdf_uniform_cone(float cos_theta_max); /* 1 / (2 pi (1 - cos_theta_max)), per sr */
-vec2 sample_invert_uniform_cone(vec3 w, float cos_theta_max);
-/* Uniform barycentrics (b0, b1) on a triangle, square-root warp, PBRT 4e, ch. 6, "Triangles"
- * (b2 = 1 - b0 - b1); pdf = 1 / area per unit area. */
+/* A cone of directions about +z with half-angle theta_max.  For a narrow cone 1 - cos theta_max
+ * cancels in float, so a cone made from sin^2 theta_max below sin^2(1.5 deg) uses the Taylor
+ * expansions 1 - cos theta_max = sin^2 theta_max / 2 and sin^2 theta = u0 sin^2 theta_max, as
+ * PBRT 4e samples spheres (ch. 6, "Spheres"). */
+struct sample_cone {
+    float cos_theta_max;     /* cos theta_max, in [-1, 1) */
+    float sin2_theta_max;    /* sin^2 theta_max */
+    float one_minus_cos_max; /* 1 - cos theta_max; sin^2 theta_max / 2 for a narrow cone */
+    bool is_narrow;          /* made from sin^2 theta_max < sin^2(1.5 deg): Taylor expansions */
+};                           /* 16 bytes */
+/* The cone of any half-angle, from cos_theta_max in [-1, 1). */
+struct sample_cone sample_cone_from_cos(float cos_theta_max);
+/* The cone of half-angle theta_max <= 90 deg from sin2_theta_max in (0, 1]: seen from a point at
+ * distance d > r, a sphere of radius r fills the cone with sin^2 theta_max = r^2 / d^2. */
+struct sample_cone sample_cone_from_sin2(float sin2_theta_max);
+/* Uniform directions in the cone: cos theta uniform in [cos theta_max, 1] (solid angle is
+ * linear in cos theta), phi = 2 pi u1; PBRT 4e, ch. A.5, "Sampling Multidimensional Functions".
+ * sample_uniform_cone_theta is its polar part alone: cos theta and sin^2 theta from u0, for the
+ * sphere sampler (shape.c), which turns theta into a point on the sphere. */
+void sample_uniform_cone_theta(float u0, const struct sample_cone *cone, float *cos_theta,
+                               float *sin2_theta);
+vec3 sample_uniform_cone(vec2 u, const struct sample_cone *cone);
+float pdf_uniform_cone(const struct sample_cone *cone); /* 1 / (2 pi (1 - cos theta_max)), per sr */
+vec2 sample_invert_uniform_cone(vec3 w, const struct sample_cone *cone);
+/* Uniform barycentrics (b0, b1) on a triangle by the square-root warp b0 = 1 - sqrt(u0),
+ * b1 = u1 sqrt(u0) (b2 = 1 - b0 - b1): PBRT 3e, ch. 13, "Sampling a Triangle" (PBRT 4e's
+ * SampleUniformTriangle, ch. 6, "Triangles", uses another map, which shifts points along the
+ * diagonal); pdf = 1 / area per unit area. */
 vec2 sample_uniform_triangle(vec2 u);
 vec2 sample_invert_uniform_triangle(vec2 b);
 
@@ -161,7 +182,7 @@ struct sample_alias_bin {
     float q;        /* probability of keeping this bin's own index once the bin is chosen */
     uint32_t alias; /* the index returned otherwise */
     float pmf;      /* probability that a pick returns this bin's index */
-}; /* 12 bytes */
+};                  /* 12 bytes */
 
 /* Fills bins[0 .. n-1] from the n weights (finite, >= 0; all zero means uniform).  A zero
  * weight is never picked.  Returns false when n == 0, a weight is negative or not finite, or

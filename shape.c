@@ -1,11 +1,55 @@
-/* shape.c - analytic shapes: spheres, parallelograms (quads) and infinite planes.
+/* shape.c - each kind of primitive's geometry: spheres, parallelograms (quads), infinite planes
+ * and the surface of triangles; intersection, surface point with its error bound (PBRT 4e, ch. 6,
+ * "Managing Rounding Error") and, for the shapes that emit, sampling from a reference point.
  * Sphere: the quadratic in the form of Haines et al. 2019, "Precision Improvements for
  * Ray/Sphere Intersection" (Ray Tracing Gems ch. 7), and PBRT 4e, ch. 6, "Spheres"; the hit point
- * is reprojected onto the surface and carries an error bound (PBRT 4e, ch. 6, "Managing Rounding
- * Error").  Quad: plane hit, then the planar coordinates (alpha, beta) of the hit. */
+ * is reprojected onto the surface.  Quad: plane hit, then the planar coordinates (alpha, beta).
+ * Sampling: PBRT 4e, ch. 6, "Shape Interface" (Sample(ctx, u), PDF(ctx, wi)); uniform by area
+ * and converted to solid angle, or, for a sphere seen from outside, uniform in its cone. */
 #include "shape.h"
 
+#include "sample.h"
+
 static vec3 v3_abs(vec3 a) { return (vec3){fabsf(a.x), fabsf(a.y), fabsf(a.z)}; }
+
+/* ---- from area to solid angle ---- */
+
+/* area -> solid angle: pdf_sa = pdf_area * dist^2 / |cos theta_light| for the point at d from
+ * the reference point, normal n, seen along unit wi (PBRT 4e, ch. 4, "Radiometric Integrals":
+ * dw = |cos theta| dA / r^2); false when seen edge-on. */
+static bool area_to_solid_angle(float pdf_area, vec3 d, vec3 n, vec3 wi, float *pdf_sa)
+{
+    float cos_light = fabsf(v3_dot(n, wi));
+    if (!(cos_light > 0.0f))
+        return false;
+    *pdf_sa = pdf_area * v3_dot(d, d) / cos_light;
+    return true;
+}
+
+/* A point p (error p_error, normal n) sampled with density pdf_area per unit area, as seen from
+ * ref: fills *ss with wi and pdf_sa. */
+static bool sample_by_area(vec3 p, vec3 p_error, vec3 n, float pdf_area, const struct surface *ref,
+                           struct shape_sample *ss)
+{
+    vec3 d = v3_sub(p, ref->p);
+    float dist2 = v3_dot(d, d);
+    if (!(dist2 > 0.0f))
+        return false;
+    ss->p = p;
+    ss->p_error = p_error;
+    ss->n = n;
+    ss->wi = v3_scale(d, 1.0f / sqrtf(dist2));
+    return area_to_solid_angle(pdf_area, d, n, ss->wi, &ss->pdf_sa) && isfinite(ss->pdf_sa);
+}
+
+/* The solid-angle density at the point on where wi meets a shape sampled with pdf_area. */
+static float pdf_by_area(float pdf_area, const struct surface *ref, const struct surface *on,
+                         vec3 wi)
+{
+    float pdf_sa;
+    return area_to_solid_angle(pdf_area, v3_sub(on->p, ref->p), on->ng, wi, &pdf_sa) ? pdf_sa
+                                                                                     : 0.0f;
+}
 
 /* ---- sphere ---- */
 
@@ -42,21 +86,27 @@ bool shape_sphere_intersect(const struct sphere *s, const struct ray *ray, float
     return false;
 }
 
+/* The point at offset pc (length r) from the centre: error gamma(5) |pc| of the reprojection
+ * (PBRT 4e, ch. 6, "Spheres"), plus the rounding of adding the centre back. */
+static vec3 sphere_point(const struct sphere *s, vec3 pc, vec3 *p_error)
+{
+    vec3 p = v3_add(s->center, pc);
+    *p_error = v3_add(v3_scale(v3_abs(pc), mcpt_gamma(5)), v3_scale(v3_abs(p), mcpt_gamma(1)));
+    return p;
+}
+
 struct surface shape_sphere_surface(const struct sphere *s, const struct ray *ray, float t_hit)
 {
     struct surface sf;
     vec3 p = v3_add(ray->o, v3_scale(ray->d, t_hit));
-    /* reproject onto the sphere: error gamma(5) |p - c| (PBRT 4e, ch. 6, "Spheres"), plus
-     * the rounding of adding the centre back */
+    /* reproject onto the sphere */
     vec3 pc = v3_sub(p, s->center);
     float len = v3_length(pc);
     if (len > 0.0f)
         pc = v3_scale(pc, s->radius / len);
     else
         pc = v3(0.0f, s->radius, 0.0f);
-    sf.p = v3_add(s->center, pc);
-    sf.p_error = v3_add(v3_scale(v3_abs(pc), mcpt_gamma(5)),
-                        v3_scale(v3_abs(sf.p), mcpt_gamma(1)));
+    sf.p = sphere_point(s, pc, &sf.p_error);
     sf.ng = v3_scale(pc, 1.0f / s->radius);
     sf.ns = sf.ng;
     float phi = atan2f(sf.ng.z, sf.ng.x);
@@ -64,6 +114,74 @@ struct surface shape_sphere_surface(const struct sphere *s, const struct ray *ra
                    acosf(fminf(1.0f, fmaxf(-1.0f, sf.ng.y))) * MCPT_INV_PI};
     sf.mat_idx = s->mat_idx;
     return sf;
+}
+
+/* Uniform area sampling of the whole sphere: pdf_area = 1 / (4 pi r^2). */
+static float sphere_pdf_area(const struct sphere *s)
+{
+    return 1.0f / (4.0f * MCPT_PI * s->radius * s->radius);
+}
+
+/* The cone of directions in which ref sees sphere s, from ref->p offset towards the centre, so
+ * that a point on the sphere itself counts as inside (PBRT 4e, ch. 6, "Spheres"): sin^2
+ * theta_max = r^2 / dist^2.  False when that point is inside; *wc = centre - the point. */
+static bool sphere_cone(const struct sphere *s, const struct surface *ref, vec3 *wc,
+                        struct sample_cone *cone)
+{
+    vec3 origin = offset_ray_origin(ref->p, ref->p_error, ref->ng, v3_sub(s->center, ref->p));
+    *wc = v3_sub(s->center, origin);
+    float dist2 = v3_dot(*wc, *wc);
+    if (dist2 <= s->radius * s->radius)
+        return false;
+    *cone = sample_cone_from_sin2(s->radius * s->radius / dist2);
+    return true;
+}
+
+bool shape_sphere_sample(const struct sphere *s, const struct surface *ref, vec2 u,
+                         struct shape_sample *ss)
+{
+    vec3 wc, p_error;
+    struct sample_cone cone;
+    if (!sphere_cone(s, ref, &wc, &cone)) {
+        /* inside: uniform by area */
+        vec3 n = sample_uniform_sphere(u);
+        vec3 p = sphere_point(s, v3_scale(n, s->radius), &p_error);
+        return sample_by_area(p, p_error, n, sphere_pdf_area(s), ref, ss);
+    }
+    /* outside: a direction uniform in the cone (sample.c), pdf_sa = 1 / (2 pi (1 - cos
+     * theta_max)), then the angle alpha, seen from the centre, between the reference point and
+     * the point where that direction first meets the sphere (PBRT 4e, ch. 6, "Spheres") */
+    float cos_theta, sin2_theta;
+    sample_uniform_cone_theta(u.x, &cone, &cos_theta, &sin2_theta);
+    float sin2_theta_max = cone.sin2_theta_max;
+    float sin_theta_max = sqrtf(sin2_theta_max);
+    float cos_alpha = sin2_theta / sin_theta_max +
+                      cos_theta * sqrtf(fmaxf(0.0f, 1.0f - sin2_theta / sin2_theta_max));
+    float sin_alpha = sqrtf(fmaxf(0.0f, 1.0f - cos_alpha * cos_alpha));
+    float phi = 2.0f * MCPT_PI * u.y;
+    vec3 wz = v3_scale(wc, -1.0f / sqrtf(v3_dot(wc, wc))); /* centre -> reference point */
+    vec3 wx, wy;
+    v3_basis(wz, &wx, &wy);
+    vec3 n = v3_from_local(v3(sin_alpha * cosf(phi), sin_alpha * sinf(phi), cos_alpha), wx, wy, wz);
+    ss->n = n;
+    ss->p = sphere_point(s, v3_scale(n, s->radius), &ss->p_error);
+    vec3 d = v3_sub(ss->p, ref->p);
+    float dist = v3_length(d);
+    if (!(dist > 0.0f))
+        return false;
+    ss->wi = v3_scale(d, 1.0f / dist);
+    ss->pdf_sa = pdf_uniform_cone(&cone);
+    return ss->pdf_sa > 0.0f;
+}
+
+float shape_sphere_pdf(const struct sphere *s, const struct surface *ref, const struct surface *on,
+                       vec3 wi)
+{
+    vec3 wc;
+    struct sample_cone cone;
+    if (sphere_cone(s, ref, &wc, &cone))
+        return pdf_uniform_cone(&cone);
+    return pdf_by_area(sphere_pdf_area(s), ref, on, wi);
 }
 
 /* ---- quad ---- */
@@ -89,6 +207,16 @@ bool shape_quad_intersect(const struct quad *q, const struct ray *ray, float *t_
     return true;
 }
 
+/* p = corner + alpha e1 + beta e2, rebuilt from the parameterisation: error of a 3-term sum,
+ * gamma(3) per term; the products alpha e1, beta e2 add one rounding each. */
+static vec3 quad_point(const struct quad *q, float alpha, float beta, vec3 *p_error)
+{
+    vec3 a_e1 = v3_scale(q->e1, alpha), b_e2 = v3_scale(q->e2, beta);
+    *p_error = v3_scale(v3_add(v3_add(v3_abs(q->corner), v3_abs(a_e1)), v3_abs(b_e2)),
+                        mcpt_gamma(4));
+    return v3_add(v3_add(q->corner, a_e1), b_e2);
+}
+
 struct surface shape_quad_surface(const struct quad *q, const struct ray *ray, float t_hit)
 {
     struct surface sf;
@@ -97,17 +225,28 @@ struct surface shape_quad_surface(const struct quad *q, const struct ray *ray, f
     float inv_nn = 1.0f / v3_dot(n, n);
     float alpha = fminf(1.0f, fmaxf(0.0f, v3_dot(v3_cross(pd, q->e2), n) * inv_nn));
     float beta = fminf(1.0f, fmaxf(0.0f, v3_dot(v3_cross(q->e1, pd), n) * inv_nn));
-    /* p rebuilt from the parameterisation: error of a 3-term sum, gamma(3) per term; the
-     * products alpha e1, beta e2 add one rounding each */
-    vec3 a_e1 = v3_scale(q->e1, alpha), b_e2 = v3_scale(q->e2, beta);
-    sf.p = v3_add(v3_add(q->corner, a_e1), b_e2);
-    sf.p_error = v3_scale(v3_add(v3_add(v3_abs(q->corner), v3_abs(a_e1)), v3_abs(b_e2)),
-                          mcpt_gamma(4));
+    sf.p = quad_point(q, alpha, beta, &sf.p_error);
     sf.ng = v3_normalize(n);
     sf.ns = sf.ng;
     sf.uv = (vec2){alpha, beta};
     sf.mat_idx = q->mat_idx;
     return sf;
+}
+
+bool shape_quad_sample(const struct quad *q, const struct surface *ref, vec2 u,
+                       struct shape_sample *ss)
+{
+    /* uniform by area: p = corner + u0 e1 + u1 e2, pdf_area = 1 / |e1 x e2| */
+    vec3 p_error;
+    vec3 p = quad_point(q, u.x, u.y, &p_error);
+    vec3 c = v3_cross(q->e1, q->e2);
+    return sample_by_area(p, p_error, v3_normalize(c), 1.0f / v3_length(c), ref, ss);
+}
+
+float shape_quad_pdf(const struct quad *q, const struct surface *ref, const struct surface *on,
+                     vec3 wi)
+{
+    return pdf_by_area(1.0f / v3_length(v3_cross(q->e1, q->e2)), ref, on, wi);
 }
 
 /* ---- infinite plane ---- */
@@ -140,4 +279,68 @@ struct surface shape_plane_surface(const struct plane *pl, const struct ray *ray
     sf.uv = (vec2){v3_dot(pp, t), v3_dot(pp, b)};
     sf.mat_idx = pl->mat_idx;
     return sf;
+}
+
+/* ---- triangle (the BVH finds the hit) ---- */
+
+/* p = b0 p0 + b1 p1 + b2 p2 and sum |b_i p_i|, which bounds its rounding error (PBRT 4e,
+ * ch. 6, "Managing Rounding Error": gamma(7) times it after an intersection, gamma(6) for exact
+ * sampled barycentrics). */
+static vec3 barycentric_point(const vec3 p[3], float b0, float b1, float b2, vec3 *abs_sum)
+{
+    vec3 bp0 = v3_scale(p[0], b0), bp1 = v3_scale(p[1], b1), bp2 = v3_scale(p[2], b2);
+    *abs_sum = v3_add(v3_add(v3_abs(bp0), v3_abs(bp1)), v3_abs(bp2));
+    return v3_add(v3_add(bp0, bp1), bp2);
+}
+
+struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec2 *uv, float b1,
+                                      float b2, uint32_t mat_idx)
+{
+    float b0 = 1.0f - b1 - b2;
+    struct surface sf;
+    vec3 abs_sum;
+    sf.p = barycentric_point(p, b0, b1, b2, &abs_sum);
+    sf.p_error = v3_scale(abs_sum, mcpt_gamma(7));
+    sf.ng = v3_normalize(v3_cross(v3_sub(p[1], p[0]), v3_sub(p[2], p[0])));
+    sf.ns = sf.ng;
+    if (ns) {
+        vec3 n = v3_add(v3_add(v3_scale(ns[0], b0), v3_scale(ns[1], b1)), v3_scale(ns[2], b2));
+        float len = v3_length(n);
+        if (len > 0.0f && isfinite(len)) {
+            n = v3_scale(n, 1.0f / len);
+            sf.ns = v3_dot(n, sf.ng) < 0.0f ? v3_neg(n) : n;
+        }
+    }
+    sf.uv = (vec2){b1, b2};
+    if (uv)
+        sf.uv = (vec2){b0 * uv[0].x + b1 * uv[1].x + b2 * uv[2].x,
+                       b0 * uv[0].y + b1 * uv[1].y + b2 * uv[2].y};
+    sf.mat_idx = mat_idx;
+    return sf;
+}
+
+float shape_triangle_area(const vec3 p[3], vec3 *ng)
+{
+    vec3 c = v3_cross(v3_sub(p[1], p[0]), v3_sub(p[2], p[0]));
+    float len = v3_length(c);
+    if (ng)
+        *ng = len > 0.0f ? v3_scale(c, 1.0f / len) : v3_splat(0.0f);
+    return 0.5f * len;
+}
+
+bool shape_triangle_sample(const vec3 p[3], const struct surface *ref, vec2 u,
+                           struct shape_sample *ss)
+{
+    /* uniform by area: barycentrics by the square-root warp (sample.c), pdf_area = 1 / A */
+    vec2 b = sample_uniform_triangle(u);
+    vec3 abs_sum, n;
+    vec3 pt = barycentric_point(p, b.x, b.y, 1.0f - b.x - b.y, &abs_sum);
+    float area = shape_triangle_area(p, &n);
+    return sample_by_area(pt, v3_scale(abs_sum, mcpt_gamma(6)), n, 1.0f / area, ref, ss);
+}
+
+float shape_triangle_pdf(const vec3 p[3], const struct surface *ref, const struct surface *on,
+                         vec3 wi)
+{
+    return pdf_by_area(1.0f / shape_triangle_area(p, NULL), ref, on, wi);
 }

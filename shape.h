@@ -1,7 +1,9 @@
-/* shape.h - analytic shapes kept outside the BVH: spheres, parallelograms ("quads") and
- * infinite planes.  Each has a ray intersection that returns the hit parameter and a
- * surface query that returns the point with its floating-point error bound (PBRT 4e, ch. 6,
- * "Managing Rounding Error"), so secondary rays can be offset without scene-tuned epsilons. */
+/* shape.h - the geometry of each kind of primitive: spheres, parallelograms ("quads") and
+ * infinite planes kept outside the BVH, and the surface of triangles (the BVH intersects them).
+ * Each has a ray intersection that returns the hit parameter (triangles: bvh.h) and a surface
+ * query that returns the point with its floating-point error bound (PBRT 4e, ch. 6, "Managing
+ * Rounding Error"), so secondary rays can be offset without scene-tuned epsilons; the shapes that
+ * can emit (triangles, quads, spheres) also sample a point as seen from a reference point. */
 #ifndef MCPT_SHAPE_H
 #define MCPT_SHAPE_H
 
@@ -30,11 +32,11 @@ struct plane {
 
 /* A point on a surface, as the integrator needs it. */
 struct surface {
-    vec3 p;        /* position */
-    vec3 p_error;  /* absolute error bound of p, per component */
-    vec3 ng;       /* unit geometric normal (front side of the primitive) */
-    vec3 ns;       /* unit shading normal, on the same side as ng */
-    vec2 uv;       /* surface parameterisation */
+    vec3 p;       /* position */
+    vec3 p_error; /* absolute error bound of p, per component */
+    vec3 ng;      /* unit geometric normal (front side of the primitive) */
+    vec3 ns;      /* unit shading normal, on the same side as ng */
+    vec2 uv;      /* surface parameterisation */
     uint32_t mat_idx;
 };
 
@@ -48,5 +50,46 @@ bool shape_plane_intersect(const struct plane *pl, const struct ray *ray, float 
 struct surface shape_sphere_surface(const struct sphere *s, const struct ray *ray, float t_hit);
 struct surface shape_quad_surface(const struct quad *q, const struct ray *ray, float t_hit);
 struct surface shape_plane_surface(const struct plane *pl, const struct ray *ray, float t_hit);
+
+/* Surface of the triangle with corners p[3] at barycentrics (1 - b1 - b2, b1, b2) of a hit;
+ * ns[3] and uv[3] are the corners' shading normals and uvs, each NULL when the mesh has none. */
+struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec2 *uv, float b1,
+                                      float b2, uint32_t mat_idx);
+/* Area of the triangle with corners p[3]; *ng (may be NULL) receives its unit normal
+ * (p1 - p0) x (p2 - p0), or 0 when the triangle is degenerate. */
+float shape_triangle_area(const vec3 p[3], vec3 *ng);
+
+/* ---- sampling a shape from a reference point (area lights) ----
+ * PBRT 4e, ch. 6, "Shape Interface": Shape::Sample(ctx, u) and Shape::PDF(ctx, wi).  Triangles,
+ * quads and spheres seen from inside are sampled uniformly by area and the density converted to
+ * solid angle; spheres seen from outside uniformly in the cone of directions they subtend. */
+
+/* A point sampled on a shape as seen from a reference point. */
+struct shape_sample {
+    vec3 p;       /* the point on the shape */
+    vec3 p_error; /* absolute error bound of p, per component */
+    vec3 n;       /* unit geometric normal at p (front side) */
+    vec3 wi;      /* unit direction from the reference point to p */
+    float pdf_sa; /* density of wi, per unit solid angle */
+};
+
+/* Sample a point on the shape from ref->p with uniforms u.  False when the sample is unusable:
+ * the point coincides with ref->p, is seen edge-on, or its density is not finite. */
+bool shape_triangle_sample(const vec3 p[3], const struct surface *ref, vec2 u,
+                           struct shape_sample *ss);
+bool shape_quad_sample(const struct quad *q, const struct surface *ref, vec2 u,
+                       struct shape_sample *ss);
+bool shape_sphere_sample(const struct sphere *s, const struct surface *ref, vec2 u,
+                         struct shape_sample *ss);
+
+/* The solid-angle density with which shape_*_sample picks the unit direction wi from ref, given
+ * the point on->p (geometric normal on->ng) where the ray along wi first meets the shape; 0 when
+ * wi meets the shape edge-on. */
+float shape_triangle_pdf(const vec3 p[3], const struct surface *ref, const struct surface *on,
+                         vec3 wi);
+float shape_quad_pdf(const struct quad *q, const struct surface *ref, const struct surface *on,
+                     vec3 wi);
+float shape_sphere_pdf(const struct sphere *s, const struct surface *ref, const struct surface *on,
+                       vec3 wi);
 
 #endif

@@ -1,7 +1,8 @@
 /* stats.h - image error metrics against a reference, convergence curves with their fits, their
- * outputs (CSV, JSON, SVG plot, PNG contact sheet, error and sample-count heat maps) and the
- * sampler laboratory (Monte Carlo estimates of 2-D integrals with known values).  Formats are an
- * interface, kept stable and documented in docs/convergence.md.  Nothing here changes a render. */
+ * CSV, JSON and text, and the sampler laboratory (the MSE of Monte Carlo estimates of 2-D
+ * integrals with known values).  Pictures of them (SVG plot, contact sheet, heat maps) are in
+ * plot.h.  Formats are an interface, kept stable and documented in docs/convergence.md.
+ * Nothing here changes a render. */
 #ifndef MCPT_STATS_H
 #define MCPT_STATS_H
 
@@ -21,9 +22,9 @@
 struct stats_image {
     int width;
     int height;
-    const float *rgb[3];  /* R, G, B planes, width * height each, row-major */
-    const float *var[3];  /* variance of the mean per channel, or all NULL when unknown */
-    const float *count;   /* samples per pixel, or NULL when unknown */
+    const float *rgb[3]; /* R, G, B planes, width * height each, row-major */
+    const float *var[3]; /* variance of the mean per channel, or all NULL when unknown */
+    const float *count;  /* samples per pixel, or NULL when unknown */
 };
 
 /* Points out at the R, G, B channels of img and, when all three are present, at variance.R/G/B
@@ -57,9 +58,9 @@ struct stats_metrics {
     double rmse_corrected;   /* sqrt(mse_corrected); NAN when mse_corrected <= 0 */
     double relmse_corrected; /* mean ((a - r)^2 - var r) / (r^2 + 0.01) */
     double psnr_corrected_db;
-    double mean_variance;    /* mean variance of the mean of a (a's variance channels; NAN
+    double mean_variance; /* mean variance of the mean of a (a's variance channels; NAN
                                 when a has none or a pixel has fewer than 2 samples) */
-    double relmse_own;       /* mean var a / (a^2 + 0.01): a's own relMSE estimate */
+    double relmse_own;    /* mean var a / (a^2 + 0.01): a's own relMSE estimate */
 };
 
 /* Compares a with ref (may be NULL: then only a's own-variance fields are filled).  Fails
@@ -74,30 +75,21 @@ void stats_print_metrics(FILE *f, const struct stats_metrics *m, const char *a_p
 void stats_write_metrics_json(FILE *f, const struct stats_metrics *m, const char *a_path,
                               const char *ref_path);
 
-/* Writes a false-colour PNG of each pixel's relative squared error, the mean over channels of
- * (a - r)^2 / (r^2 + 0.01), on a log scale (viridis, whole decades chosen from the data) above a
- * legend with tick labels; films narrower than 256 pixels are scaled up by a whole factor.
- * a and r must have the same size.  Returns false with *err (file = path) on failure. */
-bool stats_write_heatmap(const char *path, const struct stats_image *a,
-                         const struct stats_image *r, struct mcpt_error *err);
-
-/* Writes a false-colour PNG of each pixel's sample count n + n_dropped (where the renderer spent
- * its samples: adaptive sampling's map), linear from the least to the most samples in the film,
- * with the same scaling and legend as stats_write_heatmap.  Returns false with *err (file =
- * path) when out of memory, when the map would exceed 65535 pixels a side, or when the write
- * fails. */
-bool stats_write_count_heatmap(const char *path, const struct film *film, struct mcpt_error *err);
+/* The per-pixel terms of the relMSE: e[i] = mean over the channels of pixel i where a and r
+ * are both finite of (a - r)^2 / (r^2 + 0.01); NAN where none is.  a and r must have the same
+ * size; e holds width * height values. */
+void stats_relative_error_map(const struct stats_image *a, const struct stats_image *r, double *e);
 
 /* ---- line fits ---- */
 
 /* Ordinary least squares y = intercept + slope x with its 95% confidence interval. */
 struct stats_fit {
-    size_t n;          /* points used (finite x and y) */
+    size_t n; /* points used (finite x and y) */
     double slope;
     double intercept;
-    double r2;         /* coefficient of determination 1 - SSE / SST */
-    double slope_se;   /* standard error of the slope, sqrt(s^2 / Sxx), s^2 = SSE / (n - 2) */
-    double ci_lo;      /* slope -+ t(0.975, n - 2) slope_se; NAN when n < 3 */
+    double r2;       /* coefficient of determination 1 - SSE / SST */
+    double slope_se; /* standard error of the slope, sqrt(s^2 / Sxx), s^2 = SSE / (n - 2) */
+    double ci_lo;    /* slope -+ t(0.975, n - 2) slope_se; NAN when n < 3 */
     double ci_hi;
 };
 
@@ -122,7 +114,7 @@ const char *stats_error_source_name(enum stats_error_source source);
 struct stats_point {
     uint64_t seed;
     uint32_t spp;
-    double seconds;               /* render time of this seed's passes up to this spp */
+    double seconds; /* render time of this seed's passes up to this spp */
     enum stats_error_source source;
     double mse;                   /* by source; NAN when unknown */
     double rmse;                  /* sqrt(mse); NAN when mse <= 0 or unknown */
@@ -133,7 +125,7 @@ struct stats_point {
     double time_to_unit_variance; /* mean_variance seconds */
     double mse_raw;               /* mean (a - r)^2; NAN without a reference (likewise below) */
     double psnr_raw_db;
-    double noise_floor;           /* mean variance of the reference */
+    double noise_floor; /* mean variance of the reference */
     double mrse_pbrt;
     double mae;
 };
@@ -149,16 +141,6 @@ struct stats_run_info {
     int height;
 };
 
-/* A thumbnail of one snapshot for the contact sheet (sRGB, 8 bits a channel). */
-struct stats_thumb {
-    uint32_t spp;
-    double psnr_db;
-    enum stats_error_source source;
-    int width;
-    int height;
-    uint8_t *rgb8;
-};
-
 struct stats_curve {
     char scene[1024];
     char reference[1024]; /* "" without a reference */
@@ -170,9 +152,6 @@ struct stats_curve {
     struct stats_point *points;
     size_t n_points;
     size_t cap_points;
-    struct stats_thumb *thumbs;
-    size_t n_thumbs;
-    size_t cap_thumbs;
     float *planes; /* scratch: 7 planes of width * height floats */
 };
 
@@ -181,12 +160,13 @@ void stats_curve_init(struct stats_curve *c, const struct stats_run_info *info);
 void stats_curve_free(struct stats_curve *c);
 
 /* Measures film (its RGB means and variances of the mean, as they would be written) against ref
- * (NULL: no reference) and appends a point for (seed, spp, seconds); with keep_thumbnail also
- * keeps a thumbnail for the contact sheet (PNG exposure in stops).  False with *err when out of
- * memory or when ref's size differs from the film's. */
+ * (NULL: no reference) and appends a point for (seed, spp, seconds).  measured (may be NULL)
+ * receives the image as measured; it points into the curve's scratch planes and is valid until
+ * the next call (a snapshot's thumbnail is made from it, plot_sheet_add).  False with *err when
+ * out of memory (runtime) or when ref's size differs from the film's (bad input). */
 bool stats_curve_add(struct stats_curve *c, const struct film *film, const struct stats_image *ref,
-                     uint64_t seed, uint32_t spp, double seconds, bool keep_thumbnail,
-                     float exposure, struct mcpt_error *err);
+                     uint64_t seed, uint32_t spp, double seconds, struct stats_image *measured,
+                     struct mcpt_error *err);
 
 /* The next spp at which a power-of-two snapshot falls after spp_done: the smallest power of two
  * above it, or spp_final when that is smaller. */
@@ -233,9 +213,13 @@ struct stats_summary {
 bool stats_summarize(const struct stats_curve *c, double target_rmse, struct stats_summary *s);
 void stats_summary_free(struct stats_summary *s);
 
+/* max_depth as the CSV, the JSON and the plot print it: "inf" for TRACE_DEPTH_INFINITE, else
+ * the number. */
+void stats_depth_name(uint32_t max_depth, char *buf, size_t buf_bytes);
+
 /* The CSV: the header line STATS_CSV_HEADER then one row per point, in the order added. */
-#define STATS_CSV_HEADER                                                                          \
-    "spp,seconds,mse,rmse,relmse,psnr_db,mean_variance,efficiency,sampler,integrator,seed,"       \
+#define STATS_CSV_HEADER                                                                           \
+    "spp,seconds,mse,rmse,relmse,psnr_db,mean_variance,efficiency,sampler,integrator,seed,"        \
     "error_source,time_to_unit_variance,mse_raw,psnr_raw_db,noise_floor,mrse_pbrt,mae,max_depth"
 bool stats_write_csv(const char *path, const struct stats_curve *c, struct mcpt_error *err);
 /* The JSON summary (keys in docs/convergence.md), the fits and the ensemble table. */
@@ -243,13 +227,6 @@ bool stats_write_json(const char *path, const struct stats_curve *c, const struc
                       struct mcpt_error *err);
 /* The summary as text: the ensemble table, the fits and the extrapolation. */
 void stats_print_summary(FILE *f, const struct stats_curve *c, const struct stats_summary *s);
-/* Two log-log panels: RMSE vs spp (with the fit, the ideal N^-1/2 line, the uncorrected curve
- * and the reference's noise floor when known, error bars over seeds) and RMSE vs seconds. */
-bool stats_write_svg(const char *path, const struct stats_curve *c, const struct stats_summary *s,
-                     struct mcpt_error *err);
-/* The kept thumbnails in a grid, each labelled with its spp and PSNR. */
-bool stats_write_contact_sheet(const char *path, const struct stats_curve *c,
-                               struct mcpt_error *err);
 
 /* ---- the sampler laboratory: integrals on [0,1]^2 whose value is known ---- */
 
@@ -278,16 +255,5 @@ struct stats_integrate_row {
  * log2(spp_max) + 1 entries; returns how many were filled. */
 size_t stats_integrate(enum stats_integrand f, enum sampler_kind kind, uint32_t spp_max,
                        uint32_t n_seeds, uint64_t seed, struct stats_integrate_row *rows);
-
-/* ---- text in 8-bit images ---- */
-
-#define STATS_FONT_W 5 /* glyph cell in font pixels, plus one column of spacing */
-#define STATS_FONT_H 7
-
-/* Draws printable ASCII text into an interleaved RGB8 image with its top-left corner at (x, y),
- * each font pixel a scale x scale square, clipped to the image; other characters draw a box.
- * Returns the width of the text in pixels. */
-int stats_draw_text(uint8_t *rgb8, int width, int height, int x, int y, int scale,
-                    const char *text, const uint8_t color[3]);
 
 #endif

@@ -1,6 +1,7 @@
 /* trace.h - the path-tracing integrator and the tile-scheduled render loop.
- * trace_prepare turns a loaded scene into what rendering needs (BVH, camera, light table);
- * trace_render adds samples to a film; trace_radiance estimates the radiance along one ray. */
+ * trace_prepare turns a loaded scene into what rendering needs (BVH, camera, light table of
+ * light.h); trace_render adds samples to a film; trace_radiance estimates the radiance along one
+ * ray.  Depths count bounces (scattering events): 0 = emission seen directly, 1 = direct light. */
 #ifndef MCPT_TRACE_H
 #define MCPT_TRACE_H
 
@@ -12,15 +13,15 @@
 #include "scene.h"
 
 #define TRACE_DEPTH_INFINITE UINT32_MAX /* max_depth meaning "until Russian roulette ends it" */
-#define TRACE_DEPTH_CAP 1024u /* hard cap on bounces, whatever max_depth says */
-#define TRACE_TILE_SIZE 16    /* tile edge in pixels */
+#define TRACE_DEPTH_CAP 1024u           /* hard cap on bounces, whatever max_depth says */
+#define TRACE_TILE_SIZE 16              /* tile edge in pixels */
 
-struct trace_scene; /* opaque: scene + BVH + camera + light-selection table */
+struct trace_scene; /* opaque: scene + BVH + camera + light table */
 
 /* Builds the BVH (with n_threads) and the light table for scene, which must outlive the result.
- * Returns NULL and fills *err on failure (bad camera, out of memory). */
-struct trace_scene *trace_prepare(const struct scene *scene, int n_threads,
-                                  struct mcpt_error *err);
+ * Returns NULL and fills *err on failure: a bad-input error for a bad camera or a light of
+ * non-finite power (light_table_build), a runtime error when memory runs out. */
+struct trace_scene *trace_prepare(const struct scene *scene, int n_threads, struct mcpt_error *err);
 void trace_free(struct trace_scene *ts);
 struct bvh_stats trace_bvh_stats(const struct trace_scene *ts);
 
@@ -36,14 +37,14 @@ struct trace_options {
     void (*progress)(void *user, uint64_t samples_done, uint64_t samples_total);
     void *progress_user;
     /* sampling (docs/sampling.md) */
-    uint32_t sampler_spp;  /* stratified: samples per stratified set; 0 = spp, or batch when
+    uint32_t sampler_spp; /* stratified: samples per stratified set; 0 = spp, or batch when
                               adaptive.  Progressive renders pass their final spp here so that
                               the last image equals a one-call render. */
-    bool adaptive;         /* stop each pixel by trace_adaptive_stop; spp is then the maximum */
-    float tolerance;       /* adaptive: T, relative half-width of the 95% interval */
-    float adaptive_floor;  /* adaptive: luminance below which T applies absolutely */
-    uint32_t min_spp;      /* adaptive: samples before the first test */
-    uint32_t batch;        /* adaptive: samples between tests (>= 1) */
+    bool adaptive;        /* stop each pixel by trace_adaptive_stop; spp is then the maximum */
+    float tolerance;      /* adaptive: T, relative half-width of the 95% interval */
+    float adaptive_floor; /* adaptive: luminance below which T applies absolutely */
+    uint32_t min_spp;     /* adaptive: samples before the first test */
+    uint32_t batch;       /* adaptive: samples between tests (>= 1) */
     /* light transport (trace_radiance) */
     enum render_direct direct; /* direct-lighting estimator; 0 is RENDER_DIRECT_MIS */
     uint32_t light_samples;    /* light samples (shadow rays) per path vertex; 0 means 1 */
@@ -54,7 +55,7 @@ struct trace_options {
                                   later one; 0 means TRACE_RR_DEPTH_DEFAULT */
 };
 
-#define TRACE_RR_DEPTH_DEFAULT 2u  /* as PBRT 4e: the first two bounces are never cut short */
+#define TRACE_RR_DEPTH_DEFAULT 2u /* as PBRT 4e: the first two bounces are never cut short */
 
 #define TRACE_ADAPTIVE_TOLERANCE 0.05f /* default T */
 #define TRACE_ADAPTIVE_FLOOR 0.01f     /* default floor, luminance in the image's linear units */
@@ -79,6 +80,9 @@ struct trace_result {
     bool cancelled;
 };
 
+/* Adds the counts of r to sum; sum keeps its first dropped sample, else takes r's. */
+void trace_result_add(struct trace_result *sum, const struct trace_result *r);
+
 /* Renders each pixel from its current count film->pixels[i].n up to opt->spp samples (sample
  * indices sample_offset + n), tiles handed out to opt->n_threads threads.  With opt->adaptive a
  * pixel also stops when trace_adaptive_stop holds at a test point, i.e. when n + n_dropped is
@@ -88,44 +92,15 @@ struct trace_result {
 bool trace_render(const struct trace_scene *ts, const struct trace_options *opt, struct film *film,
                   struct trace_result *result, struct mcpt_error *err);
 
-/* Radiance estimate along the camera ray of (pixel px, py; sample sampler), Kajiya 1986 eq. 1
- * solved by path tracing with the estimator opt->direct (NEE and MIS by default), keeping the
- * bounces opt->split asks for.  n_rays is incremented by rays traced. */
-vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *opt,
-                    struct ray ray, struct sampler *sampler, uint64_t *n_rays);
+/* Radiance estimate along ray (a camera ray), Kajiya 1986 eq. 1 solved by path tracing with the
+ * estimator opt->direct (NEE and MIS by default), up to opt->max_depth bounces, keeping the
+ * bounces opt->split asks for.  sampler is the camera sample's, past its pixel and lens
+ * dimensions; the path reads its bounce dimensions from it (sample.h).  *n_rays is incremented
+ * by the rays traced. */
+vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *opt, struct ray ray,
+                    struct sampler *sampler, uint64_t *n_rays);
 
 /* The camera ray of film position (px, py) for this sample's lens dimensions. */
 struct ray trace_camera_ray(const struct trace_scene *ts, float px, float py, vec2 u_lens);
-
-/* ---- lights (exposed for tests: chi-square of light sampling, pmfs) ----
- * The light table holds the scene's lights (scene->lights, in order) followed by the sky when
- * it is not black; next-event estimation picks one by power with an alias table. */
-
-/* Number of entries in the light table; the sky, if present, is the last. */
-uint32_t trace_n_lights(const struct trace_scene *ts);
-/* Probability with which next-event estimation picks light light_idx. */
-float trace_light_pmf(const struct trace_scene *ts, uint32_t light_idx);
-
-/* A light sample seen from a reference point. */
-struct trace_light_sample {
-    vec3 wi;           /* unit direction from the reference point to the light point */
-    vec3 Le;           /* radiance arriving along -wi (intensity / dist^2 for point lights) */
-    float pdf_sa;      /* solid-angle density of wi; 0 for a delta (point) light */
-    bool is_delta;     /* point light: no MIS */
-    struct ray shadow; /* from the offset reference point to the offset light point */
-};
-
-/* Samples light light_idx from the surface point ref with uniforms u: area lights uniformly by
- * area (triangles, quads, and spheres seen from inside), spheres seen from outside by their
- * cone of directions, the sky cosine-weighted about n_sky (the shading normal turned to the side
- * being lit).  False when the sample carries no light (back of a one-sided emitter, degenerate
- * geometry). */
-bool trace_sample_light(const struct trace_scene *ts, uint32_t light_idx,
-                        const struct surface *ref, vec3 n_sky, vec2 u,
-                        struct trace_light_sample *ls);
-/* The solid-angle density with which trace_sample_light picks direction wi (unit) from ref;
- * 0 where light light_idx does not lie along wi, and for point lights. */
-float trace_light_pdf(const struct trace_scene *ts, uint32_t light_idx,
-                      const struct surface *ref, vec3 n_sky, vec3 wi);
 
 #endif

@@ -32,7 +32,7 @@ struct ray {
     float t_min; /* smallest accepted hit parameter */
     vec3 d;      /* direction */
     float t_max; /* largest accepted hit parameter; +INFINITY for an unbounded ray */
-}; /* 32 bytes */
+};               /* 32 bytes */
 
 /* Every failure is reported here; main prints "file:line:col: error: msg" and exits with the
  * status its kind names.  line == 0 means the error has no line (e.g. the file cannot be
@@ -51,8 +51,7 @@ struct mcpt_error {
 };
 
 static inline void mcpt_error_setv(struct mcpt_error *err, enum mcpt_error_kind kind,
-                                   const char *file, int line, int col, const char *fmt,
-                                   va_list ap)
+                                   const char *file, int line, int col, const char *fmt, va_list ap)
 {
     if (!err)
         return;
@@ -141,6 +140,11 @@ static inline void v3_basis(vec3 n, vec3 *t, vec3 *b)
 static inline vec3 v3_from_local(vec3 l, vec3 t, vec3 b, vec3 n)
 {
     return v3_add(v3_add(v3_scale(t, l.x), v3_scale(b, l.y)), v3_scale(n, l.z));
+}
+/* World-space vector to the local frame (t, b, n): the inverse of v3_from_local. */
+static inline vec3 v3_to_local(vec3 w, vec3 t, vec3 b, vec3 n)
+{
+    return (vec3){v3_dot(w, t), v3_dot(w, b), v3_dot(w, n)};
 }
 
 /* Floating-point error bounds, PBRT 4e, ch. 6, "Managing Rounding Error":

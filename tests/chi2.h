@@ -44,20 +44,20 @@ struct chi2_spec {
     chi2_sample_fn sample;
     chi2_pdf_fn pdf;
     void *ctx;
-    uint64_t n_samples; /* default 1000000 */
-    int n_rows;         /* cells along cos theta (or y); default 32 */
-    int n_cols;         /* cells along phi (or x); default 64 */
+    uint64_t n_samples;    /* default 1000000 */
+    int n_rows;            /* cells along cos theta (or y); default 32 */
+    int n_cols;            /* cells along phi (or x); default 64 */
     double x0, x1, y0, y1; /* CHI2_PLANE bounds */
-    uint64_t seed;      /* of the uniforms; default 1 */
+    uint64_t seed;         /* of the uniforms; default 1 */
 };
 
 struct chi2_result {
-    double statistic;     /* Pearson's sum (O - E)^2 / E over the pooled cells */
-    int dof;              /* cells after pooling, minus 1 */
-    double p_value;       /* Q(dof / 2, statistic / 2); 0 when a sample fell where pdf = 0 */
-    double pdf_integral;  /* integral of the pdf over the domain (1 for a complete sampler) */
-    uint64_t n_missed;    /* draws that returned false */
-    char msg[256];        /* a one-line summary for assertion messages */
+    double statistic;    /* Pearson's sum (O - E)^2 / E over the pooled cells */
+    int dof;             /* cells after pooling, minus 1 */
+    double p_value;      /* Q(dof / 2, statistic / 2); 0 when a sample fell where pdf = 0 */
+    double pdf_integral; /* integral of the pdf over the domain (1 for a complete sampler) */
+    uint64_t n_missed;   /* draws that returned false */
+    char msg[256];       /* a one-line summary for assertion messages */
 };
 
 /* The regularised upper incomplete gamma function Q(a, x) = Gamma(a, x) / Gamma(a): series for
@@ -166,17 +166,16 @@ static inline void chi2_counts(const double *expected, const uint64_t *observed,
     r->statistic = stat;
     r->dof = n_bins - 1;
     r->p_value = chi2_p_value(stat, r->dof);
-    snprintf(r->msg, sizeof r->msg, "chi2 = %.1f, dof = %d, p = %.3g", stat, r->dof,
-             r->p_value);
+    snprintf(r->msg, sizeof r->msg, "chi2 = %.1f, dof = %d, p = %.3g", stat, r->dof, r->p_value);
 }
 
 /* ---- integration of the pdf over a cell: nested adaptive Simpson ---- */
 
 struct chi2_integrand {
     const struct chi2_spec *spec;
-    double outer;    /* the fixed row coordinate while integrating along a row */
-    double x0, x1;   /* the cell's column interval */
-    double eps_row;  /* absolute tolerance of one integral along a row */
+    double outer;   /* the fixed row coordinate while integrating along a row */
+    double x0, x1;  /* the cell's column interval */
+    double eps_row; /* absolute tolerance of one integral along a row */
 };
 
 /* The pdf at row coordinate y (cos theta, or y) and column coordinate x (phi, or x); the
@@ -234,16 +233,31 @@ static inline double chi2_outer(struct chi2_integrand *it, double y)
 
 static inline struct chi2_spec chi2_sphere(chi2_sample_fn sample, chi2_pdf_fn pdf, void *ctx)
 {
-    return (struct chi2_spec){.domain = CHI2_SPHERE, .sample = sample, .pdf = pdf, .ctx = ctx,
-                              .n_samples = 1000000, .n_rows = 32, .n_cols = 64, .seed = 1};
+    return (struct chi2_spec){.domain = CHI2_SPHERE,
+                              .sample = sample,
+                              .pdf = pdf,
+                              .ctx = ctx,
+                              .n_samples = 1000000,
+                              .n_rows = 32,
+                              .n_cols = 64,
+                              .seed = 1};
 }
 
 static inline struct chi2_spec chi2_plane(chi2_sample_fn sample, chi2_pdf_fn pdf, void *ctx,
                                           double x0, double x1, double y0, double y1)
 {
-    return (struct chi2_spec){.domain = CHI2_PLANE, .sample = sample, .pdf = pdf, .ctx = ctx,
-                              .n_samples = 1000000, .n_rows = 32, .n_cols = 32, .x0 = x0,
-                              .x1 = x1, .y0 = y0, .y1 = y1, .seed = 1};
+    return (struct chi2_spec){.domain = CHI2_PLANE,
+                              .sample = sample,
+                              .pdf = pdf,
+                              .ctx = ctx,
+                              .n_samples = 1000000,
+                              .n_rows = 32,
+                              .n_cols = 32,
+                              .x0 = x0,
+                              .x1 = x1,
+                              .y0 = y0,
+                              .y1 = y1,
+                              .seed = 1};
 }
 
 /* SplitMix64 (Steele et al. 2014): the test's own uniforms, independent of sample.c. */
@@ -289,8 +303,10 @@ static inline void chi2_run(const struct chi2_spec *spec, struct chi2_result *r)
         if (sphere) {
             double len = sqrt((double)w.x * w.x + (double)w.y * w.y + (double)w.z * w.z);
             if (!(fabs(len - 1.0) < 1e-3)) {
-                snprintf(r->msg, sizeof r->msg, "chi2: sample %llu is not a unit vector "
-                         "(%g, %g, %g)", (unsigned long long)i, w.x, w.y, w.z);
+                snprintf(r->msg, sizeof r->msg,
+                         "chi2: sample %llu is not a unit vector "
+                         "(%g, %g, %g)",
+                         (unsigned long long)i, w.x, w.y, w.z);
                 goto done;
             }
             y = fmin(1.0, fmax(-1.0, w.z / len));

@@ -68,8 +68,8 @@ Test(cli, bad_scene_writes_nothing, .init = setup, .fini = teardown)
     const char *args[] = {"tests/data/cli/bad-statement.txt", "-o", out, NULL};
     cr_assert_eq(run_mcpt(args, err, sizeof err), 2);
     cr_assert_eq(count_lines(err), 1, "%s", err);
-    cr_assert(strncmp(err, "tests/data/cli/bad-statement.txt:2:1: error: expected ", 54) == 0,
-              "%s", err);
+    cr_assert(strncmp(err, "tests/data/cli/bad-statement.txt:2:1: error: expected ", 54) == 0, "%s",
+              err);
     char buf[16] = {0};
     f = fopen(out, "r");
     cr_assert(fread(buf, 1, sizeof buf - 1, f) == 8);

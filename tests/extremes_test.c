@@ -30,13 +30,15 @@ static void render_file(const char *path, uint64_t seed, struct film *film,
 {
     struct scene scene;
     struct mcpt_error err;
-    cr_assert(scene_load(path, &scene, &err), "%s:%d:%d: %s", err.file, err.line, err.col,
-              err.msg);
+    cr_assert(scene_load(path, &scene, &err), "%s:%d:%d: %s", err.file, err.line, err.col, err.msg);
     struct trace_scene *ts = trace_prepare(&scene, 2, &err);
     cr_assert_not_null(ts, "%s: %s", path, err.msg);
     cr_assert(film_init(film, scene.width, scene.height, &err));
-    struct trace_options opt = {.spp = scene.render.spp, .max_depth = scene.render.max_depth,
-                                .seed = seed, .sampler = scene.render.sampler, .n_threads = 2};
+    struct trace_options opt = {.spp = scene.render.spp,
+                                .max_depth = scene.render.max_depth,
+                                .seed = seed,
+                                .sampler = scene.render.sampler,
+                                .n_threads = 2};
     cr_assert(trace_render(ts, &opt, film, res, &err), "%s", err.msg);
     trace_free(ts);
     scene_free(&scene);
@@ -77,9 +79,10 @@ static void assert_same_image(const struct film *a, const struct film *b, const 
             struct estimate eb = region(b, x0, y0, x1, y1, c);
             double diff = fabs(ea.mean - eb.mean);
             double tol = N_SE * sqrt(ea.var + eb.var) + 1e-6 * fmax(fabs(ea.mean), fabs(eb.mean));
-            cr_assert(diff <= tol, "%s: quadrant %d channel %d: %.6g vs %.6g, |diff| %.3g > %.3g "
-                                   "(%.1f SE)", what, q, c, ea.mean, eb.mean, diff, tol,
-                      diff / sqrt(ea.var + eb.var));
+            cr_assert(diff <= tol,
+                      "%s: quadrant %d channel %d: %.6g vs %.6g, |diff| %.3g > %.3g "
+                      "(%.1f SE)",
+                      what, q, c, ea.mean, eb.mean, diff, tol, diff / sqrt(ea.var + eb.var));
         }
     }
 }
@@ -121,8 +124,7 @@ static void assert_black(const char *path)
     for (size_t i = 0; i < (size_t)f.width * (size_t)f.height; i++)
         for (int c = 0; c < 3; c++)
             cr_assert(f.pixels[i].sum[c] == 0.0, "%s: pixel %zu,%zu channel %d sees %g", path,
-                      i % (size_t)f.width, i / (size_t)f.width, c,
-                      film_mean(&f.pixels[i], c));
+                      i % (size_t)f.width, i / (size_t)f.width, c, film_mean(&f.pixels[i], c));
     film_free(&f);
 }
 
@@ -152,10 +154,7 @@ Test(extremes, sliver_floor_renders_as_two_triangles, .timeout = 120)
 }
 
 /* A black sliver floor under a white sky seen from above: no ray leaks between slivers. */
-Test(extremes, sliver_floor_does_not_leak)
-{
-    assert_black(DIR "slivers-black.txt");
-}
+Test(extremes, sliver_floor_does_not_leak) { assert_black(DIR "slivers-black.txt"); }
 
 /* Triangles of area 1e-12 down to exactly 0, some emissive, change nothing and make no NaN. */
 Test(extremes, tiny_and_zero_area_triangles, .timeout = 120)
@@ -172,10 +171,7 @@ Test(extremes, duplicated_and_coplanar_faces, .timeout = 120)
 }
 
 /* A camera inside a closed black mesh under a white sky sees exactly 0 everywhere. */
-Test(extremes, camera_inside_closed_mesh_sees_no_sky)
-{
-    assert_black(DIR "inside-mesh.txt");
-}
+Test(extremes, camera_inside_closed_mesh_sees_no_sky) { assert_black(DIR "inside-mesh.txt"); }
 
 /* Rays aimed exactly at the vertices and at points along every edge of a mesh hit it: from the
  * centre of the closed icosphere (every edge shared by two faces), and from above the sliver fan
@@ -207,12 +203,15 @@ Test(extremes, rays_through_vertices_and_edges_hit)
                     vec3 p = v3_add(a, v3_scale(v3_sub(b, a), f)); /* s = 0: the vertex */
                     if (k == 1 && (fabsf(p.x) == 1.0f || fabsf(p.z) == 1.0f))
                         continue; /* on the outline */
-                    struct ray r = {.o = origins[k], .t_min = 0.0f, .d = v3_sub(p, origins[k]),
+                    struct ray r = {.o = origins[k],
+                                    .t_min = 0.0f,
+                                    .d = v3_sub(p, origins[k]),
                                     .t_max = INFINITY};
                     struct bvh_hit hit;
                     cr_assert(bvh_intersect(bvh, &r, &hit),
                               "%s: ray through (%.9g, %.9g, %.9g) (face %u, edge %d, %d/10) "
-                              "leaks", paths[k], p.x, p.y, p.z, i, j, s);
+                              "leaks",
+                              paths[k], p.x, p.y, p.z, i, j, s);
                     cr_assert(fabsf(hit.t - 1.0f) < 1e-3f, "t = %g", hit.t);
                     n_rays++;
                 }
@@ -287,8 +286,8 @@ Test(extremes, albedo_0_reflects_nothing)
             double n_b = (p->sum[c] - a * n_a) / b;
             cr_assert(fabs(n_a - round(n_a)) < 1e-6 && fabs(n_b - round(n_b)) < 1e-6 &&
                           n_a > -0.5 && n_b > -0.5 && n_a + n_b < p->n + 0.5,
-                      "pixel %zu channel %d: sum %.17g, sum_sq %.17g is not made of 0, 0.5, 5",
-                      i, c, p->sum[c], p->sum_sq[c]);
+                      "pixel %zu channel %d: sum %.17g, sum_sq %.17g is not made of 0, 0.5, 5", i,
+                      c, p->sum[c], p->sum_sq[c]);
             n_sky += c == 0 && n_a > 0.5;
             n_lamp += c == 0 && n_b > 0.5;
         }
@@ -377,8 +376,11 @@ Test(extremes, million_samples_match_long_double_sum, .timeout = 180)
     cr_assert(scene_load(DIR "precision.txt", &scene, &err), "%s", err.msg);
     struct trace_scene *ts = trace_prepare(&scene, 1, &err);
     cr_assert_not_null(ts);
-    struct trace_options opt = {.spp = 1, .max_depth = scene.render.max_depth, .seed = 3,
-                                .sampler = SAMPLER_INDEPENDENT, .n_threads = 1};
+    struct trace_options opt = {.spp = 1,
+                                .max_depth = scene.render.max_depth,
+                                .seed = 3,
+                                .sampler = SAMPLER_INDEPENDENT,
+                                .n_threads = 1};
     const uint32_t n = 1000000;
     float *xs = malloc(sizeof(float) * n);
     cr_assert_not_null(xs);
@@ -426,8 +428,11 @@ Test(extremes, split_accumulation_is_bit_identical, .timeout = 120)
     cr_assert_not_null(ts);
     struct film one, split;
     cr_assert(film_init(&one, 1, 1, &err) && film_init(&split, 1, 1, &err));
-    struct trace_options opt = {.spp = 20000, .max_depth = scene.render.max_depth, .seed = 5,
-                                .sampler = scene.render.sampler, .n_threads = 1};
+    struct trace_options opt = {.spp = 20000,
+                                .max_depth = scene.render.max_depth,
+                                .seed = 5,
+                                .sampler = scene.render.sampler,
+                                .n_threads = 1};
     struct trace_result res;
     cr_assert(trace_render(ts, &opt, &one, &res, &err));
     for (uint32_t spp = 1000; spp <= 20000; spp += 1000) {
@@ -469,8 +474,7 @@ static uint64_t exr_dropped(const char *path, float spp)
     uint64_t dropped = 0;
     for (size_t i = 0; i < (size_t)img.width * (size_t)img.height; i++) {
         for (int c = 0; c < img.n_channels; c++)
-            cr_assert(isfinite(img.data[c][i]), "%s: channel %s pixel %zu", path,
-                      img.names[c], i);
+            cr_assert(isfinite(img.data[c][i]), "%s: channel %s pixel %zu", path, img.names[c], i);
         dropped += (uint64_t)(spp - img.data[s][i]);
     }
     image_free(&img);
@@ -490,8 +494,11 @@ Test(nonfinite, overflow_dropped_counted_reported)
     uint64_t dropped = exr_dropped(out, 8.0f);
     unsigned long long n_reported = 0;
     unsigned x, y, s;
-    cr_assert_eq(sscanf(err, "mcpt: warning: %llu NaN or infinite samples dropped (first at "
-                             "pixel %u,%u sample %u)", &n_reported, &x, &y, &s), 4, "%s", err);
+    cr_assert_eq(sscanf(err,
+                        "mcpt: warning: %llu NaN or infinite samples dropped (first at "
+                        "pixel %u,%u sample %u)",
+                        &n_reported, &x, &y, &s),
+                 4, "%s", err);
     cr_assert_gt(n_reported, 0);
     cr_assert_eq(n_reported, dropped);
     cr_assert(x < 16 && y < 12 && s < 8);
@@ -541,8 +548,11 @@ Test(nonfinite, nan_material_dropped_and_counted)
     cr_assert_not_null(ts);
     struct film f;
     cr_assert(film_init(&f, scene.width, scene.height, &err));
-    struct trace_options opt = {.spp = 8, .max_depth = 3, .seed = 1,
-                                .sampler = scene.render.sampler, .n_threads = 2};
+    struct trace_options opt = {.spp = 8,
+                                .max_depth = 3,
+                                .seed = 1,
+                                .sampler = scene.render.sampler,
+                                .n_threads = 2};
     struct trace_result r;
     cr_assert(trace_render(ts, &opt, &f, &r, &err));
     cr_assert_gt(r.n_nonfinite, 0);

@@ -75,7 +75,8 @@ Test(material, chi2_diffuse_uniform)
  * misses (reflections below the surface) must match 1 - integral of mat_pdf. */
 Test(material, chi2_conductor)
 {
-    struct material m = {.kind = MAT_CONDUCTOR, .specular = v3(0.9f, 0.6f, 0.3f),
+    struct material m = {.kind = MAT_CONDUCTOR,
+                         .specular = v3(0.9f, 0.6f, 0.3f),
                          .roughness = 0.6f};
     check_bsdf_chi2(m, dir(0.3f, 0.4f), "conductor r = 0.6, 17 deg");
     m.roughness = 0.4f;
@@ -85,8 +86,10 @@ Test(material, chi2_conductor)
 /* The plastic's mixture: coat (VNDF) or base (cosine), chosen by the coat's albedo share. */
 Test(material, chi2_plastic)
 {
-    struct material m = {.kind = MAT_PLASTIC, .albedo = v3(0.8f, 0.3f, 0.2f),
-                         .specular = v3(0.04f, 0.04f, 0.04f), .roughness = 0.5f};
+    struct material m = {.kind = MAT_PLASTIC,
+                         .albedo = v3(0.8f, 0.3f, 0.2f),
+                         .specular = v3(0.04f, 0.04f, 0.04f),
+                         .roughness = 0.5f};
     check_bsdf_chi2(m, dir(1.1f, 0.7f), "plastic r = 0.5");
     m.specular = v3(0.5f, 0.5f, 0.5f);
     m.roughness = 0.35f;
@@ -163,7 +166,9 @@ Test(material, reciprocity)
         {.kind = MAT_DIFFUSE, .albedo = v3(0.5f, 0.25f, 1.0f)},
         {.kind = MAT_DIFFUSE_UNIFORM, .albedo = v3(0.5f, 0.25f, 1.0f)},
         {.kind = MAT_CONDUCTOR, .specular = v3(0.9f, 0.5f, 0.1f), .roughness = 0.4f},
-        {.kind = MAT_PLASTIC, .albedo = v3(0.7f, 0.2f, 0.9f), .specular = v3(0.04f, 0.2f, 0.5f),
+        {.kind = MAT_PLASTIC,
+         .albedo = v3(0.7f, 0.2f, 0.9f),
+         .specular = v3(0.04f, 0.2f, 0.5f),
          .roughness = 0.3f},
     };
     struct pcg32 rng;
@@ -223,8 +228,8 @@ Test(material, ggx_D_normalised)
 
 /* Mean of f |cos| / pdf over n BSDF samples (a furnace of radiance 1 seen from wo), with its
  * standard error; channel c. */
-static void albedo(const struct material *m, vec3 wo, int n, struct pcg32 *rng, int c,
-                   double *mean, double *se)
+static void albedo(const struct material *m, vec3 wo, int n, struct pcg32 *rng, int c, double *mean,
+                   double *se)
 {
     double s = 0.0, s2 = 0.0;
     for (int i = 0; i < n; i++) {
@@ -259,22 +264,24 @@ Test(material, furnace_albedo_at_most_one)
         albedo(&d, wo, 100000, &rng, 0, &mean, &se);
         cr_assert(fabs(mean - 1.0) < 4.0 * se, "uniform diffuse: %f +- %f", mean, se);
         for (int r = 0; r < 5; r++) {
-            struct material c = {.kind = MAT_CONDUCTOR, .specular = v3(1, 1, 1),
+            struct material c = {.kind = MAT_CONDUCTOR,
+                                 .specular = v3(1, 1, 1),
                                  .roughness = rough[r]};
             albedo(&c, wo, 20000, &rng, 0, &mean, &se);
-            cr_assert(mean <= 1.0 + 4.0 * se + 1e-6, "conductor r %f theta %f: %f +- %f",
-                      rough[r], thetas[t], mean, se);
+            cr_assert(mean <= 1.0 + 4.0 * se + 1e-6, "conductor r %f theta %f: %f +- %f", rough[r],
+                      thetas[t], mean, se);
             for (int f = 0; f < 3; f++) {
-                struct material p = {.kind = MAT_PLASTIC, .albedo = v3(1, 1, 1),
-                                     .specular = v3_splat(F0s[f]), .roughness = rough[r]};
+                struct material p = {.kind = MAT_PLASTIC,
+                                     .albedo = v3(1, 1, 1),
+                                     .specular = v3_splat(F0s[f]),
+                                     .roughness = rough[r]};
                 albedo(&p, wo, 20000, &rng, 0, &mean, &se);
-                cr_assert(mean <= 1.0 + 4.0 * se + 1e-6,
-                          "plastic r %f F0 %f theta %f: %f +- %f", rough[r], F0s[f], thetas[t],
-                          mean, se);
+                cr_assert(mean <= 1.0 + 4.0 * se + 1e-6, "plastic r %f F0 %f theta %f: %f +- %f",
+                          rough[r], F0s[f], thetas[t], mean, se);
                 /* little is lost: only the coat's missing multiple scattering and the table's
                  * margin, so a white plastic stays near 1 */
-                cr_assert(mean > 0.9 - 4.0 * se, "plastic r %f F0 %f theta %f: only %f",
-                          rough[r], F0s[f], thetas[t], mean);
+                cr_assert(mean > 0.9 - 4.0 * se, "plastic r %f F0 %f theta %f: only %f", rough[r],
+                          F0s[f], thetas[t], mean);
             }
         }
     }
@@ -292,7 +299,8 @@ Test(material, conductor_albedo_decreases_with_roughness)
     for (int t = 0; t < 3; t++) {
         double prev = 0.0, prev_se = 0.0;
         for (int r = 0; r < 5; r++) {
-            struct material c = {.kind = MAT_CONDUCTOR, .specular = v3(1, 1, 1),
+            struct material c = {.kind = MAT_CONDUCTOR,
+                                 .specular = v3(1, 1, 1),
                                  .roughness = rough[r]};
             double mean, se;
             albedo(&c, dir(thetas[t], 0.0f), 40000, &rng, 0, &mean, &se);
@@ -338,14 +346,13 @@ Test(material, coat_table_bounds_true_albedo)
         double se1 = sqrt(fmax(0.0, s1q / n - e1 * e1) / n);
         double se5 = sqrt(fmax(0.0, s5q / n - e5 * e5) / n);
         float t1 = mat_ggx_albedo(mu, r, 1.0f), t5 = mat_ggx_albedo(mu, r, 0.0f);
-        cr_assert(t1 >= e1 - 4.0 * se1 && t1 <= 1.0f, "mu %f r %f: E1 table %f < %f +- %f", mu,
-                  r, t1, e1, se1);
-        cr_assert(t5 >= e5 - 4.0 * se5, "mu %f r %f: E5 table %f < %f +- %f", mu, r, t5, e5,
-                  se5);
+        cr_assert(t1 >= e1 - 4.0 * se1 && t1 <= 1.0f, "mu %f r %f: E1 table %f < %f +- %f", mu, r,
+                  t1, e1, se1);
+        cr_assert(t5 >= e5 - 4.0 * se5, "mu %f r %f: E5 table %f < %f +- %f", mu, r, t5, e5, se5);
         /* and tight: the margin stays small away from grazing angles */
         if (mu > 0.2f)
-            cr_assert(t1 - e1 < 0.01 + 4.0 * se1, "mu %f r %f: E1 table %f far above %f", mu, r,
-                      t1, e1);
+            cr_assert(t1 - e1 < 0.01 + 4.0 * se1, "mu %f r %f: E1 table %f far above %f", mu, r, t1,
+                      e1);
     }
 }
 
@@ -425,8 +432,10 @@ Test(material, mirror)
  * not purely specular; the base's pdf excludes the coat's share. */
 Test(material, smooth_plastic_lobes)
 {
-    struct material m = {.kind = MAT_PLASTIC, .albedo = v3(0.5f, 0.5f, 0.5f),
-                         .specular = v3(0.04f, 0.04f, 0.04f), .roughness = 0.0f};
+    struct material m = {.kind = MAT_PLASTIC,
+                         .albedo = v3(0.5f, 0.5f, 0.5f),
+                         .specular = v3(0.04f, 0.04f, 0.04f),
+                         .roughness = 0.0f};
     cr_assert(mat_has_delta(&m) && !mat_is_specular(&m));
     vec3 wo = dir(0.3f, 0.0f);
     struct mat_sample s;
@@ -455,8 +464,10 @@ Test(material, emission_sides)
  * boundary, whatever the rounding of y); uv cells from (0, 0); no texture gives the albedo. */
 Test(material, checker_texture)
 {
-    struct material m = {.kind = MAT_DIFFUSE, .albedo = v3(1, 1, 1),
-                         .checker_albedo = v3(0, 0, 0), .checker_scale = 0.5f};
+    struct material m = {.kind = MAT_DIFFUSE,
+                         .albedo = v3(1, 1, 1),
+                         .checker_albedo = v3(0, 0, 0),
+                         .checker_scale = 0.5f};
     vec2 uv = {0, 0};
     cr_assert_eq(mat_albedo_at(&m, v3(0.1f, 1e-7f, 0.1f), uv).x, 1.0f);
     cr_assert_eq(mat_albedo_at(&m, v3(0.1f, -1e-7f, 0.1f), uv).x, 1.0f);

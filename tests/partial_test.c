@@ -87,8 +87,8 @@ Test(partial, parse_range)
     cr_assert(r.begin == 0 && r.end == 1);
     cr_assert(partial_parse_range("4294967294:4294967295", &r));
     cr_assert(r.begin == 4294967294u && r.end == 4294967295u);
-    const char *bad[] = {"", "5", "5:", ":5", "5:5", "6:5", "-1:3", "1:2x", " 1:2", "1:+2",
-                         "0:4294967296", "1:2:3", "1,2"};
+    const char *bad[] = {"",     "5",    "5:",   ":5",           "5:5",   "6:5", "-1:3",
+                         "1:2x", " 1:2", "1:+2", "0:4294967296", "1:2:3", "1,2"};
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++)
         cr_assert_not(partial_parse_range(bad[i], &r), "accepted '%s'", bad[i]);
 }
@@ -117,15 +117,14 @@ Test(partial, exr_round_trip_keeps_48_bits, .init = setup, .fini = teardown)
     double worst = 0.0;
     for (int i = 0; i < 13 * 7; i++) {
         const struct film_pixel *a = &film.pixels[i], *b = &back.pixels[i];
-        double x[7] = {a->sum[0], a->sum[1], a->sum[2], a->sum_sq[0], a->sum_sq[1],
-                       a->sum_sq[2], a->sum_lum_sq};
-        double y[7] = {b->sum[0], b->sum[1], b->sum[2], b->sum_sq[0], b->sum_sq[1],
-                       b->sum_sq[2], b->sum_lum_sq};
+        double x[7] = {a->sum[0],    a->sum[1],    a->sum[2],    a->sum_sq[0],
+                       a->sum_sq[1], a->sum_sq[2], a->sum_lum_sq};
+        double y[7] = {b->sum[0],    b->sum[1],    b->sum[2],    b->sum_sq[0],
+                       b->sum_sq[1], b->sum_sq[2], b->sum_lum_sq};
         for (int k = 0; k < 7; k++) {
             double rel = fabs(y[k] - x[k]) / x[k];
             worst = fmax(worst, rel);
-            cr_assert_leq(rel, 0x1p-48, "pixel %d value %d: %.17g back as %.17g", i, k, x[k],
-                          y[k]);
+            cr_assert_leq(rel, 0x1p-48, "pixel %d value %d: %.17g back as %.17g", i, k, x[k], y[k]);
         }
         cr_assert_eq(b->n, a->n);
         cr_assert_eq(b->n_dropped, a->n_dropped);
@@ -276,10 +275,7 @@ static int shell(const char *fmt, ...)
     return WIFEXITED(status) ? WEXITSTATUS(status) : 128;
 }
 
-static const char *mcpt_bin(void)
-{
-    return getenv("MCPT") ? getenv("MCPT") : "./mcpt";
-}
+static const char *mcpt_bin(void) { return getenv("MCPT") ? getenv("MCPT") : "./mcpt"; }
 
 static float channel(const struct image *img, const char *name, int i)
 {
@@ -329,9 +325,10 @@ static int assert_within_rounding(const struct image *merged, const struct image
 
 /* GNU parallel runs 4 mcpt processes over the uneven disjoint ranges 0:10, 10:27, 27:50 and
  * 50:64 of a 64-spp render of the glass Cornell box (refraction, every kind of path), mcpt
- * merge joins them, and the result equals one process rendering all 64 samples within the
- * float-rounding bound above; for the Sobol' sampler and for the stratified one (whose strata
- * span the whole render, so a range must use the whole render's sets). */
+ * merge --partial joins them (keeping the sums the bound below reads), and the result equals
+ * one process rendering all 64 samples within the float-rounding bound above; for the Sobol'
+ * sampler and for the stratified one (whose strata span the whole render, so a range must use
+ * the whole render's sets). */
 Test(distributed, gnu_parallel_four_ranges_equal_one_process, .init = setup, .fini = teardown,
      .timeout = 120)
 {
@@ -346,10 +343,12 @@ Test(distributed, gnu_parallel_four_ranges_equal_one_process, .init = setup, .fi
                            "--sample-range {} -o %s/part-{#}.exr ::: 0:10 10:27 27:50 50:64",
                            mcpt_bin(), common, samplers[s], g_dir),
                      0, "parallel or one of the partial renders failed");
-        cr_assert_eq(shell("%s merge --quiet %s/part-*.exr -o %s/merged.exr", mcpt_bin(), g_dir,
-                           g_dir), 0);
+        cr_assert_eq(shell("%s merge --quiet --partial %s/part-*.exr -o %s/merged.exr", mcpt_bin(),
+                           g_dir, g_dir),
+                     0);
         cr_assert_eq(shell("%s %s --sampler %s -o %s/full.exr", mcpt_bin(), common, samplers[s],
-                           g_dir), 0);
+                           g_dir),
+                     0);
         char path[300];
         struct image merged, full;
         struct mcpt_error err;
@@ -373,8 +372,7 @@ Test(distributed, whole_range_is_the_plain_render, .init = setup, .fini = teardo
     const char *common = "scenes/cornell-box.txt --width 32 --height 24 --spp 16 --threads 2 "
                          "--quiet --sampler stratified";
     cr_assert_eq(shell("%s %s -o %s/plain.exr", mcpt_bin(), common, g_dir), 0);
-    cr_assert_eq(shell("%s %s --sample-range 0:16 -o %s/range.exr", mcpt_bin(), common, g_dir),
-                 0);
+    cr_assert_eq(shell("%s %s --sample-range 0:16 -o %s/range.exr", mcpt_bin(), common, g_dir), 0);
     char path[300];
     struct image a, b;
     struct mcpt_error err;
@@ -399,23 +397,30 @@ Test(distributed, bad_usage, .init = setup, .fini = teardown)
     cr_assert_eq(shell("%s tests/data/cli/tiny.txt --quiet -o %s", mcpt_bin(), plain), 0);
     char cases[6][2][700];
     snprintf(cases[0][0], 700, "scenes/cornell-box.txt --sample-range 5:5 -o %s", out);
-    snprintf(cases[0][1], 700, "mcpt: error: expected --sample-range A:B with integers 0 <= A < "
+    snprintf(cases[0][1], 700,
+             "mcpt: error: expected --sample-range A:B with integers 0 <= A < "
              "B <= 4294967295, got '5:5' (see mcpt --help)");
     snprintf(cases[1][0], 700, "scenes/cornell-box.txt --spp 64 --sample-range 32:65 -o %s", out);
-    snprintf(cases[1][1], 700, "mcpt: error: expected --sample-range within the render's 64 "
+    snprintf(cases[1][1], 700,
+             "mcpt: error: expected --sample-range within the render's 64 "
              "samples per pixel (--spp sets them), got 32:65 (see mcpt --help)");
     snprintf(cases[2][0], 700, "scenes/cornell-box.txt --adaptive --sample-range 0:8 -o %s", out);
-    snprintf(cases[2][1], 700, "mcpt: error: expected no adaptive sampling with --sample-range "
+    snprintf(cases[2][1], 700,
+             "mcpt: error: expected no adaptive sampling with --sample-range "
              "(where a pixel stops depends on all its samples), got it (see mcpt --help)");
     snprintf(cases[3][0], 700, "merge %s", plain);
-    snprintf(cases[3][1], 700, "mcpt: error: expected -o OUT.exr for mcpt merge, got none (see "
+    snprintf(cases[3][1], 700,
+             "mcpt: error: expected -o OUT.exr for mcpt merge, got none (see "
              "mcpt --help)");
     snprintf(cases[4][0], 700, "merge -o %s", out);
-    snprintf(cases[4][1], 700, "mcpt: error: expected partial renders to merge, got none (see "
+    snprintf(cases[4][1], 700,
+             "mcpt: error: expected partial renders to merge, got none (see "
              "mcpt --help)");
     snprintf(cases[5][0], 700, "merge -o %s %s", out, plain);
-    snprintf(cases[5][1], 700, "%s: error: expected a partial render (mcpt --sample-range) with "
-             "channel 'sum.R', got an image without it", plain);
+    snprintf(cases[5][1], 700,
+             "%s: error: expected a partial render (mcpt --sample-range) with "
+             "channel 'sum.R', got an image without it",
+             plain);
     char err_path[300];
     scratch(err_path, sizeof err_path, "stderr.txt");
     for (int i = 0; i < 6; i++) {

@@ -1,6 +1,6 @@
-/* tests/resume_test.c - interrupt and resume: film.c's checkpoints (film_save_checkpoint,
- * film_load_checkpoint) and main.c's SIGINT/SIGTERM handling and --resume, run through the
- * binary $MCPT (default ./mcpt).  The property checked is the one the design rests on: each
+/* tests/resume_test.c - interrupt and resume: main.c's SIGINT/SIGTERM handling and --resume,
+ * run through the binary $MCPT (default ./mcpt); the checkpoint file itself is tested by
+ * tests/checkpoint_test.c.  The property checked is the one the design rests on: each
  * pixel's samples are added in sample-index order from its own count (film.h), so a render
  * interrupted any number of times and resumed is bit-identical to an uninterrupted one. */
 #include <criterion/criterion.h>
@@ -8,6 +8,7 @@
 #include <signal.h>
 #include <time.h>
 
+#include "checkpoint.h"
 #include "film.h"
 #include "image.h"
 #include "scene.h"
@@ -83,7 +84,7 @@ static void assert_partial(const char *exr_path, float spp)
     image_free(&img);
 }
 
-/* FNV-1a 64 of a file, as main.c records it (docs/reliability.md). */
+/* FNV-1a 64 of a file, as checkpoint_hash_file records it (docs/reliability.md). */
 static uint64_t fnv1a_file(const char *path)
 {
     FILE *f = fopen(path, "rb");
@@ -93,75 +94,6 @@ static uint64_t fnv1a_file(const char *path)
         h = (h ^ (uint64_t)ch) * 0x100000001b3ull;
     fclose(f);
     return h;
-}
-
-/* ---- the checkpoint file ---- */
-
-/* Save then load returns the same pixel records and settings; one flipped byte, a truncation
- * or a count above spp is refused with a message naming the file. */
-Test(checkpoint, round_trip_and_damage, .init = setup, .fini = teardown)
-{
-    struct film film, back;
-    struct mcpt_error err;
-    cr_assert(film_init(&film, 5, 3, &err));
-    for (int i = 0; i < 15; i++) {
-        struct film_pixel *p = &film.pixels[i];
-        for (int c = 0; c < 3; c++) {
-            p->sum[c] = 0.1 * i + c;
-            p->sum_sq[c] = 1.0 / (i + 1);
-        }
-        p->sum_lum_sq = i;
-        p->n = (uint32_t)i;
-        p->n_dropped = i == 7;
-    }
-    struct film_checkpoint_info info = {.scene_hash = 42, .seed = 7, .spp = 16, .max_depth = 3,
-                                        .sampler = 0, .sample_offset = 5, .args_bytes = 9};
-    snprintf(info.scene_path, sizeof info.scene_path, "a/scene.txt");
-    memcpy(info.args, "--spp=16", 9);
-    char path[300];
-    snprintf(path, sizeof path, "%s/x.ckpt", tmpdir);
-    cr_assert(film_save_checkpoint(path, &film, &info, &err), "%s", err.msg);
-    struct film_checkpoint_info got;
-    cr_assert(film_load_checkpoint(path, &back, &got, &err), "%s", err.msg);
-    cr_assert(back.width == 5 && back.height == 3);
-    cr_assert(memcmp(back.pixels, film.pixels, 15 * sizeof(struct film_pixel)) == 0);
-    cr_assert(got.scene_hash == 42 && got.seed == 7 && got.spp == 16 && got.max_depth == 3 &&
-              got.sample_offset == 5 && got.args_bytes == 9);
-    cr_assert_str_eq(got.scene_path, "a/scene.txt");
-    cr_assert_str_eq(got.args, "--spp=16");
-    film_free(&back);
-
-    /* flip one bit of a pixel record: the checksum catches it */
-    FILE *f = fopen(path, "r+b");
-    cr_assert_not_null(f);
-    fseek(f, -100, SEEK_END);
-    int ch = fgetc(f);
-    fseek(f, -100, SEEK_END);
-    fputc(ch ^ 1, f);
-    fclose(f);
-    cr_assert_not(film_load_checkpoint(path, &back, &got, &err));
-    cr_assert(strncmp(err.msg, "expected checksum", 17) == 0, "%s", err.msg);
-    cr_assert_str_eq(err.file, path);
-    cr_assert_null(back.pixels);
-
-    /* a truncated file names the length it expected */
-    cr_assert(film_save_checkpoint(path, &film, &info, &err));
-    cr_assert_eq(truncate(path, 200), 0);
-    cr_assert_not(film_load_checkpoint(path, &back, &got, &err));
-    cr_assert(strstr(err.msg, "bytes for a 5x3 film, got 200"), "%s", err.msg);
-
-    /* a pixel beyond the spp target cannot come from a real run */
-    film.pixels[3].n = 17;
-    cr_assert(film_save_checkpoint(path, &film, &info, &err));
-    cr_assert_not(film_load_checkpoint(path, &back, &got, &err));
-    cr_assert(strstr(err.msg, "at most 16 samples in a pixel"), "%s", err.msg);
-
-    /* writing into a missing folder fails cleanly and leaves nothing */
-    char bad[320];
-    snprintf(bad, sizeof bad, "%s/no/such/dir.ckpt", tmpdir);
-    cr_assert_not(film_save_checkpoint(bad, &film, &info, &err));
-    cr_assert(strncmp(err.msg, "cannot write: ", 14) == 0, "%s", err.msg);
-    film_free(&film);
 }
 
 /* Renders SCENE in-process to spp_done samples per pixel and saves a checkpoint that targets
@@ -175,18 +107,23 @@ static void make_checkpoint(const char *path, uint32_t spp_done, uint32_t spp_ta
     cr_assert_not_null(ts, "%s", err.msg);
     struct film film;
     cr_assert(film_init(&film, scene.width, scene.height, &err));
-    struct trace_options opt = {.spp = spp_done, .max_depth = scene.render.max_depth,
-                                .seed = 0, .sampler = SAMPLER_INDEPENDENT, .n_threads = 2};
+    struct trace_options opt = {.spp = spp_done,
+                                .max_depth = scene.render.max_depth,
+                                .seed = 0,
+                                .sampler = SAMPLER_INDEPENDENT,
+                                .n_threads = 2};
     struct trace_result res;
     cr_assert(trace_render(ts, &opt, &film, &res, &err));
-    struct film_checkpoint_info info = {.scene_hash = fnv1a_file(SCENE), .seed = 0,
-                                        .spp = spp_target, .max_depth = opt.max_depth,
-                                        .sampler = SAMPLER_INDEPENDENT};
+    struct checkpoint_info info = {.scene_hash = fnv1a_file(SCENE),
+                                   .seed = 0,
+                                   .spp = spp_target,
+                                   .max_depth = opt.max_depth,
+                                   .sampler = SAMPLER_INDEPENDENT};
     snprintf(info.scene_path, sizeof info.scene_path, "%s", SCENE);
     int n = snprintf(info.args, sizeof info.args, "--spp=%u", spp_target) + 1;
     n += snprintf(info.args + n, sizeof info.args - (size_t)n, "--sampler=independent") + 1;
     info.args_bytes = (uint32_t)n;
-    cr_assert(film_save_checkpoint(path, &film, &info, &err), "%s", err.msg);
+    cr_assert(checkpoint_save(path, &film, &info, &err), "%s", err.msg);
     film_free(&film);
     trace_free(ts);
     scene_free(&scene);
@@ -202,8 +139,8 @@ Test(resume, from_checkpoint_bit_identical, .init = setup, .fini = teardown)
     snprintf(resumed, sizeof resumed, "%s/resumed.exr", tmpdir);
     snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
     make_checkpoint(ckpt, 13, 64);
-    const char *a_full[] = {SCENE, "--spp", "64", "--sampler", "independent", "--threads", "1",
-                            "-o", full, NULL};
+    const char *a_full[] = {SCENE,       "--spp", "64", "--sampler", "independent",
+                            "--threads", "1",     "-o", full,        NULL};
     cr_assert_eq(test_run_mcpt(a_full, NULL, err_path, ALARM_S), 0);
     const char *a_res[] = {"--resume", ckpt, "--threads", "2", "-o", resumed, NULL};
     char err[4096];
@@ -226,29 +163,29 @@ Test(resume, mismatch_refused, .init = setup, .fini = teardown)
     const char *seed[] = {SCENE, "--resume", ckpt, "--seed", "5", "-o", out, NULL};
     cr_assert_eq(test_run_mcpt(seed, NULL, err_path, ALARM_S), 2);
     test_read_file(err_path, err, sizeof err);
-    snprintf(want, sizeof want,
-             "%s: error: expected --seed 0 as in the checkpoint, got 5\n", ckpt);
+    snprintf(want, sizeof want, "%s: error: expected --seed 0 as in the checkpoint, got 5\n", ckpt);
     cr_assert_str_eq(err, want);
 
     const char *spp[] = {"--resume", ckpt, "--spp", "9", "-o", out, NULL};
     cr_assert_eq(test_run_mcpt(spp, NULL, err_path, ALARM_S), 2);
     test_read_file(err_path, err, sizeof err);
-    snprintf(want, sizeof want, "%s: error: expected --spp 8 as in the checkpoint, got 9\n",
-             ckpt);
+    snprintf(want, sizeof want, "%s: error: expected --spp 8 as in the checkpoint, got 9\n", ckpt);
     cr_assert_str_eq(err, want);
 
+    /* --width alone keeps the film's aspect ratio: 24x16 -> 8x5 (5.33 rounded) */
     const char *size[] = {"--resume", ckpt, "--width", "8", "-o", out, NULL};
     cr_assert_eq(test_run_mcpt(size, NULL, err_path, ALARM_S), 2);
     test_read_file(err_path, err, sizeof err);
-    snprintf(want, sizeof want, "%s: error: expected a 24x16 film as in the checkpoint, got "
-                                "8x16\n", ckpt);
+    snprintf(want, sizeof want,
+             "%s: error: expected a 24x16 film as in the checkpoint, got "
+             "8x5\n",
+             ckpt);
     cr_assert_str_eq(err, want);
 
     const char *scene[] = {"tests/data/cli/tiny.txt", "--resume", ckpt, "-o", out, NULL};
     cr_assert_eq(test_run_mcpt(scene, NULL, err_path, ALARM_S), 2);
     test_read_file(err_path, err, sizeof err);
-    snprintf(want, sizeof want, "%s: error: expected the scene the checkpoint was made from",
-             ckpt);
+    snprintf(want, sizeof want, "%s: error: expected the scene the checkpoint was made from", ckpt);
     cr_assert(strncmp(err, want, strlen(want)) == 0, "%s", err);
     cr_assert_not(test_exists(out));
     cr_assert(test_exists(ckpt), "a refused resume keeps its checkpoint");
@@ -270,8 +207,8 @@ Test(interrupt, sigint_then_sigterm_then_bit_identical, .init = setup, .fini = t
     snprintf(final, sizeof final, "%s/final.exr", tmpdir);
     snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
 
-    const char *a_full[] = {SCENE, "--spp", SIGNAL_SPP, "--threads", "1", "--quiet", "-o", full,
-                            NULL};
+    const char *a_full[] = {SCENE,     "--spp", SIGNAL_SPP, "--threads", "1",
+                            "--quiet", "-o",    full,       NULL};
     cr_assert_eq(test_run_mcpt(a_full, NULL, err_path, ALARM_S), 0);
 
     /* first interruption: SIGINT */
@@ -337,8 +274,7 @@ Test(interrupt, second_signal_exits_at_once, .init = setup, .fini = teardown, .t
     double stop_s = now_s() - t0;
     test_read_file(err_path, err, sizeof err);
     cr_assert(rc == 130 || rc == 143, "exit %d: %s", rc, err);
-    cr_assert_not(strstr(err, "interrupted by"), "the first signal's path ran to the end: %s",
-                  err);
+    cr_assert_not(strstr(err, "interrupted by"), "the first signal's path ran to the end: %s", err);
     cr_assert_lt(stop_s, 1.0, "took %.2f s", stop_s);
 
     char buf[16] = {0};
@@ -354,9 +290,9 @@ Test(interrupt, second_signal_exits_at_once, .init = setup, .fini = teardown, .t
     }
     if (test_exists(ckpt)) {
         struct film film;
-        struct film_checkpoint_info info;
+        struct checkpoint_info info;
         struct mcpt_error e;
-        cr_assert(film_load_checkpoint(ckpt, &film, &info, &e), "%s", e.msg);
+        cr_assert(checkpoint_load(ckpt, &film, &info, &e), "%s", e.msg);
         film_free(&film);
     }
 }

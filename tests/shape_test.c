@@ -1,6 +1,8 @@
 /* tests/shape_test.c - shape.c: ray-sphere, ray-quad and ray-plane intersection, including
  * edge and corner hits, rays from inside and far-away rays (Haines et al. 2019, RTG ch. 7), and
- * the error bounds of hit points (PBRT 4e, ch. 6, "Managing Rounding Error"). */
+ * the error bounds of hit points (PBRT 4e, ch. 6, "Managing Rounding Error"); triangle surfaces;
+ * sampled points on their shape, with the density shape_*_pdf gives (PBRT 4e, ch. 6, "Shape
+ * Interface").  The distributions of the samples are tested in light_test.c (chi-square). */
 #include <criterion/criterion.h>
 
 #include "shape.h"
@@ -79,8 +81,8 @@ Test(shape, quad_edges_and_corners)
     cr_assert_not(shape_quad_intersect(&q, &r, &t), "outside");
     r = mkray(v3(0.5f, 0.5f, 1), v3(1, 0, 0));
     cr_assert_not(shape_quad_intersect(&q, &r, &t), "parallel");
-    struct surface sf = shape_quad_surface(&q, &(struct ray){v3(0.25f, 0.75f, 1), 0,
-                                                             v3(0, 0, -1), INFINITY}, 1.0f);
+    struct surface sf =
+        shape_quad_surface(&q, &(struct ray){v3(0.25f, 0.75f, 1), 0, v3(0, 0, -1), INFINITY}, 1.0f);
     cr_assert_float_eq(sf.ng.z, 1.0f, 1e-6f);
     cr_assert_float_eq(sf.uv.x, 0.25f, 1e-6f);
     cr_assert_float_eq(sf.uv.y, 0.75f, 1e-6f);
@@ -122,8 +124,89 @@ Test(shape, sphere_offset_no_self_hit)
             struct ray out = mkray(offset_ray_origin(sf.p, sf.p_error, sf.ng, w), w);
             float t2;
             bool hit = shape_sphere_intersect(&s, &out, &t2);
-            cr_assert(!hit || t2 > 1e-3f * radii[k], "radius %g: self hit at t = %g", radii[k],
-                      t2);
+            cr_assert(!hit || t2 > 1e-3f * radii[k], "radius %g: self hit at t = %g", radii[k], t2);
+        }
+    }
+}
+
+/* A triangle's surface at barycentrics (b0, b1, b2): p = sum b_i p_i within its error bound
+ * gamma(7) sum |b_i p_i| of the exact value (PBRT 4e, ch. 6, "Managing Rounding Error"), the
+ * shading normal and uv interpolated (the normal renormalised and turned to the side of ng), and
+ * without per-corner normals ns = ng. */
+Test(shape, triangle_surface_interpolates)
+{
+    const vec3 p[3] = {{1e3f, 2.0f, -3.0f}, {1e3f + 1.5f, 2.25f, -3.0f}, {1e3f, 3.0f, -1.0f}};
+    const vec3 ns[3] = {{0, 0, 1}, {0, 1, 0}, {1, 0, 0}};
+    const vec2 uv[3] = {{0, 0}, {1, 0}, {0, 1}};
+    const float b1 = 0.3f, b2 = 0.45f;
+    const double b[3] = {1.0 - b1 - b2, b1, b2};
+    struct surface sf = shape_triangle_surface(p, ns, uv, b1, b2, 7);
+    for (int k = 0; k < 3; k++) {
+        double exact = b[0] * v3_get(p[0], k) + b[1] * v3_get(p[1], k) + b[2] * v3_get(p[2], k);
+        cr_assert(fabs(v3_get(sf.p, k) - exact) <= v3_get(sf.p_error, k), "axis %d", k);
+        cr_assert(v3_get(sf.p_error, k) > 0.0f);
+    }
+    vec3 n = v3_normalize(
+        v3_add(v3_add(v3_scale(ns[0], (float)b[0]), v3_scale(ns[1], b1)), v3_scale(ns[2], b2)));
+    float side = v3_dot(n, sf.ng) < 0.0f ? -1.0f : 1.0f;
+    cr_assert(v3_length(v3_sub(sf.ns, v3_scale(n, side))) < 1e-6f);
+    cr_assert_float_eq(sf.uv.x, b1, 1e-6f);
+    cr_assert_float_eq(sf.uv.y, b2, 1e-6f);
+    cr_assert_eq(sf.mat_idx, 7u);
+    struct surface flat = shape_triangle_surface(p, NULL, NULL, b1, b2, 0);
+    cr_assert(v3_length(v3_sub(flat.ns, flat.ng)) == 0.0f);
+    vec3 ng;
+    float area = shape_triangle_area(p, &ng);
+    cr_assert(v3_length(v3_sub(ng, sf.ng)) < 1e-6f);
+    cr_assert_float_eq(area, 0.5f * v3_length(v3_cross(v3_sub(p[1], p[0]), v3_sub(p[2], p[0]))),
+                       1e-6f);
+}
+
+/* Sampled points lie on their shape to within their error bound: on the plane of a triangle
+ * or quad (|(p - p0) . n| <= |n| . p_error) and at distance r from a sphere's centre (seen from
+ * outside, cone sampling, and from inside, area sampling; | |p - c| - r | <= |p_error|); wi is
+ * the unit direction to p; shape_*_pdf at p is the density the sample returned. */
+Test(shape, samples_lie_on_the_shape)
+{
+    const vec3 tri[3] = {{-1, -1, 2}, {2, -1, 2.5f}, {-1, 2, 2}};
+    struct quad q = {.corner = v3(-0.5f, -2, 0.3f), .e1 = v3(1, 0, 0.2f), .e2 = v3(0, 0.3f, 1)};
+    struct sphere far = {.center = v3(0.5f, 0.3f, 2.5f), .radius = 0.7f};
+    struct sphere around = {.center = v3(0.1f, -0.2f, 0.2f), .radius = 1.0f};
+    struct surface ref = {.p = v3(0, 0, 0), .ng = v3(0, 0, 1), .ns = v3(0, 0, 1)};
+    for (int i = 0; i < 1000; i++) {
+        vec2 u = {((float)i + 0.5f) / 1000.0f, (float)((i * 389) % 1000) / 1000.0f};
+        struct shape_sample ss[4];
+        bool ok[4] = {shape_triangle_sample(tri, &ref, u, &ss[0]),
+                      shape_quad_sample(&q, &ref, u, &ss[1]),
+                      shape_sphere_sample(&far, &ref, u, &ss[2]),
+                      shape_sphere_sample(&around, &ref, u, &ss[3])};
+        for (int k = 0; k < 4; k++) {
+            if (!ok[k])
+                continue;
+            const struct shape_sample *s = &ss[k];
+            vec3 n_abs = v3(fabsf(s->n.x), fabsf(s->n.y), fabsf(s->n.z));
+            double off;
+            if (k < 2) {
+                vec3 p0 = k == 0 ? tri[0] : q.corner;
+                vec3 d = v3_sub(s->p, p0);
+                off = fabs((double)d.x * s->n.x + (double)d.y * s->n.y + (double)d.z * s->n.z);
+                cr_assert(off <= 1.01 * v3_dot(n_abs, s->p_error) + 1e-7, "shape %d: %g", k, off);
+            } else {
+                const struct sphere *sp = k == 2 ? &far : &around;
+                double dx = (double)s->p.x - sp->center.x, dy = (double)s->p.y - sp->center.y,
+                       dz = (double)s->p.z - sp->center.z;
+                off = fabs(sqrt(dx * dx + dy * dy + dz * dz) - sp->radius);
+                cr_assert(off <= v3_length(s->p_error), "sphere %d: %g", k, off);
+            }
+            cr_assert(fabsf(v3_length(s->n) - 1.0f) < 1e-5f);
+            vec3 w = v3_normalize(v3_sub(s->p, ref.p));
+            cr_assert(v3_length(v3_sub(w, s->wi)) < 1e-6f, "shape %d: wi", k);
+            struct surface on = {.p = s->p, .ng = s->n};
+            float pdf = k == 0   ? shape_triangle_pdf(tri, &ref, &on, s->wi)
+                        : k == 1 ? shape_quad_pdf(&q, &ref, &on, s->wi)
+                        : k == 2 ? shape_sphere_pdf(&far, &ref, &on, s->wi)
+                                 : shape_sphere_pdf(&around, &ref, &on, s->wi);
+            cr_assert_eq(pdf, s->pdf_sa, "shape %d", k);
         }
     }
 }

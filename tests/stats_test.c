@@ -6,8 +6,10 @@
  *   recovers the true MSE within its standard error; the uncorrected one does not.
  * - Student's t quantiles against numerical integration of the t density; OLS slopes exact on
  *   power laws; the 95% interval covers the true slope in about 95% of noisy trials.
+ * - The error map's per-pixel terms of the relMSE.
  * - A run with --snapshots and --curve writes the same EXR bytes as a plain run; CSV header and
- *   JSON keys as documented in docs/convergence.md; compare reproduces a CSV row.
+ *   JSON keys as documented in docs/convergence.md; compare reproduces a CSV row.  The pictures
+ *   (plot, contact sheet, heat maps) are tests/plot_test.c's.
  * - The integrands' exact integrals against quadrature; independent sampling gives MSE ~ N^-1. */
 #include <criterion/criterion.h>
 
@@ -84,11 +86,11 @@ Test(stats, metrics_constant_offset)
     cr_assert_float_eq(m.mse, d2, 1e-12);
     cr_assert_float_eq(m.rmse, sqrt(d2), 1e-12);
     cr_assert_float_eq(m.mae, d1, 1e-12);
-    cr_assert_float_eq(m.relmse, d2 / (0.25 + 0.01), 1e-12);        /* (a-r)^2 / (r^2 + 0.01) */
-    cr_assert_float_eq(m.mrse_pbrt, d2 / (0.51 * 0.51), 1e-12);     /* (a-r)^2 / (r + 0.01)^2 */
-    cr_assert_float_eq(m.psnr_db, -10.0 * log10(d2), 1e-9);         /* peak 1 */
-    cr_assert_float_eq(m.mse_se, 0.0, 1e-15);                        /* every pixel alike */
-    cr_assert(isnan(m.noise_floor) && isnan(m.mse_corrected));       /* r has no variance */
+    cr_assert_float_eq(m.relmse, d2 / (0.25 + 0.01), 1e-12);    /* (a-r)^2 / (r^2 + 0.01) */
+    cr_assert_float_eq(m.mrse_pbrt, d2 / (0.51 * 0.51), 1e-12); /* (a-r)^2 / (r + 0.01)^2 */
+    cr_assert_float_eq(m.psnr_db, -10.0 * log10(d2), 1e-9);     /* peak 1 */
+    cr_assert_float_eq(m.mse_se, 0.0, 1e-15);                   /* every pixel alike */
+    cr_assert(isnan(m.noise_floor) && isnan(m.mse_corrected));  /* r has no variance */
     free(pa.data);
     free(pr.data);
 }
@@ -158,8 +160,7 @@ Test(stats, noise_correction_recovers_true_mse)
     struct stats_metrics m;
     cr_assert(stats_compare(&a, &r, &m, &err));
     double truth = sigma * sigma / 4.0;
-    cr_assert(fabs(m.noise_floor / (sigma * sigma / 16.0) - 1.0) < 0.05, "floor %g",
-              m.noise_floor);
+    cr_assert(fabs(m.noise_floor / (sigma * sigma / 16.0) - 1.0) < 0.05, "floor %g", m.noise_floor);
     cr_assert(fabs(m.mse_corrected - truth) < 3.0 * m.mse_corrected_se,
               "corrected %g +- %g, true MSE %g", m.mse_corrected, m.mse_corrected_se, truth);
     cr_assert(fabs(m.mse - truth) > 10.0 * m.mse_se, "uncorrected %g should be biased", m.mse);
@@ -180,6 +181,33 @@ Test(stats, compare_size_mismatch)
     struct mcpt_error err;
     cr_assert(!stats_compare(&a, &r, &m, &err));
     cr_assert_str_eq(err.msg, "expected a reference of the image's size 4x4, got 4x5");
+    free(pa.data);
+    free(pr.data);
+}
+
+/* The error map's pixel i is the mean over its finite channels of (a - r)^2 / (r^2 + 0.01):
+ * the relMSE's terms, so its mean is the relMSE when every channel is finite.  NaN where no
+ * channel is finite. */
+Test(stats, relative_error_map_terms)
+{
+    struct planes pa, pr;
+    struct stats_image a = planes_image(&pa, 3, 1, false), r = planes_image(&pr, 3, 1, false);
+    for (int c = 0; c < 3; c++)
+        for (int i = 0; i < 3; i++) {
+            plane(&pr, c)[i] = 0.5f;
+            plane(&pa, c)[i] = 0.5f;
+        }
+    plane(&pa, 0)[0] = 0.75f; /* pixel 0: one channel off by 1/4 */
+    plane(&pa, 1)[1] = NAN;   /* pixel 1: exact, one channel not finite */
+    plane(&pa, 2)[1] = 0.25f; /*          and one off by 1/4 */
+    for (int c = 0; c < 3; c++)
+        plane(&pr, c)[2] = INFINITY; /* pixel 2: no finite channel */
+    double e[3];
+    stats_relative_error_map(&a, &r, e);
+    double term = 0.0625 / (0.25 + STATS_RELMSE_EPS);
+    cr_assert_float_eq(e[0], term / 3.0, 1e-15, "%.17g", e[0]);
+    cr_assert_float_eq(e[1], term / 2.0, 1e-15, "%.17g", e[1]);
+    cr_assert(isnan(e[2]));
     free(pa.data);
     free(pr.data);
 }
@@ -261,11 +289,14 @@ Test(stats, fit_ci_coverage)
 
 /* A curve of n_seeds runs at spp 1 .. 4096 with mse = (1/N)^(1 + delta_s) exp(eta) per seed:
  * delta_s the run's own slope offset, eta independent noise per point. */
-static void synthetic_curve(struct stats_curve *c, size_t n_seeds, double sd_delta,
-                            double sd_eta, struct pcg32 *rng)
+static void synthetic_curve(struct stats_curve *c, size_t n_seeds, double sd_delta, double sd_eta,
+                            struct pcg32 *rng)
 {
-    struct stats_run_info info = {.scene = "synthetic", .sampler = "independent",
-                                  .integrator = "path-mis", .width = 1, .height = 1};
+    struct stats_run_info info = {.scene = "synthetic",
+                                  .sampler = "independent",
+                                  .integrator = "path-mis",
+                                  .width = 1,
+                                  .height = 1};
     stats_curve_init(c, &info);
     c->cap_points = n_seeds * 13;
     c->points = calloc(c->cap_points, sizeof *c->points);
@@ -274,10 +305,12 @@ static void synthetic_curve(struct stats_curve *c, size_t n_seeds, double sd_del
         double delta = sd_delta * gauss(rng);
         for (int e = 0; e <= 12; e++) {
             double n = exp2(e);
-            c->points[c->n_points++] = (struct stats_point){
-                .seed = 100 + k, .spp = (uint32_t)n, .seconds = 0.01 * n,
-                .source = STATS_ERR_REFERENCE,
-                .mse = pow(n, -(1.0 + delta)) * exp(sd_eta * gauss(rng))};
+            c->points[c->n_points++] = (struct stats_point){.seed = 100 + k,
+                                                            .spp = (uint32_t)n,
+                                                            .seconds = 0.01 * n,
+                                                            .source = STATS_ERR_REFERENCE,
+                                                            .mse = pow(n, -(1.0 + delta)) *
+                                                                   exp(sd_eta * gauss(rng))};
         }
     }
 }
@@ -300,7 +333,7 @@ Test(stats, seed_bootstrap_interval)
     cr_assert_float_eq(s.rmse_fit.slope, -0.5, 1e-12);
     cr_assert_float_eq(s.mse_slope_boot_lo, -1.0, 1e-12);
     cr_assert_float_eq(s.mse_slope_boot_hi, -1.0, 1e-12);
-    cr_assert_float_eq(s.time_fit.slope, 0.01, 1e-12);   /* seconds per spp */
+    cr_assert_float_eq(s.time_fit.slope, 0.01, 1e-12);    /* seconds per spp */
     cr_assert_float_eq(s.time_fit.intercept, 0.0, 1e-12); /* no overhead */
     /* half the last RMSE needs 4x the spp under N^-1/2, 4 x 4096 x 0.01 s */
     cr_assert_float_eq(s.target_spp, 16384.0, 1e-6);
@@ -397,8 +430,12 @@ Test(stats, csv_json_formats)
             plane(&pr, c)[i] = 0.5f;
             plane(&pr, 3 + c)[i] = 1e-4f;
         }
-    struct stats_run_info info = {.scene = "s.txt", .reference = "ref.exr", .sampler = "sobol",
-                                  .integrator = "path-mis", .max_depth = UINT32_MAX, .width = 8,
+    struct stats_run_info info = {.scene = "s.txt",
+                                  .reference = "ref.exr",
+                                  .sampler = "sobol",
+                                  .integrator = "path-mis",
+                                  .max_depth = UINT32_MAX,
+                                  .width = 8,
                                   .height = 8};
     struct stats_curve curve;
     stats_curve_init(&curve, &info);
@@ -408,21 +445,17 @@ Test(stats, csv_json_formats)
         for (int i = 0; i < 64; i++)
             while (film.pixels[i].n < spp)
                 film_add(&film.pixels[i], v3_splat(0.5f + 0.3f * (float)gauss(&rng)));
-        cr_assert(stats_curve_add(&curve, &film, &ref, 9, spp, 0.1 * spp, true, 0.0f, &err));
+        cr_assert(stats_curve_add(&curve, &film, &ref, 9, spp, 0.1 * spp, NULL, &err));
     }
     struct stats_summary sum;
     cr_assert(stats_summarize(&curve, 0.0, &sum));
     char dir[256];
     test_make_dir(dir, sizeof dir, "stats");
-    char csv[300], json[300], svg[300], sheet[300];
+    char csv[300], json[300];
     snprintf(csv, sizeof csv, "%s/c.csv", dir);
     snprintf(json, sizeof json, "%s/c.json", dir);
-    snprintf(svg, sizeof svg, "%s/c.svg", dir);
-    snprintf(sheet, sizeof sheet, "%s/sheet.png", dir);
     cr_assert(stats_write_csv(csv, &curve, &err), "%s", err.msg);
     cr_assert(stats_write_json(json, &curve, &sum, &err), "%s", err.msg);
-    cr_assert(stats_write_svg(svg, &curve, &sum, &err), "%s", err.msg);
-    cr_assert(stats_write_contact_sheet(sheet, &curve, &err), "%s", err.msg);
 
     const char *text = read_text(csv);
     const char *golden_header =
@@ -452,56 +485,11 @@ Test(stats, csv_json_formats)
     json_keys(strstr(text, "\"mse_fit\""), 1, keys, sizeof keys);
     cr_assert_str_eq(keys, "slope,intercept,r2,slope_se,ci95,n_points");
     cr_assert(strstr(text, "\"format\": \"mcpt-convergence-1\"") != NULL);
-    cr_assert(strstr(read_text(svg), "</svg>") != NULL);
 
     stats_summary_free(&sum);
     stats_curve_free(&curve);
     film_free(&film);
     free(pr.data);
-    test_remove_dir(dir);
-}
-
-/* Width and height of a PNG, from its IHDR chunk (big-endian, bytes 16-23 of the file). */
-static void png_size(const char *path, uint32_t *width, uint32_t *height)
-{
-    unsigned char head[24];
-    FILE *f = fopen(path, "rb");
-    cr_assert(f && fread(head, 1, sizeof head, f) == sizeof head, "cannot read %s", path);
-    fclose(f);
-    *width = 0;
-    *height = 0;
-    for (int i = 0; i < 4; i++) {
-        *width = *width << 8 | head[16 + i];
-        *height = *height << 8 | head[20 + i];
-    }
-}
-
-/* The sample-count map of a 4 x 3 film is scaled by a whole factor to 256 pixels wide (k = 64)
- * above a legend of 43 rows: 256 x 235.  A film so narrow and tall that its map would exceed
- * 65535 rows (1 x 300: k = 256) is refused with a message and no file. */
-Test(stats, count_heatmap_size_and_limit)
-{
-    char dir[256], path[300];
-    test_make_dir(dir, sizeof dir, "stats_count");
-    snprintf(path, sizeof path, "%s/count.png", dir);
-    struct film film;
-    struct mcpt_error err;
-    cr_assert(film_init(&film, 4, 3, &err));
-    for (int i = 0; i < 12; i++)
-        film.pixels[i].n = (uint32_t)(10 * i);
-    cr_assert(stats_write_count_heatmap(path, &film, &err), "%s", err.msg);
-    uint32_t w, h;
-    png_size(path, &w, &h);
-    cr_assert(w == 256 && h == 3 * 64 + 43, "%ux%u", w, h);
-    film_free(&film);
-
-    snprintf(path, sizeof path, "%s/tall.png", dir);
-    cr_assert(film_init(&film, 1, 300, &err));
-    cr_assert_not(stats_write_count_heatmap(path, &film, &err));
-    cr_assert_str_eq(err.msg, "expected a film whose sample-count map is at most 65535 pixels a "
-                              "side, got a 1x300 film");
-    cr_assert_not(test_exists(path));
-    film_free(&film);
     test_remove_dir(dir);
 }
 
@@ -562,31 +550,63 @@ static void assert_same_exr_data(const char *a, const char *b)
 /* trace_render continues each pixel from its count, so a progressive run with snapshots at
  * 1, 2, 4, 8, 12 spp (and previews between passes) ends on the same image as one call:
  * identical EXR bytes, for every sampler (the stratified one's strata must be those of the final
- * spp), and with --seeds the image is the first seed's. */
+ * spp), and with --seeds the image is the first seed's.  SOURCE_DATE_EPOCH leaves the render
+ * time out of the EXR header, the one attribute in which two runs may differ. */
 Test(stats, snapshot_run_equals_plain_run, .init = setup, .fini = teardown, .timeout = 60)
 {
+    cr_assert_eq(setenv("SOURCE_DATE_EPOCH", "0", 1), 0); /* inherited by the mcpt runs */
     const char *samplers[] = {"sobol", "stratified", "independent"};
     for (int k = 0; k < 3; k++) {
         char plain[300], snap[300], curve[300];
         snprintf(plain, sizeof plain, "%s/plain-%s.exr", tmpdir, samplers[k]);
         snprintf(snap, sizeof snap, "%s/snap-%s.exr", tmpdir, samplers[k]);
         snprintf(curve, sizeof curve, "%s/curve-%s.csv", tmpdir, samplers[k]);
-        const char *a[] = {"scenes/cornell-box.txt", "--width", "16", "--height", "12", "--spp",
-                           "12", "--seed", "5", "--sampler", samplers[k], "-o", plain, "--quiet",
+        const char *a[] = {"scenes/cornell-box.txt",
+                           "--width",
+                           "16",
+                           "--height",
+                           "12",
+                           "--spp",
+                           "12",
+                           "--seed",
+                           "5",
+                           "--sampler",
+                           samplers[k],
+                           "-o",
+                           plain,
+                           "--quiet",
                            NULL};
         cr_assert_eq(run_mcpt(a), 0);
         /* the independent run also repeats itself for seeds 6 and 7: OUT.exr stays seed 5's */
-        const char *b[] = {"scenes/cornell-box.txt", "--width", "16", "--height", "12", "--spp",
-                           "12", "--seed", "5", "--sampler", samplers[k], "-o", snap,
-                           "--snapshots", "pow2", "--curve", curve, "--preview-every", "0.001",
-                           k == 2 ? "--seeds" : NULL, "3", NULL};
+        const char *b[] = {"scenes/cornell-box.txt",
+                           "--width",
+                           "16",
+                           "--height",
+                           "12",
+                           "--spp",
+                           "12",
+                           "--seed",
+                           "5",
+                           "--sampler",
+                           samplers[k],
+                           "-o",
+                           snap,
+                           "--snapshots",
+                           "pow2",
+                           "--curve",
+                           curve,
+                           "--preview-every",
+                           "0.001",
+                           k == 2 ? "--seeds" : NULL,
+                           "3",
+                           NULL};
         cr_assert_eq(run_mcpt(b), 0);
         assert_same_exr_data(plain, snap);
         cr_assert(same_bytes(plain, snap), "%s: EXR files differ", samplers[k]);
     }
     /* the snapshots and the curve's companions exist; the CSV has the 5 measured rows */
-    const char *files[] = {"snap-sobol-spp01.exr", "snap-sobol-spp08.png", "snap-sobol-spp12.exr",
-                           "snap-sobol-contact.png", "curve-sobol.json", "curve-sobol.svg"};
+    const char *files[] = {"snap-sobol-spp01.exr",   "snap-sobol-spp08.png", "snap-sobol-spp12.exr",
+                           "snap-sobol-contact.png", "curve-sobol.json",     "curve-sobol.svg"};
     for (size_t i = 0; i < sizeof files / sizeof files[0]; i++) {
         char path[400];
         struct stat st;
@@ -620,12 +640,39 @@ Test(stats, compare_reproduces_curve_row, .init = setup, .fini = teardown, .time
     snprintf(curve, sizeof curve, "%s/curve.csv", tmpdir);
     snprintf(snap4, sizeof snap4, "%s/out-spp4.exr", tmpdir);
     snprintf(heat, sizeof heat, "%s/heat.png", tmpdir);
-    const char *a[] = {"scenes/cornell-box.txt", "--width", "16", "--height", "16", "--spp", "64",
-                       "--seed", "99", "-o", ref, "--quiet", NULL};
+    const char *a[] = {"scenes/cornell-box.txt",
+                       "--width",
+                       "16",
+                       "--height",
+                       "16",
+                       "--spp",
+                       "64",
+                       "--seed",
+                       "99",
+                       "-o",
+                       ref,
+                       "--quiet",
+                       NULL};
     cr_assert_eq(run_mcpt(a), 0);
-    const char *b[] = {"scenes/cornell-box.txt", "--width", "16", "--height", "16", "--spp", "8",
-                       "--seed", "1", "-o", out, "--snapshots", "pow2", "--reference", ref,
-                       "--curve", curve, "--quiet", NULL};
+    const char *b[] = {"scenes/cornell-box.txt",
+                       "--width",
+                       "16",
+                       "--height",
+                       "16",
+                       "--spp",
+                       "8",
+                       "--seed",
+                       "1",
+                       "-o",
+                       out,
+                       "--snapshots",
+                       "pow2",
+                       "--reference",
+                       ref,
+                       "--curve",
+                       curve,
+                       "--quiet",
+                       NULL};
     cr_assert_eq(run_mcpt(b), 0);
     const char *text = read_text(curve);
     const char *row = strstr(text, "\n4,");
@@ -658,15 +705,35 @@ Test(stats, compare_reproduces_curve_row, .init = setup, .fini = teardown, .time
     cr_assert_eq(run_mcpt(missing), 2);
     char small[300];
     snprintf(small, sizeof small, "%s/small.exr", tmpdir);
-    const char *d[] = {"scenes/cornell-box.txt", "--width", "8", "--height", "8", "--spp", "1",
-                       "-o", small, "--quiet", NULL};
+    const char *d[] = {"scenes/cornell-box.txt",
+                       "--width",
+                       "8",
+                       "--height",
+                       "8",
+                       "--spp",
+                       "1",
+                       "-o",
+                       small,
+                       "--quiet",
+                       NULL};
     cr_assert_eq(run_mcpt(d), 0);
     const char *mismatch[] = {"compare", small, ref, NULL};
     cr_assert_eq(run_mcpt(mismatch), 2);
     const char *one[] = {"compare", small, NULL};
     cr_assert_eq(run_mcpt(one), 2);
-    const char *bad_ref[] = {"scenes/cornell-box.txt", "--width", "8", "--height", "8", "--spp",
-                             "2", "-o", out, "--reference", ref, "--quiet", NULL};
+    const char *bad_ref[] = {"scenes/cornell-box.txt",
+                             "--width",
+                             "8",
+                             "--height",
+                             "8",
+                             "--spp",
+                             "2",
+                             "-o",
+                             out,
+                             "--reference",
+                             ref,
+                             "--quiet",
+                             NULL};
     cr_assert_eq(run_mcpt(bad_ref), 2);
 }
 

@@ -94,8 +94,8 @@ static inline int test_wait(pid_t pid)
 }
 
 /* test_start_mcpt, then test_wait: runs mcpt to the end and returns its status. */
-static inline int test_run_mcpt(const char *const *args, const char *out_path,
-                                const char *err_path, unsigned alarm_s)
+static inline int test_run_mcpt(const char *const *args, const char *out_path, const char *err_path,
+                                unsigned alarm_s)
 {
     return test_wait(test_start_mcpt(args, out_path, err_path, alarm_s));
 }

@@ -11,8 +11,6 @@
  *   = full; shading normals never leak light through a surface.
  * - The same scene at scale 1e-4 and 1e4 gives the same image (robust ray offsets, PBRT 4e,
  *   ch. 6, "Robust Spawned Ray Origins").
- * - Light sampling (triangle, quad, sphere cone and inside, sky) by chi-square against
- *   trace_light_pdf; light selection by power (Walker/Vose alias table, sample.c).
  * - Per-pixel Z-test with Sidak correction against a stored 65536-spp reference (as Mitsuba's
  *   render tests do): at least 99.75% of the pixel channels pass.
  * - Images are bit-identical for 1 and 2 threads and for any split of the samples into calls. */
@@ -20,7 +18,6 @@
 
 #include <stdlib.h>
 
-#include "chi2.h"
 #include "film.h"
 #include "image.h"
 #include "scene.h"
@@ -28,8 +25,8 @@
 
 /* Image mean per channel over pixels [x0, x1) x [y0, y1) and its standard error: the pixels
  * are independent, so Var(mean) = sum_i Var(mean_i) / N^2. */
-static void region_mean_se(const struct film *film, int x0, int y0, int x1, int y1,
-                           double mean[3], double se[3])
+static void region_mean_se(const struct film *film, int x0, int y0, int x1, int y1, double mean[3],
+                           double se[3])
 {
     double n = (double)(x1 - x0) * (y1 - y0);
     for (int c = 0; c < 3; c++) {
@@ -67,7 +64,8 @@ static void render_opt(const struct trace_scene *ts, struct trace_options opt, s
 
 static struct trace_options default_options(uint64_t seed)
 {
-    return (struct trace_options){.max_depth = TRACE_DEPTH_INFINITE, .seed = seed,
+    return (struct trace_options){.max_depth = TRACE_DEPTH_INFINITE,
+                                  .seed = seed,
                                   .sampler = SAMPLER_INDEPENDENT};
 }
 
@@ -77,9 +75,11 @@ static void render(const struct trace_scene *ts, struct film *film, uint32_t spp
     render_opt(ts, default_options(seed), film, spp, threads);
 }
 
-static const enum render_direct ALL_DIRECT[RENDER_DIRECT_COUNT] = {
-    RENDER_DIRECT_MIS, RENDER_DIRECT_LIGHT, RENDER_DIRECT_BSDF, RENDER_DIRECT_COSINE,
-    RENDER_DIRECT_HEMISPHERE};
+static const enum render_direct ALL_DIRECT[RENDER_DIRECT_COUNT] = {RENDER_DIRECT_MIS,
+                                                                   RENDER_DIRECT_LIGHT,
+                                                                   RENDER_DIRECT_BSDF,
+                                                                   RENDER_DIRECT_COSINE,
+                                                                   RENDER_DIRECT_HEMISPHERE};
 
 /* A loaded scene with its trace_scene and a film of the scene's size. */
 struct setup {
@@ -184,7 +184,8 @@ Test(trace, diffuse_plane_under_sky, .timeout = 60)
         if (sky == 0) {
             expect = v3_mul(rho, s.scene.sky.radiance);
         } else {
-            s.scene.sky = (struct sky){.kind = SKY_GRADIENT, .horizon = v3(1.0f, 0.5f, 0.2f),
+            s.scene.sky = (struct sky){.kind = SKY_GRADIENT,
+                                       .horizon = v3(1.0f, 0.5f, 0.2f),
                                        .zenith = v3(0.1f, 0.4f, 1.5f)};
             expect = v3_mul(rho, v3_add(v3_scale(s.scene.sky.horizon, 1.0f / 3.0f),
                                         v3_scale(s.scene.sky.zenith, 2.0f / 3.0f)));
@@ -199,8 +200,7 @@ Test(trace, diffuse_plane_under_sky, .timeout = 60)
             for (int c = 0; c < 3; c++)
                 cr_assert(fabs(mean[c] - v3_get(expect, c)) <= 4.0 * se[c] + 1e-5,
                           "sky %d, %s, channel %d: %f +- %f, expected %f", sky,
-                          scene_direct_name(ALL_DIRECT[d]), c, mean[c], se[c],
-                          v3_get(expect, c));
+                          scene_direct_name(ALL_DIRECT[d]), c, mean[c], se[c], v3_get(expect, c));
         }
     }
     setup_free(&s);
@@ -243,18 +243,26 @@ static struct light furnace_light[1];
 
 static struct scene furnace_scene(float rho, float Le)
 {
-    furnace_mat[0] = (struct material){.kind = MAT_DIFFUSE, .albedo = v3_splat(rho),
-                                       .Le = v3_splat(Le), .two_sided_emission = true};
+    furnace_mat[0] = (struct material){.kind = MAT_DIFFUSE,
+                                       .albedo = v3_splat(rho),
+                                       .Le = v3_splat(Le),
+                                       .two_sided_emission = true};
     furnace_sphere[0] = (struct sphere){.center = v3(0, 0, 0), .radius = 1.0f, .mat_idx = 0};
     furnace_light[0] = (struct light){.kind = LIGHT_SPHERE, .prim_idx = 0};
     struct scene s = {
-        .camera = {.eye = v3(0.1f, -0.2f, 0.3f), .look_at = v3(0, 0, -1), .up = v3(0, 1, 0),
+        .camera = {.eye = v3(0.1f, -0.2f, 0.3f),
+                   .look_at = v3(0, 0, -1),
+                   .up = v3(0, 1, 0),
                    .fov_deg = 60.0f},
-        .width = 16, .height = 16,
+        .width = 16,
+        .height = 16,
         .render = {.spp = 16, .max_depth = TRACE_DEPTH_INFINITE},
-        .materials = furnace_mat, .n_materials = 1,
-        .spheres = furnace_sphere, .n_spheres = 1,
-        .lights = furnace_light, .n_lights = 1,
+        .materials = furnace_mat,
+        .n_materials = 1,
+        .spheres = furnace_sphere,
+        .n_spheres = 1,
+        .lights = furnace_light,
+        .n_lights = 1,
     };
     return s;
 }
@@ -303,8 +311,11 @@ Test(trace, every_estimator_converges_to_the_same_image, .timeout = 120)
     cr_assert(film_init(&ref, s.film.width, s.film.height, &err));
     render_opt(s.ts, default_options(21), &ref, 128, 2);
     const int w = s.film.width, h = s.film.height;
-    const int regions[5][4] = {{0, 0, w / 2, h / 2}, {w / 2, 0, w, h / 2},
-                               {0, h / 2, w / 2, h}, {w / 2, h / 2, w, h}, {0, 0, w, h}};
+    const int regions[5][4] = {{0, 0, w / 2, h / 2},
+                               {w / 2, 0, w, h / 2},
+                               {0, h / 2, w / 2, h},
+                               {w / 2, h / 2, w, h},
+                               {0, 0, w, h}};
     for (int variant = 0; variant < 6; variant++) {
         struct trace_options opt = default_options(22 + variant);
         const char *what;
@@ -322,14 +333,16 @@ Test(trace, every_estimator_converges_to_the_same_image, .timeout = 120)
         render_opt(s.ts, opt, &s.film, 128, 2);
         for (int r = 0; r < 5; r++) {
             double m[3], e[3], mr[3], er[3];
-            region_mean_se(&s.film, regions[r][0], regions[r][1], regions[r][2], regions[r][3],
-                           m, e);
+            region_mean_se(&s.film, regions[r][0], regions[r][1], regions[r][2], regions[r][3], m,
+                           e);
             region_mean_se(&ref, regions[r][0], regions[r][1], regions[r][2], regions[r][3], mr,
                            er);
             for (int c = 0; c < 3; c++) {
                 double tol = 4.0 * sqrt(e[c] * e[c] + er[c] * er[c]);
-                cr_assert(fabs(m[c] - mr[c]) <= tol, "%s, region %d, channel %d: %f vs MIS %f "
-                          "(tolerance %f)", what, r, c, m[c], mr[c], tol);
+                cr_assert(fabs(m[c] - mr[c]) <= tol,
+                          "%s, region %d, channel %d: %f vs MIS %f "
+                          "(tolerance %f)",
+                          what, r, c, m[c], mr[c], tol);
             }
         }
     }
@@ -389,7 +402,9 @@ Test(trace, shading_normals_do_not_leak)
     setup_load(&s, "tests/data/trace/leak.txt");
     struct material kinds[3] = {
         s.scene.materials[0],
-        {.kind = MAT_PLASTIC, .albedo = v3(0.8f, 0.8f, 0.8f), .specular = v3_splat(0.04f),
+        {.kind = MAT_PLASTIC,
+         .albedo = v3(0.8f, 0.8f, 0.8f),
+         .specular = v3_splat(0.04f),
          .roughness = 0.5f},
         {.kind = MAT_CONDUCTOR, .specular = v3(0.9f, 0.9f, 0.9f), .roughness = 0.3f},
     };
@@ -456,11 +471,30 @@ static double two_sided_z(double alpha)
     return 0.5 * (lo + hi);
 }
 
+/* P(X > k) for X ~ Binomial(n, p), summed from the top (lgamma), for the test below. */
+static double binomial_upper_tail(int n, double p, int k)
+{
+    double tail = 0.0;
+    for (int j = n; j > k; j--)
+        tail += exp(lgamma(n + 1.0) - lgamma(j + 1.0) - lgamma(n - j + 1.0) + j * log(p) +
+                    (n - j) * log1p(-p));
+    return tail;
+}
+
 /* tests/data/trace/regression.txt at 512 spp against regression-ref.exr (65536 spp, its
  * header gives the command): per pixel and channel z = (m - m_ref) / sqrt(s^2 / n + v_ref),
  * with s^2 the reference's per-sample variance (v_ref n_ref) and v_ref its variance of the
- * mean; each test at the Sidak-corrected level 1 - (1 - 0.01)^(1 / tests), and at least 99.75%
- * of them must pass.  This catches local errors that image means average away. */
+ * mean.  One rule, a count of failing pixels (this catches local errors that image means
+ * average away):
+ * - a pixel fails when any channel has |z| > z_0, z_0 = 3.29 (two-sided alpha_0 = 0.001).  Its
+ *   three channels are correlated; by Sidak's inequality for correlated normals a pixel fails
+ *   with probability at most p = 1 - (1 - alpha_0)^3 = 0.0030.  Pixels are independent (their
+ *   samples are), so the failures are at most Binomial(1024, p) (mean 3.07);
+ * - the test allows k failing pixels, the least k with P(Binomial > k) <= 0.001: k = 10.
+ * Why not a Sidak max-test (no |z| beyond the family-wise 1% level, 4.65): a 512-sample mean
+ * of a skewed pixel (glass, lamp hits by BSDF sampling) is not normal that far out.  Over 300
+ * seeds the worst |z| reached 13 and such a test failed on 10.7% of seeds, while at 3.29 the
+ * normal bound holds: 2.03 failing pixels per image on average (at most 6), this seed 5. */
 Test(trace, regression_against_reference_image, .timeout = 120)
 {
     struct setup s;
@@ -481,11 +515,16 @@ Test(trace, regression_against_reference_image, .timeout = 120)
     cr_assert(ch_n >= 0);
     const uint32_t spp = 512;
     render(s.ts, &s.film, spp, 2, 1234);
-    int n_pixels = s.film.width * s.film.height, n_tests = 3 * n_pixels, n_fail = 0;
-    double alpha = 1.0 - pow(1.0 - 0.01, 1.0 / n_tests); /* Sidak */
-    double z_crit = two_sided_z(alpha);
+    int n_pixels = s.film.width * s.film.height, n_fail = 0;
+    const double alpha_0 = 0.001;                   /* per channel, two-sided */
+    double z_crit = two_sided_z(alpha_0);           /* 3.29 */
+    double p_pixel = 1.0 - pow(1.0 - alpha_0, 3.0); /* Sidak's inequality, three channels */
+    int k_max = 0;                                  /* failing pixels allowed */
+    while (binomial_upper_tail(n_pixels, p_pixel, k_max) > 0.001)
+        k_max++;
     double z_worst = 0.0;
-    for (int i = 0; i < n_pixels; i++)
+    for (int i = 0; i < n_pixels; i++) {
+        double z_pixel = 0.0;
         for (int c = 0; c < 3; c++) {
             double m = film_mean(&s.film.pixels[i], c);
             double m_ref = ref.data[ch_mean[c]][i], v_ref = ref.data[ch_var[c]][i];
@@ -493,181 +532,17 @@ Test(trace, regression_against_reference_image, .timeout = 120)
             double var = v_ref * n_ref / spp + v_ref;
             double z = var > 0.0 ? fabs(m - m_ref) / sqrt(var)
                                  : (fabs(m - m_ref) <= 1e-5 * (1.0 + fabs(m_ref)) ? 0.0 : INFINITY);
-            z_worst = fmax(z_worst, z);
-            n_fail += z > z_crit;
+            z_pixel = fmax(z_pixel, z);
         }
-    cr_log_info("regression: %d of %d pixel channels beyond |z| = %.2f (worst %.2f)", n_fail,
-                n_tests, z_crit, z_worst);
-    cr_assert(n_fail <= (int)(0.0025 * n_tests), "%d of %d pixel channels beyond |z| = %.2f "
-              "(worst %.2f)", n_fail, n_tests, z_crit, z_worst);
+        z_worst = fmax(z_worst, z_pixel);
+        n_fail += z_pixel > z_crit;
+    }
+    cr_log_info("regression: %d of %d pixels beyond |z| = %.2f, %d allowed (worst %.2f)", n_fail,
+                n_pixels, z_crit, k_max, z_worst);
+    cr_assert(n_fail <= k_max, "%d of %d pixels beyond |z| = %.2f, %d allowed (worst %.2f)", n_fail,
+              n_pixels, z_crit, k_max, z_worst);
     image_free(&ref);
     setup_free(&s);
-}
-
-/* ---- lights ---- */
-
-/* A light scene built in code: a two-sided emissive triangle, quad, sphere (seen from outside)
- * and sphere enclosing the reference point, and a gradient sky. */
-static vec3 lt_positions[3] = {{-1.0f, -1.0f, 1.0f}, {2.0f, -1.0f, 1.5f}, {-1.0f, 2.0f, 1.0f}};
-static struct scene_tri lt_tris[1] = {{.v = {0, 1, 2}, .vn = {-1, -1, -1}, .vt = {-1, -1, -1}}};
-static struct material lt_materials[2];
-static struct sphere lt_spheres[2];
-static struct quad lt_quads[1];
-static struct light lt_lights[4];
-
-static struct scene light_scene(void)
-{
-    lt_materials[0] = (struct material){.kind = MAT_DIFFUSE, .Le = v3(1.0f, 2.0f, 3.0f),
-                                        .two_sided_emission = true};
-    lt_materials[1] = (struct material){.kind = MAT_DIFFUSE, .Le = v3(0.5f, 0.5f, 0.5f),
-                                        .two_sided_emission = true};
-    lt_spheres[0] = (struct sphere){.center = v3(0.5f, 0.3f, 2.5f), .radius = 0.7f};
-    lt_spheres[1] = (struct sphere){.center = v3(0.1f, -0.2f, 0.2f), .radius = 1.0f,
-                                    .mat_idx = 1};
-    lt_quads[0] = (struct quad){.corner = v3(-0.5f, -2.0f, 0.3f), .e1 = v3(1.0f, 0.0f, 0.2f),
-                                .e2 = v3(0.0f, 0.3f, 1.0f)};
-    lt_lights[0] = (struct light){.kind = LIGHT_TRIANGLE, .prim_idx = 0};
-    lt_lights[1] = (struct light){.kind = LIGHT_QUAD, .prim_idx = 0};
-    lt_lights[2] = (struct light){.kind = LIGHT_SPHERE, .prim_idx = 0};
-    lt_lights[3] = (struct light){.kind = LIGHT_SPHERE, .prim_idx = 1};
-    struct scene s = {
-        .camera = {.eye = v3(0, 0, 5), .look_at = v3(0, 0, 0), .up = v3(0, 1, 0),
-                   .fov_deg = 40.0f},
-        .width = 4, .height = 4,
-        .materials = lt_materials, .n_materials = 2,
-        .positions = lt_positions, .n_positions = 3,
-        .tris = lt_tris, .n_tris = 1,
-        .spheres = lt_spheres, .n_spheres = 2,
-        .quads = lt_quads, .n_quads = 1,
-        .lights = lt_lights, .n_lights = 4,
-        .sky = {.kind = SKY_GRADIENT, .horizon = v3(1, 1, 1), .zenith = v3(0.2f, 0.3f, 1.0f)},
-    };
-    return s;
-}
-
-struct light_ctx {
-    const struct trace_scene *ts;
-    uint32_t light_idx;
-    struct surface ref;
-    vec3 n_sky;
-};
-
-static bool light_draw(void *ctx, const float u[3], vec3 *w)
-{
-    struct light_ctx *c = ctx;
-    struct trace_light_sample ls;
-    if (!trace_sample_light(c->ts, c->light_idx, &c->ref, c->n_sky, (vec2){u[0], u[1]}, &ls))
-        return false;
-    *w = ls.wi;
-    return true;
-}
-
-static double light_density(void *ctx, vec3 w)
-{
-    struct light_ctx *c = ctx;
-    return trace_light_pdf(c->ts, c->light_idx, &c->ref, c->n_sky, w);
-}
-
-/* Chi-square (tests/chi2.h) of the directions trace_sample_light draws against
- * trace_light_pdf, for a triangle and a quad (uniform area, converted to solid angle), a sphere
- * seen from outside (cone sampling) and from inside (uniform area), and the sky (cosine about
- * n_sky); each pdf integrates to 1 (Bonferroni over the 5 tests). */
-Test(trace, chi2_light_sampling, .timeout = 60)
-{
-    struct scene s = light_scene();
-    struct mcpt_error err;
-    struct trace_scene *ts = trace_prepare(&s, 1, &err);
-    cr_assert(ts, "%s", err.msg);
-    cr_assert_eq(trace_n_lights(ts), 5u, "four lights and the sky");
-    struct surface ref = {.p = v3(0, 0, 0), .p_error = v3(0, 0, 0), .ng = v3(0, 0, 1),
-                          .ns = v3(0, 0, 1)};
-    vec3 n_sky = v3_normalize(v3(0.3f, 0.2f, 1.0f));
-    for (uint32_t k = 0; k < 5; k++) {
-        struct light_ctx c = {ts, k, ref, n_sky};
-        struct chi2_spec spec = chi2_sphere(light_draw, light_density, &c);
-        spec.n_samples = 500000;
-        struct chi2_result r;
-        chi2_run(&spec, &r);
-        cr_assert(chi2_accept(&r, 5), "light %u: %s", k, r.msg);
-        cr_assert(fabs(r.pdf_integral - 1.0) < 2e-3, "light %u: pdf integrates to %f", k,
-                  r.pdf_integral);
-    }
-    trace_free(ts);
-}
-
-/* Light selection is proportional to power: pmf_i / pmf_j = Phi_i / Phi_j with Phi = pi A Le
- * per side for the area lights (luminance of Le), and the pmfs sum to 1. */
-Test(trace, light_pmf_proportional_to_power)
-{
-    struct scene s = light_scene();
-    s.sky.kind = SKY_NONE;
-    struct mcpt_error err;
-    struct trace_scene *ts = trace_prepare(&s, 1, &err);
-    cr_assert(ts);
-    cr_assert_eq(trace_n_lights(ts), 4u);
-    vec3 e1 = v3_sub(lt_positions[1], lt_positions[0]);
-    vec3 e2 = v3_sub(lt_positions[2], lt_positions[0]);
-    double lum0 = v3_luminance(lt_materials[0].Le), lum1 = v3_luminance(lt_materials[1].Le);
-    double phi[4] = {
-        2.0 * MCPT_PI * 0.5 * v3_length(v3_cross(e1, e2)) * lum0,
-        2.0 * MCPT_PI * v3_length(v3_cross(lt_quads[0].e1, lt_quads[0].e2)) * lum0,
-        2.0 * MCPT_PI * 4.0 * MCPT_PI * 0.7 * 0.7 * lum0,
-        2.0 * MCPT_PI * 4.0 * MCPT_PI * 1.0 * lum1,
-    };
-    double total = phi[0] + phi[1] + phi[2] + phi[3], pmf_sum = 0.0;
-    for (uint32_t k = 0; k < 4; k++) {
-        cr_assert_float_eq(trace_light_pmf(ts, k), phi[k] / total, 1e-5);
-        pmf_sum += trace_light_pmf(ts, k);
-    }
-    cr_assert_float_eq(pmf_sum, 1.0, 1e-5);
-    trace_free(ts);
-}
-
-/* The alias table (Walker 1977; Vose 1991) picks index i with probability w_i / sum w: over a
- * uniform grid of M values of u the frequencies match the pmfs to within n / M (the picks are
- * unions of intervals of u), zero weights are never picked, and random u pass a chi-square
- * test; all-zero weights give the uniform distribution. */
-Test(trace, alias_table_frequencies)
-{
-    const double w[7] = {1.0, 0.0, 3.0, 0.5, 2.5, 0.0, 1e-3};
-    const uint32_t n = 7;
-    struct sample_alias_bin bins[7];
-    cr_assert(sample_alias_build(w, n, bins));
-    const uint32_t M = 1u << 20;
-    uint64_t count[7] = {0};
-    for (uint32_t k = 0; k < M; k++) {
-        float pmf;
-        uint32_t i = sample_alias_pick(bins, n, ((float)k + 0.5f) / (float)M, &pmf);
-        cr_assert(i < n);
-        cr_assert_eq(pmf, bins[i].pmf);
-        count[i]++;
-    }
-    double total = 7.001;
-    for (uint32_t i = 0; i < n; i++) {
-        cr_assert_float_eq(bins[i].pmf, w[i] / total, 1e-7);
-        cr_assert(fabs((double)count[i] / M - w[i] / total) <= (double)n / M + 1e-6,
-                  "bin %u: frequency %f, pmf %f", i, (double)count[i] / M, w[i] / total);
-        if (w[i] == 0.0)
-            cr_assert_eq(count[i], 0u);
-    }
-    struct pcg32 rng;
-    sample_pcg32_seed(&rng, 17, 4);
-    uint64_t observed[7] = {0};
-    double expected[7];
-    const int draws = 1000000;
-    for (int k = 0; k < draws; k++)
-        observed[sample_alias_pick(bins, n, sample_pcg32_float(&rng), NULL)]++;
-    for (uint32_t i = 0; i < n; i++)
-        expected[i] = draws * w[i] / total;
-    struct chi2_result r;
-    chi2_counts(expected, observed, n, &r);
-    cr_assert(chi2_accept(&r, 1), "%s", r.msg);
-    const double zeros[3] = {0.0, 0.0, 0.0};
-    cr_assert(sample_alias_build(zeros, 3, bins));
-    for (int i = 0; i < 3; i++)
-        cr_assert_float_eq(bins[i].pmf, 1.0f / 3.0f, 1e-7f);
-    const double negative[2] = {1.0, -1.0};
-    cr_assert(!sample_alias_build(negative, 2, bins), "negative weights are refused");
 }
 
 /* ---- the render loop ---- */

@@ -1,9 +1,10 @@
 /* make_fixtures.c - one-off program that wrote the malformed checkpoints in this folder with
- * film_save_checkpoint, then damaged them (see tests/bad/cases.txt for what each must produce).
+ * checkpoint_save, then damaged them (see tests/bad/cases.txt for what each must produce).
  * Not part of the build; kept so the fixtures can be re-made from the repo root:
- *     gcc -std=c11 -D_DEFAULT_SOURCE -I. tests/bad/ckpt/make_fixtures.c film.c -o /tmp/mk
+ *     gcc -std=c11 -D_DEFAULT_SOURCE -I. tests/bad/ckpt/make_fixtures.c checkpoint.c file.c \
+ *         film.c sample.c -lm -o /tmp/mk
  *     /tmp/mk */
-#include "film.h"
+#include "checkpoint.h"
 
 #include <stdlib.h>
 
@@ -41,11 +42,13 @@ static void valid(const char *path, const char *args, uint32_t args_bytes, uint3
         film.pixels[i].sum[0] = film.pixels[i].sum[1] = film.pixels[i].sum[2] = 4.0;
     }
     film.pixels[0].n = n_first;
-    struct film_checkpoint_info info = {.scene_hash = 0x0123456789abcdefull, .spp = 16,
-                                        .max_depth = 4, .args_bytes = args_bytes};
+    struct checkpoint_info info = {.scene_hash = 0x0123456789abcdefull,
+                                   .spp = 16,
+                                   .max_depth = 4,
+                                   .args_bytes = args_bytes};
     snprintf(info.scene_path, sizeof info.scene_path, "tests/data/resume/small.txt");
     memcpy(info.args, args, args_bytes);
-    if (!film_save_checkpoint(path, &film, &info, &err)) {
+    if (!checkpoint_save(path, &film, &info, &err)) {
         fprintf(stderr, "%s\n", err.msg);
         exit(1);
     }

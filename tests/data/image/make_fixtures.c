@@ -7,13 +7,13 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define CHECK(call)                                                                              \
-    do {                                                                                         \
-        exr_result_t rv_ = (call);                                                               \
-        if (rv_ != EXR_ERR_SUCCESS) {                                                            \
-            fprintf(stderr, "%s: %s\n", #call, exr_get_default_error_message(rv_));              \
-            return 1;                                                                            \
-        }                                                                                        \
+#define CHECK(call)                                                                                \
+    do {                                                                                           \
+        exr_result_t rv_ = (call);                                                                 \
+        if (rv_ != EXR_ERR_SUCCESS) {                                                              \
+            fprintf(stderr, "%s: %s\n", #call, exr_get_default_error_message(rv_));                \
+            return 1;                                                                              \
+        }                                                                                          \
     } while (0)
 
 /* Points each encoder channel at its plane: base[k] for the channel named names[k]. */
@@ -123,8 +123,8 @@ static int write_scanline(void)
     CHECK(exr_initialize_required_attr(ctx, part, &dw, &dw, 1.0f, &center, 1.0f,
                                        EXR_LINEORDER_INCREASING_Y, EXR_COMPRESSION_RLE));
     for (int c = 0; c < 3; c++)
-        CHECK(exr_add_channel(ctx, part, names[c], EXR_PIXEL_HALF, EXR_PERCEPTUALLY_LOGARITHMIC,
-                              1, 1));
+        CHECK(exr_add_channel(ctx, part, names[c], EXR_PIXEL_HALF, EXR_PERCEPTUALLY_LOGARITHMIC, 1,
+                              1));
     CHECK(exr_write_header(ctx));
     float *plane[3];
     for (int c = 0; c < 3; c++)
@@ -159,7 +159,4 @@ static int write_scanline(void)
     return 0;
 }
 
-int main(void)
-{
-    return write_tiled() || write_scanline();
-}
+int main(void) { return write_tiled() || write_scanline(); }

@@ -11,9 +11,9 @@
  * (E1 = 1, E5 = (1 - mu)^5), which material.c evaluates exactly; mu = 0 is computed at
  * mu = 1e-4 (the limit; 0 itself divides by zero).  The sample weights do not involve D, so
  * the table depends only on G1, G2 and the VNDF warp.
- * Run from the repository root (takes a few minutes; -D_DEFAULT_SOURCE as the Makefile uses):
- *   gcc -std=c11 -D_DEFAULT_SOURCE -O2 -I. tests/data/trace/ggx_albedo_gen.c material.c sample.c \
- *       -lm -o /tmp/ggx_gen && /tmp/ggx_gen > material_ggx_table.inc */
+ * Run `make ggx-table` from the repository root (about 20 s); it does the equivalent of
+ *   cc -std=c11 -D_DEFAULT_SOURCE -O2 -I. tests/data/trace/ggx_albedo_gen.c material.c sample.c \
+ *       -lm -o build/ggx_albedo_gen && build/ggx_albedo_gen > material_ggx_table.inc */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -22,9 +22,9 @@
 
 #define N_R 32
 #define N_MU 32
-#define GEN_TOL 1e-5      /* absolute tolerance of each integral */
-#define SAFETY 3.0        /* nodes are raised by SAFETY times the largest shortfall seen */
-#define MU_MIN 1e-4       /* where mu = 0 is evaluated */
+#define GEN_TOL 1e-5 /* absolute tolerance of each integral */
+#define SAFETY 3.0   /* nodes are raised by SAFETY times the largest shortfall seen */
+#define MU_MIN 1e-4  /* where mu = 0 is evaluated */
 
 struct ctx {
     vec3 wo;

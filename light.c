@@ -1,0 +1,360 @@
+/* light.c - the light table: each light's emitted power, the pick by power, and per light the
+ * sampling of a direction from a reference point and its solid-angle density.
+ * Lights: emissive triangles, quads and spheres (area lights: their shape samples the point,
+ * shape.c), point lights (delta) and the sky (cosine-weighted about the shading normal).
+ * Picking: Walker's alias method over the powers, pmf_i = Phi_i / sum Phi (PBRT 4e, ch. 12,
+ * "Light Sampling", power light sampler).  Sampling and densities: PBRT 4e, ch. 12, "Light
+ * Sources" (SampleLi, PDF_Li); every density returned is per unit solid angle.  This file traces
+ * no ray: the integrator (trace.c) turns a sample into a shadow ray. */
+#include "light.h"
+
+#include <stdlib.h>
+
+struct light_table {
+    const struct scene *scene;
+    struct sample_alias_bin *bins; /* n_lights entries: pick a light by power */
+    uint32_t n_lights;             /* scene->n_lights, plus 1 for the sky when it is not black */
+    uint32_t sky_idx;              /* light index of the sky (the last), or LIGHT_NONE */
+    uint32_t *tri_light;           /* light index of each triangle, or LIGHT_NONE */
+    uint32_t *quad_light;          /* light index of each quad, or LIGHT_NONE */
+    uint32_t *sphere_light;        /* light index of each sphere, or LIGHT_NONE */
+};
+
+vec3 light_sky_radiance(const struct sky *sky, vec3 d)
+{
+    switch (sky->kind) {
+    case SKY_NONE:
+        return v3_splat(0.0f);
+    case SKY_CONSTANT:
+        return sky->radiance;
+    case SKY_GRADIENT: {
+        float s = fmaxf(0.0f, d.y); /* lerp(horizon, zenith, max(d.y, 0)) */
+        return v3_add(v3_scale(sky->horizon, 1.0f - s), v3_scale(sky->zenith, s));
+    }
+    }
+    return v3_splat(0.0f);
+}
+
+static void triangle_corners(const struct scene *scene, uint32_t tri_idx, vec3 p[3])
+{
+    for (int k = 0; k < 3; k++)
+        p[k] = scene->positions[scene->tris[tri_idx].v[k]];
+}
+
+/* ---- power ---- */
+
+/* Emitted power (luminance) of a scene light, for light selection: Phi = pi A Le per emitting
+ * side of an area light, Phi = 4 pi I for a point light.  *area receives A (0 for a point). */
+static double light_power(const struct scene *scene, const struct light *l, double *area)
+{
+    const struct material *m;
+    vec3 p[3];
+    *area = 0.0;
+    switch (l->kind) {
+    case LIGHT_TRIANGLE:
+        m = &scene->materials[scene->tris[l->prim_idx].mat_idx];
+        triangle_corners(scene, l->prim_idx, p);
+        *area = shape_triangle_area(p, NULL);
+        break;
+    case LIGHT_QUAD:
+        m = &scene->materials[scene->quads[l->prim_idx].mat_idx];
+        *area = v3_length(v3_cross(scene->quads[l->prim_idx].e1, scene->quads[l->prim_idx].e2));
+        break;
+    case LIGHT_SPHERE: {
+        const struct sphere *s = &scene->spheres[l->prim_idx];
+        m = &scene->materials[s->mat_idx];
+        *area = 4.0 * MCPT_PI * (double)s->radius * s->radius;
+        break;
+    }
+    case LIGHT_POINT:
+        return 4.0 * MCPT_PI * v3_luminance(l->intensity); /* Phi = 4 pi I */
+    default:
+        return 0.0;
+    }
+    double sides = m->two_sided_emission ? 2.0 : 1.0;
+    return MCPT_PI * *area * sides * v3_luminance(m->Le);
+}
+
+/* Power of the sky as PBRT 4e counts an infinite light's (ch. 12, "Uniform Infinite Lights"):
+ * Phi = 4 pi^2 r^2 L_avg for the scene's bounding sphere of radius r; a gradient sky's average
+ * over the sphere is 3/4 horizon + 1/4 zenith (the mean of max(d.y, 0) is 1/4). */
+static double sky_power(const struct sky *sky, double radius)
+{
+    vec3 avg = sky->kind == SKY_CONSTANT
+                   ? sky->radiance
+                   : v3_add(v3_scale(sky->horizon, 0.75f), v3_scale(sky->zenith, 0.25f));
+    return 4.0 * MCPT_PI * MCPT_PI * radius * radius * v3_luminance(avg);
+}
+
+/* Radius of a bounding sphere of the scene's finite geometry, point lights and camera (planes
+ * are infinite and left out); 1 when there is nothing to bound. */
+static double scene_radius(const struct scene *scene)
+{
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+#define GROW(P, R)                                                                                 \
+    do {                                                                                           \
+        vec3 p_ = (P);                                                                             \
+        double r_ = (R);                                                                           \
+        for (int k_ = 0; k_ < 3; k_++) {                                                           \
+            lo[k_] = fmin(lo[k_], v3_get(p_, k_) - r_);                                            \
+            hi[k_] = fmax(hi[k_], v3_get(p_, k_) + r_);                                            \
+        }                                                                                          \
+    } while (0)
+    for (uint32_t i = 0; i < scene->n_positions; i++)
+        GROW(scene->positions[i], 0.0);
+    for (uint32_t i = 0; i < scene->n_spheres; i++)
+        GROW(scene->spheres[i].center, scene->spheres[i].radius);
+    for (uint32_t i = 0; i < scene->n_quads; i++) {
+        const struct quad *q = &scene->quads[i];
+        GROW(q->corner, 0.0);
+        GROW(v3_add(q->corner, v3_add(q->e1, q->e2)), 0.0);
+        GROW(v3_add(q->corner, q->e1), 0.0);
+        GROW(v3_add(q->corner, q->e2), 0.0);
+    }
+    for (uint32_t i = 0; i < scene->n_lights; i++)
+        if (scene->lights[i].kind == LIGHT_POINT)
+            GROW(scene->lights[i].position, 0.0);
+    GROW(scene->camera.eye, 0.0);
+#undef GROW
+    double d2 = 0.0;
+    for (int k = 0; k < 3; k++)
+        d2 += (hi[k] - lo[k]) * (hi[k] - lo[k]);
+    double r = 0.5 * sqrt(d2);
+    return r > 0.0 && isfinite(r) ? r : 1.0;
+}
+
+/* The bad-input error for scene light l whose power Phi (area A) is not finite: the scene
+ * records no file position for a primitive, so the message names the emitter by kind, index,
+ * material and a corner. */
+static void power_error(const struct scene *scene, const struct light *l, double phi, double area,
+                        struct mcpt_error *err)
+{
+    const char *kind = l->kind == LIGHT_TRIANGLE ? "triangle" : "quad";
+    uint32_t mat_idx;
+    vec3 corner;
+    if (l->kind == LIGHT_TRIANGLE) {
+        mat_idx = scene->tris[l->prim_idx].mat_idx;
+        corner = scene->positions[scene->tris[l->prim_idx].v[0]];
+    } else {
+        mat_idx = scene->quads[l->prim_idx].mat_idx;
+        corner = scene->quads[l->prim_idx].corner;
+    }
+    char got[64];
+    if (!isfinite(area))
+        snprintf(got, sizeof got, "an area beyond float range");
+    else
+        snprintf(got, sizeof got, "power %g", phi);
+    mcpt_error_set(err, "", 0, 0,
+                   "emissive %s %u (material '%s', corner %g,%g,%g): expected an emitter of "
+                   "finite power pi A Le, got %s",
+                   kind, l->prim_idx, scene->materials[mat_idx].name, (double)corner.x,
+                   (double)corner.y, (double)corner.z, got);
+}
+
+/* ---- the table ---- */
+
+struct light_table *light_table_build(const struct scene *scene, struct mcpt_error *err)
+{
+    double *power = NULL;
+    struct light_table *lt = calloc(1, sizeof *lt);
+    if (!lt)
+        goto oom;
+    lt->scene = scene;
+    /* the scene's lights, then the sky if it shines */
+    bool has_sky = scene->sky.kind != SKY_NONE && sky_power(&scene->sky, 1.0) > 0.0;
+    lt->n_lights = scene->n_lights + (has_sky ? 1u : 0u);
+    lt->sky_idx = has_sky ? scene->n_lights : LIGHT_NONE;
+    lt->tri_light = malloc(sizeof(uint32_t) * ((size_t)scene->n_tris + 1));
+    lt->quad_light = malloc(sizeof(uint32_t) * ((size_t)scene->n_quads + 1));
+    lt->sphere_light = malloc(sizeof(uint32_t) * ((size_t)scene->n_spheres + 1));
+    lt->bins = malloc(sizeof(struct sample_alias_bin) * ((size_t)lt->n_lights + 1));
+    power = malloc(sizeof(double) * ((size_t)lt->n_lights + 1));
+    if (!lt->tri_light || !lt->quad_light || !lt->sphere_light || !lt->bins || !power)
+        goto oom;
+    for (uint32_t i = 0; i < scene->n_tris; i++)
+        lt->tri_light[i] = LIGHT_NONE;
+    for (uint32_t i = 0; i < scene->n_quads; i++)
+        lt->quad_light[i] = LIGHT_NONE;
+    for (uint32_t i = 0; i < scene->n_spheres; i++)
+        lt->sphere_light[i] = LIGHT_NONE;
+
+    /* light selection proportional to emitted power: pmf_i = Phi_i / sum Phi (alias table) */
+    for (uint32_t i = 0; i < scene->n_lights; i++) {
+        const struct light *l = &scene->lights[i];
+        if (l->kind == LIGHT_TRIANGLE)
+            lt->tri_light[l->prim_idx] = i;
+        else if (l->kind == LIGHT_QUAD)
+            lt->quad_light[l->prim_idx] = i;
+        else if (l->kind == LIGHT_SPHERE)
+            lt->sphere_light[l->prim_idx] = i;
+        double area;
+        power[i] = light_power(scene, l, &area);
+        if (!isfinite(power[i])) {
+            power_error(scene, l, power[i], area, err);
+            goto fail;
+        }
+    }
+    if (has_sky)
+        power[lt->sky_idx] = sky_power(&scene->sky, scene_radius(scene));
+    if (lt->n_lights > 0 && !sample_alias_build(power, lt->n_lights, lt->bins))
+        goto oom; /* the powers are finite and >= 0: only memory can fail */
+    free(power);
+    return lt;
+oom:
+    mcpt_error_runtime(err, NULL, "out of memory building the light table");
+fail:
+    free(power);
+    light_table_free(lt);
+    return NULL;
+}
+
+void light_table_free(struct light_table *lt)
+{
+    if (!lt)
+        return;
+    free(lt->bins);
+    free(lt->tri_light);
+    free(lt->quad_light);
+    free(lt->sphere_light);
+    free(lt);
+}
+
+uint32_t light_count(const struct light_table *lt) { return lt->n_lights; }
+
+uint32_t light_sky_idx(const struct light_table *lt) { return lt->sky_idx; }
+
+uint32_t light_idx_of(const struct light_table *lt, enum light_kind kind, uint32_t prim_idx)
+{
+    switch (kind) {
+    case LIGHT_TRIANGLE:
+        return lt->tri_light[prim_idx];
+    case LIGHT_QUAD:
+        return lt->quad_light[prim_idx];
+    case LIGHT_SPHERE:
+        return lt->sphere_light[prim_idx];
+    case LIGHT_POINT:
+        break;
+    }
+    return LIGHT_NONE;
+}
+
+bool light_is_delta(const struct light_table *lt, uint32_t light_idx)
+{
+    return light_idx < lt->scene->n_lights && lt->scene->lights[light_idx].kind == LIGHT_POINT;
+}
+
+uint32_t light_pick(const struct light_table *lt, float u, float *pmf)
+{
+    return sample_alias_pick(lt->bins, lt->n_lights, u, pmf);
+}
+
+float light_pmf(const struct light_table *lt, uint32_t light_idx)
+{
+    return light_idx < lt->n_lights ? lt->bins[light_idx].pmf : 0.0f;
+}
+
+/* ---- sampling and densities, per kind of light ---- */
+
+/* The sky: wi cosine-weighted about n_sky, pdf_sa = cos theta / pi. */
+static bool sample_sky(const struct sky *sky, vec3 n_sky, vec2 u, struct light_sample *ls)
+{
+    vec3 t, b;
+    v3_basis(n_sky, &t, &b);
+    vec3 w = sample_cosine_hemisphere(u);
+    ls->wi = v3_normalize(v3_from_local(w, t, b, n_sky));
+    ls->pdf_sa = pdf_cosine_hemisphere(w.z);
+    ls->Le = light_sky_radiance(sky, ls->wi);
+    ls->is_delta = false;
+    ls->is_infinite = true;
+    return ls->pdf_sa > 0.0f && !v3_is_zero(ls->Le);
+}
+
+/* A point light: the one direction to it, Le = I / r^2 (PBRT 4e, ch. 12, "Point Lights"). */
+static bool sample_point(const struct light *l, const struct surface *ref, struct light_sample *ls)
+{
+    vec3 d = v3_sub(l->position, ref->p);
+    float dist2 = v3_dot(d, d);
+    if (!(dist2 > 0.0f))
+        return false;
+    ls->wi = v3_scale(d, 1.0f / sqrtf(dist2));
+    ls->Le = v3_scale(l->intensity, 1.0f / dist2);
+    ls->pdf_sa = 0.0f;
+    ls->is_delta = true;
+    ls->is_infinite = false;
+    ls->p = l->position;
+    ls->p_error = v3_splat(0.0f);
+    ls->n = v3_splat(0.0f);
+    return true;
+}
+
+bool light_sample(const struct light_table *lt, uint32_t light_idx, const struct surface *ref,
+                  vec3 n_sky, vec2 u, struct light_sample *ls)
+{
+    const struct scene *scene = lt->scene;
+    if (light_idx == lt->sky_idx)
+        return sample_sky(&scene->sky, n_sky, u, ls);
+    if (light_idx >= scene->n_lights)
+        return false;
+    const struct light *l = &scene->lights[light_idx];
+    /* an area light: its shape samples the point and gives pdf_sa (shape.c) */
+    struct shape_sample ss;
+    uint32_t mat_idx;
+    bool ok;
+    switch (l->kind) {
+    case LIGHT_POINT:
+        return sample_point(l, ref, ls);
+    case LIGHT_TRIANGLE: {
+        vec3 p[3];
+        triangle_corners(scene, l->prim_idx, p);
+        ok = shape_triangle_sample(p, ref, u, &ss);
+        mat_idx = scene->tris[l->prim_idx].mat_idx;
+        break;
+    }
+    case LIGHT_QUAD:
+        ok = shape_quad_sample(&scene->quads[l->prim_idx], ref, u, &ss);
+        mat_idx = scene->quads[l->prim_idx].mat_idx;
+        break;
+    case LIGHT_SPHERE:
+        ok = shape_sphere_sample(&scene->spheres[l->prim_idx], ref, u, &ss);
+        mat_idx = scene->spheres[l->prim_idx].mat_idx;
+        break;
+    default:
+        return false;
+    }
+    if (!ok)
+        return false;
+    ls->wi = ss.wi;
+    ls->pdf_sa = ss.pdf_sa;
+    ls->Le = mat_emission(&scene->materials[mat_idx], ss.n, v3_neg(ss.wi));
+    ls->is_delta = false;
+    ls->is_infinite = false;
+    ls->p = ss.p;
+    ls->p_error = ss.p_error;
+    ls->n = ss.n;
+    return !v3_is_zero(ls->Le);
+}
+
+float light_pdf(const struct light_table *lt, uint32_t light_idx, const struct surface *ref,
+                vec3 n_sky, const struct surface *on, vec3 wi)
+{
+    const struct scene *scene = lt->scene;
+    if (light_idx == lt->sky_idx)
+        return pdf_cosine_hemisphere(fmaxf(0.0f, v3_dot(wi, n_sky)));
+    if (light_idx >= scene->n_lights)
+        return 0.0f;
+    const struct light *l = &scene->lights[light_idx];
+    switch (l->kind) {
+    case LIGHT_TRIANGLE: {
+        vec3 p[3];
+        triangle_corners(scene, l->prim_idx, p);
+        return shape_triangle_pdf(p, ref, on, wi);
+    }
+    case LIGHT_QUAD:
+        return shape_quad_pdf(&scene->quads[l->prim_idx], ref, on, wi);
+    case LIGHT_SPHERE:
+        return shape_sphere_pdf(&scene->spheres[l->prim_idx], ref, on, wi);
+    case LIGHT_POINT:
+        break;
+    }
+    return 0.0f; /* a delta light: no direction found otherwise has it */
+}

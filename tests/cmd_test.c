@@ -1,0 +1,113 @@
+/* tests/cmd_test.c - cmd.c: the command-line helpers and the subcommands' exit statuses.  Numbers
+ * are parsed strictly (the whole word, in range, no sign or space); a usage error reads
+ * "mcpt: error: <msg> (see mcpt --help)" and keeps the hint whatever the message's length;
+ * cmd_fail prints one line and returns 2 for bad input and 1 for a runtime error; through the
+ * binary, each subcommand exits 0 for --help, 2 for bad usage or bad input and 1 for a write
+ * that fails.  The metrics, the laboratory and the merge themselves are tested with their
+ * modules (tests/stats_test.c, tests/partial_test.c). */
+#include <criterion/criterion.h>
+
+#include "cmd.h"
+#include "test_util.h"
+
+Test(cmd, numbers_are_parsed_strictly)
+{
+    uint64_t v;
+    cr_assert(cmd_parse_u64("42", 1, 100, &v) && v == 42);
+    cr_assert(cmd_parse_u64("18446744073709551615", 0, UINT64_MAX, &v) && v == UINT64_MAX);
+    const char *bad[] = {"", "-1", "+1", " 1", "1 ", "1x", "0x10", "101", "18446744073709551616"};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++)
+        cr_assert_not(cmd_parse_u64(bad[i], 1, 100, &v), "'%s'", bad[i]);
+    float f;
+    cr_assert(cmd_parse_float("-0.5", -1.0f, 1.0f, &f) && f == -0.5f);
+    const char *bad_f[] = {"", "nan", "inf", "1e39", "2", "0.5x"};
+    for (size_t i = 0; i < sizeof bad_f / sizeof bad_f[0]; i++)
+        cr_assert_not(cmd_parse_float(bad_f[i], -1.0f, 1.0f, &f), "'%s'", bad_f[i]);
+}
+
+/* The kind of the error decides the status; the line is mcpt_error_format's. */
+Test(cmd, fail_maps_kinds_to_exit_statuses)
+{
+    struct mcpt_error err;
+    cr_assert_not(cmd_usage_error(&err, "expected %s, got %d", "one", 2));
+    char line[1024];
+    mcpt_error_format(&err, line, sizeof line);
+    cr_assert_str_eq(line, "mcpt: error: expected one, got 2 (see mcpt --help)");
+    cr_assert_eq(err.kind, MCPT_ERROR_INPUT);
+    static char word[2000];
+    memset(word, 'w', sizeof word - 1);
+    cr_assert_not(cmd_usage_error(&err, "expected a number, got '%s'", word));
+    size_t len = strlen(err.msg);
+    cr_assert(len > 200 && strcmp(err.msg + len - 18, " (see mcpt --help)") == 0, "%s", err.msg);
+
+    FILE *saved = stderr;
+    stderr = fopen("/dev/null", "w");
+    cr_assert_eq(cmd_fail(&err), CMD_EXIT_INPUT);
+    mcpt_error_runtime(&err, "out.exr", "cannot write: %s", "No space left on device");
+    cr_assert_eq(cmd_fail(&err), CMD_EXIT_RUNTIME);
+    mcpt_error_set(&err, "scene.txt", 3, 7, "expected 3 numbers after 'v', got 2");
+    cr_assert_eq(cmd_fail(&err), CMD_EXIT_INPUT);
+    fclose(stderr);
+    stderr = saved;
+}
+
+static char tmpdir[256];
+
+static void setup(void) { test_make_dir(tmpdir, sizeof tmpdir, "cmd"); }
+static void teardown(void) { test_remove_dir(tmpdir); }
+
+/* Runs mcpt with args; returns the exit status and the first line of stderr in err_out. */
+static int run_mcpt(const char *const *args, char *err_out, size_t err_bytes)
+{
+    char err_path[300];
+    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
+    int rc = test_run_mcpt(args, NULL, err_path, 60);
+    test_read_file(err_path, err_out, err_bytes);
+    return rc;
+}
+
+/* Each subcommand: --help 0; an unknown option, a missing file 2; a write into a missing folder
+ * 1, with one line naming the file. */
+Test(cmd, subcommand_exit_statuses, .init = setup, .fini = teardown, .timeout = 60)
+{
+    char img[300], bad_out[300], part[300], err[4096], want[400];
+    snprintf(img, sizeof img, "%s/img.exr", tmpdir);
+    snprintf(part, sizeof part, "%s/part.exr", tmpdir);
+    snprintf(bad_out, sizeof bad_out, "%s/no/such/dir/out.png", tmpdir);
+    const char *render[] = {"tests/data/cli/tiny.txt", "--spp", "2", "--quiet", "-o", img, NULL};
+    cr_assert_eq(run_mcpt(render, err, sizeof err), 0, "%s", err);
+    const char *render_part[] = {"tests/data/cli/tiny.txt",
+                                 "--spp",
+                                 "2",
+                                 "--sample-range",
+                                 "0:2",
+                                 "--quiet",
+                                 "-o",
+                                 part,
+                                 NULL};
+    cr_assert_eq(run_mcpt(render_part, err, sizeof err), 0, "%s", err);
+
+    const char *help[][3] = {{"compare", "--help", NULL},
+                             {"integrate", "--help", NULL},
+                             {"merge", "--help", NULL}};
+    for (int i = 0; i < 3; i++)
+        cr_assert_eq(run_mcpt(help[i], err, sizeof err), 0, "%s --help: %s", help[i][0], err);
+    const char *usage[][4] = {{"compare", "--bogus", NULL},
+                              {"integrate", "--bogus", NULL},
+                              {"merge", "--bogus", NULL},
+                              {"compare", img, "missing.exr", NULL},
+                              {"merge", "missing.exr", "-o", NULL}};
+    for (int i = 0; i < 5; i++)
+        cr_assert_eq(run_mcpt(usage[i], err, sizeof err), 2, "%s %s: %s", usage[i][0], usage[i][1],
+                     err);
+
+    const char *heat[] = {"compare", img, img, "--heatmap", bad_out, NULL};
+    cr_assert_eq(run_mcpt(heat, err, sizeof err), 1, "%s", err);
+    snprintf(want, sizeof want, "%s: error: cannot write: No such file or directory\n", bad_out);
+    cr_assert_str_eq(err, want);
+    snprintf(bad_out, sizeof bad_out, "%s/no/such/dir/merged.exr", tmpdir);
+    const char *merge[] = {"merge", part, "-o", bad_out, NULL};
+    cr_assert_eq(run_mcpt(merge, err, sizeof err), 1, "%s", err);
+    snprintf(want, sizeof want, "%s: error: cannot write: No such file or directory\n", bad_out);
+    cr_assert_str_eq(err, want);
+}
