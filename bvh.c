@@ -72,20 +72,20 @@
 /* What the build knows of one triangle, or of the part of one that a spatial split left on one
  * side of its plane: its box (the centre is derived from it). */
 struct prim_ref {
-    float min[3];      /* lower corner of the box of the stored vertices */
-    uint32_t prim_idx; /* the caller's index of the triangle */
-    float max[3];      /* upper corner */
+    float min[3];           /* lower corner of the box of the stored vertices */
+    uint32_t prim_idx;      /* the caller's index of the triangle */
+    float max[3];           /* upper corner */
     uint32_t is_degenerate; /* 1 for a zero-area triangle (dropped from the wide layout) */
-}; /* 32 bytes */
+};                          /* 32 bytes */
 
 struct bin {
     struct box box; /* union of the boxes of the triangles whose centre falls in the bin */
     uint32_t n;     /* number of those triangles */
-}; /* 36 bytes */
+};                  /* 36 bytes */
 
 struct bins {
     struct bin b[3][BVH_N_BINS]; /* per axis */
-}; /* 1728 bytes */
+};                               /* 1728 bytes */
 
 /* A node waiting to be built: refs[begin, end) at depth, with the bounds of the refs' boxes
  * and of their centres (computed while the parent partitioned them); refs[end, cap) are spare
@@ -99,22 +99,22 @@ struct build_task {
     uint32_t node_base;       /* parallel subtrees: first node index of its reserved range */
     struct box bounds;        /* of the refs' boxes */
     struct box centre_bounds; /* of their centres */
-}; /* 88 bytes */
+};                            /* 88 bytes */
 
 /* A split candidate: sah_sum = A_L N_L + A_R N_R (half areas), the part of C_split that varies. */
 struct split {
     int axis;      /* 0, 1, 2; -1 when no candidate separates the centres */
     int bin;       /* the left child takes bins 0..bin */
     float sah_sum; /* A_L * N_L + A_R * N_R */
-}; /* 12 bytes */
+};                 /* 12 bytes */
 
 struct build_ctx {
-    struct prim_ref *refs;   /* the refs, permuted into BVH order by the build (with gaps) */
-    struct bvh_node *nodes;  /* node array being written */
-    int n_threads;           /* 1 .. BVH_MAX_THREADS */
-    bool spatial;            /* spatial splits (BVH_QUALITY_SPATIAL) */
-    float min_overlap;       /* half area of overlap that tries a spatial split */
-    const vec3 *positions;   /* the caller's mesh, for clipping triangles */
+    struct prim_ref *refs;  /* the refs, permuted into BVH order by the build (with gaps) */
+    struct bvh_node *nodes; /* node array being written */
+    int n_threads;          /* 1 .. BVH_MAX_THREADS */
+    bool spatial;           /* spatial splits (BVH_QUALITY_SPATIAL) */
+    float min_overlap;      /* half area of overlap that tries a spatial split */
+    const vec3 *positions;  /* the caller's mesh, for clipping triangles */
     const uint32_t *indices;
 };
 
@@ -205,8 +205,8 @@ static void bins_clear(struct bins *bins)
  * three bin indices are each one 4-lane vector operation (lane 3 is zero padding):
  *   k_a = (int) min((c_a - c_min_a) scale_a, N - 1),  which equals min((int) ..., N - 1)
  * (bin_index's form) for the finite, non-negative values met here. */
-static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t begin,
-                      uint32_t end, const struct box *centre_bounds)
+static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t begin, uint32_t end,
+                      const struct box *centre_bounds)
 {
     const v4f c_min = {centre_bounds->min[0], centre_bounds->min[1], centre_bounds->min[2], 0.0f};
     const v4f scale = {bin_scale(centre_bounds, 0), bin_scale(centre_bounds, 1),
@@ -389,21 +389,21 @@ static void range_bounds(const struct prim_ref *refs, uint32_t begin, uint32_t e
  * is left between its children in proportion to their refs.  A cut ref finding no spare slot
  * is unsplit.  All of this depends only on the node's refs, so the tree is still the same for
  * any thread count. */
-#define BVH_N_SPATIAL_BINS 16            /* slabs per axis */
-#define BVH_SPLIT_ALPHA 1e-5f            /* Stich et al. 2009, sec. 4.3: overlap / root area */
-#define BVH_SPLIT_BUDGET 0.25            /* spare refs for copies, fraction of the triangles */
-#define BVH_SPATIAL_MIN_REFS 64          /* smaller nodes: object splits only */
+#define BVH_N_SPATIAL_BINS 16             /* slabs per axis */
+#define BVH_SPLIT_ALPHA 1e-5f             /* Stich et al. 2009, sec. 4.3: overlap / root area */
+#define BVH_SPLIT_BUDGET 0.25             /* spare refs for copies, fraction of the triangles */
+#define BVH_SPATIAL_MIN_REFS 64           /* smaller nodes: object splits only */
 #define BVH_SPATIAL_MIN_NODE_OVERLAP 0.1f /* and overlap / the node's own area, to search */
 
 struct spatial_bin {
     struct box box; /* union of the boxes of the refs' parts inside the slab */
     uint32_t enter; /* refs whose first slab this is */
     uint32_t exit;  /* refs whose last slab this is */
-}; /* 40 bytes */
+};                  /* 40 bytes */
 
 struct spatial_bins {
     struct spatial_bin b[3][BVH_N_SPATIAL_BINS]; /* per axis */
-}; /* 1920 bytes */
+};                                               /* 1920 bytes */
 
 /* The slabs of a node's box: slab k of axis a is [lo + k step, lo + (k + 1) step]. */
 struct slab_grid {
@@ -573,8 +573,8 @@ static void chop_into_bins(struct spatial_bin *bins, const struct slab_grid *g, 
 }
 
 /* Chopped binning of refs[begin, end) into the slabs of g. */
-static void spatial_bins_fill(struct spatial_bins *sb, const struct build_ctx *ctx,
-                              uint32_t begin, uint32_t end, const struct slab_grid *g)
+static void spatial_bins_fill(struct spatial_bins *sb, const struct build_ctx *ctx, uint32_t begin,
+                              uint32_t end, const struct slab_grid *g)
 {
     for (uint32_t i = begin; i < end; i++) {
         const struct prim_ref *r = &ctx->refs[i];
@@ -710,9 +710,8 @@ static struct split spatial_best_split(const struct spatial_bins *sb, const stru
  * [right_begin, right_end) (right_begin >= left_end, right_end <= cap); the spare slots
  * cap - begin - n_L - n_R are shared in proportion to the counts, the right block moving up to
  * make the left one's share. */
-static void place_children(struct prim_ref *refs, const struct build_task *task,
-                           uint32_t left_end, uint32_t right_begin, uint32_t right_end,
-                           struct build_task child[2])
+static void place_children(struct prim_ref *refs, const struct build_task *task, uint32_t left_end,
+                           uint32_t right_begin, uint32_t right_end, struct build_task child[2])
 {
     uint32_t n_l = left_end - task->begin;
     uint32_t n_r = right_end - right_begin;
@@ -974,8 +973,7 @@ static bool build_node(const struct build_ctx *ctx, const struct build_task *tas
 /* Builds the subtree of root depth first from an explicit stack, allocating child pairs from
  * root.node_base on.  Returns the deepest depth reached; *n_next is one past the last node
  * used.  Started at the root with node_base 2, this numbers nodes in the canonical order. */
-static uint32_t build_subtree(const struct build_ctx *ctx, struct build_task root,
-                              uint32_t *n_next)
+static uint32_t build_subtree(const struct build_ctx *ctx, struct build_task root, uint32_t *n_next)
 {
     struct build_task stack[BVH_MAX_DEPTH + 2]; /* one pending right child per level + current */
     int n_stack = 0;
@@ -1326,13 +1324,15 @@ struct bvh *bvh_build_with(const vec3 *positions, const uint32_t *indices, uint3
                            const struct bvh_build_options *opt)
 {
     double t_start_ms = now_ms();
-    struct bvh_build_options o =
-        opt ? *opt : (struct bvh_build_options){1, BVH_LAYOUT_WIDE, BVH_QUALITY_DEFAULT};
+    struct bvh_build_options o = opt ? *opt
+                                     : (struct bvh_build_options){1, BVH_LAYOUT_WIDE,
+                                                                  BVH_QUALITY_DEFAULT};
     unsigned layouts = o.layouts ? o.layouts : BVH_LAYOUT_WIDE;
     if (n_tris >= BVH_WIDE_MAX_TRIS)
         layouts = BVH_LAYOUT_BINARY;
-    int n_threads = o.n_threads < 1 ? 1 : o.n_threads > BVH_MAX_THREADS ? BVH_MAX_THREADS
-                                                                          : o.n_threads;
+    int n_threads = o.n_threads < 1                 ? 1
+                    : o.n_threads > BVH_MAX_THREADS ? BVH_MAX_THREADS
+                                                    : o.n_threads;
     bool spatial = o.quality != BVH_QUALITY_BINNED;
     struct build_ctx ctx = {NULL, NULL, n_threads, spatial, 0.0f, positions, indices};
     uint8_t *degenerate = NULL; /* per binary triangle position, for the conversion */
@@ -1415,7 +1415,6 @@ fail:
 }
 
 unsigned bvh_layouts(const struct bvh *bvh) { return bvh->layouts; }
-
 
 /* ---- Reference traversal ----------------------------------------------------------------------
  * Closest hit: iterative, depth first, nearer child first.  At an interior node both children's
@@ -1622,8 +1621,8 @@ static inline float max_abs3(float a, float b, float c)
 }
 
 /* The double-precision fallback for one triangle's sheared 2D vertices (woop8 uses it too). */
-void bvh_edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx, float Cy,
-                               float *U, float *V, float *W)
+void bvh_edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx, float Cy, float *U,
+                               float *V, float *W)
 {
     double CxBy = (double)Cx * (double)By;
     double CyBx = (double)Cy * (double)Bx;
@@ -1710,8 +1709,8 @@ static bool tri_hit(const struct bvh_tri *tri, const struct ray_pre *rp, float t
  * bit-identical to what the traversals compute for it; among exactly equal t the lowest BVH
  * position wins.  Without the binary layout it walks the wide leaves in their stored order
  * (bvh_wide_brute). */
-void bvh_brute_step(const struct bvh_tri *tri, uint32_t prim, const struct ray_pre *rp,
-                    float t_min, struct bvh_hit *best)
+void bvh_brute_step(const struct bvh_tri *tri, uint32_t prim, const struct ray_pre *rp, float t_min,
+                    struct bvh_hit *best)
 {
     float t;
     float u;

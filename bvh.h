@@ -19,7 +19,7 @@ struct bvh_node {
     uint32_t left_first; /* first child node index (interior) or first triangle (leaf) */
     float max[3];
     uint32_t n_tris; /* triangles in this leaf; 0 for an interior node */
-}; /* 32 bytes */
+};                   /* 32 bytes */
 _Static_assert(sizeof(struct bvh_node) == 32, "bvh_node must be 32 bytes");
 
 struct bvh; /* opaque */
@@ -34,13 +34,13 @@ struct bvh_hit {
 
 struct bvh_stats {
     uint32_t n_tris;
-    uint32_t n_refs;     /* triangle references in the leaves: n_tris plus spatial splits' copies */
-    uint32_t n_nodes;    /* binary nodes (the tree every layout is converted from) */
-    uint32_t n_leaves;   /* binary leaves */
-    uint32_t max_depth;  /* of the binary tree, root = 0 */
-    double sah_cost;     /* SAH cost of the binary tree, in units of one node traversal */
-    double build_ms;     /* wall-clock build time, conversion to the wide layout included */
-    size_t bytes;        /* what the BVH keeps: nodes + triangle data of every layout it carries */
+    uint32_t n_refs;    /* triangle references in the leaves: n_tris plus spatial splits' copies */
+    uint32_t n_nodes;   /* binary nodes (the tree every layout is converted from) */
+    uint32_t n_leaves;  /* binary leaves */
+    uint32_t max_depth; /* of the binary tree, root = 0 */
+    double sah_cost;    /* SAH cost of the binary tree, in units of one node traversal */
+    double build_ms;    /* wall-clock build time, conversion to the wide layout included */
+    size_t bytes;       /* what the BVH keeps: nodes + triangle data of every layout it carries */
     /* the 8-wide layout (0 when the BVH carries none) */
     uint32_t n_wide_nodes;  /* 8-wide nodes */
     uint32_t n_wide_leaves; /* leaves of the wide tree (non-empty binary leaves) */

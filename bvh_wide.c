@@ -41,7 +41,7 @@ struct wide_node {
     _Alignas(64) float bounds[6][BVH_WIDTH]; /* SoA child boxes: min x, max x, min y, ... */
     uint32_t child[BVH_WIDTH];               /* child references; 0 in unused lanes */
     uint32_t order[BVH_WIDTH];               /* per octant, the lanes farthest first (below) */
-}; /* 256 bytes: four cache lines */
+};                                           /* 256 bytes: four cache lines */
 _Static_assert(sizeof(struct wide_node) == 256, "wide_node must be 256 bytes");
 
 /* The children in use fill lanes 0 .. n - 1; a child reference is never 0 (the root is nobody's
@@ -71,7 +71,8 @@ static inline uint32_t wide_n_children(const struct wide_node *w)
  * becomes a small wide subtree of 8-triangle parts.  A first pass counts nodes and triangles so
  * that the arrays are allocated once at their exact size. */
 #define WIDE_COST_NODE 1.0f /* c_node: one wide node visit (eight box tests) */
-#define WIDE_COST_LEAF 1.0f /* c_leaf: one leaf (woop8), in units of c_node; 1.5 and 2.0 gave
+#define WIDE_COST_LEAF                                                                             \
+    1.0f /* c_leaf: one leaf (woop8), in units of c_node; 1.5 and 2.0 gave
                                the same visits per ray within 1% (docs/bvh.md) */
 
 #define CHOICE_FEWER 0   /* C(n, i) = C(n, i - 1) */
@@ -87,20 +88,20 @@ struct collapse_entry {
 }; /* 52 bytes */
 
 struct convert {
-    const struct bvh *bvh;       /* binary tree: nodes, prim_idx */
-    const uint8_t *degenerate;   /* per binary triangle position: zero area, dropped */
+    const struct bvh *bvh;           /* binary tree: nodes, prim_idx */
+    const uint8_t *degenerate;       /* per binary triangle position: zero area, dropped */
     const struct collapse_entry *dp; /* per binary node */
-    const vec3 *positions;       /* the caller's mesh, read again for the leaves */
-    const uint32_t *indices;     /* (the wide leaves keep the same vertices as struct bvh_tri) */
-    struct wide_node *wide;      /* NULL in the counting pass */
-    float *leaf_tris;            /* SoA leaves */
-    uint32_t *prim_idx;          /* of the wide triangles */
-    uint32_t *scratch;           /* valid triangles of one leaf */
-    uint32_t n_wide;             /* nodes allocated so far */
-    uint32_t n_wide_tris;        /* triangles written so far */
-    uint32_t n_leaves;           /* wide leaves */
-    uint32_t depth;              /* current wide depth, root = 0 */
-    uint32_t max_depth;          /* deepest wide node */
+    const vec3 *positions;           /* the caller's mesh, read again for the leaves */
+    const uint32_t *indices; /* (the wide leaves keep the same vertices as struct bvh_tri) */
+    struct wide_node *wide;  /* NULL in the counting pass */
+    float *leaf_tris;        /* SoA leaves */
+    uint32_t *prim_idx;      /* of the wide triangles */
+    uint32_t *scratch;       /* valid triangles of one leaf */
+    uint32_t n_wide;         /* nodes allocated so far */
+    uint32_t n_wide_tris;    /* triangles written so far */
+    uint32_t n_leaves;       /* wide leaves */
+    uint32_t depth;          /* current wide depth, root = 0 */
+    uint32_t max_depth;      /* deepest wide node */
 };
 
 /* Wide depth stays below the binary depth cap plus the levels of one oversized leaf
@@ -473,15 +474,15 @@ struct i8 {
 #endif
 
 /* The scalar forms: r.v[i] = expr for each lane i (a mask lane is -1 where expr holds). */
-#define F8_MAP(expr)                                                                              \
-    struct f8 r;                                                                                  \
-    for (int i = 0; i < 8; i++)                                                                   \
-        r.v[i] = (expr);                                                                          \
+#define F8_MAP(expr)                                                                               \
+    struct f8 r;                                                                                   \
+    for (int i = 0; i < 8; i++)                                                                    \
+        r.v[i] = (expr);                                                                           \
     return r
-#define M8_MAP(expr)                                                                              \
-    struct m8 r;                                                                                  \
-    for (int i = 0; i < 8; i++)                                                                   \
-        r.v[i] = (expr) ? -1 : 0;                                                                 \
+#define M8_MAP(expr)                                                                               \
+    struct m8 r;                                                                                   \
+    for (int i = 0; i < 8; i++)                                                                    \
+        r.v[i] = (expr) ? -1 : 0;                                                                  \
     return r
 
 const char *bvh_simd_name(void) { return BVH_AVX2 ? "avx2" : "scalar"; }
@@ -700,10 +701,10 @@ static inline float f8_hmin(struct f8 a)
 }
 /* Eight uint32 lanes: child references and lane indices, for the ordered push of the single-ray
  * traversal. */
-#define I8_MAP(expr)                                                                              \
-    struct i8 r;                                                                                  \
-    for (int i = 0; i < 8; i++)                                                                   \
-        r.v[i] = (expr);                                                                          \
+#define I8_MAP(expr)                                                                               \
+    struct i8 r;                                                                                   \
+    for (int i = 0; i < 8; i++)                                                                    \
+        r.v[i] = (expr);                                                                           \
     return r
 /* (p[i] >> shift) & 7, p 32-byte aligned: a node's child order for one octant */
 static inline struct i8 i8_order(const uint32_t *p, int shift)
@@ -854,9 +855,8 @@ struct woop8_out {
     struct f8 v; /* W / det */
 };
 
-static void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, struct f8 Bx,
-                               struct f8 By, struct f8 Cx, struct f8 Cy, struct f8 *U,
-                               struct f8 *V, struct f8 *W)
+static void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, struct f8 Bx, struct f8 By,
+                           struct f8 Cx, struct f8 Cy, struct f8 *U, struct f8 *V, struct f8 *W)
 {
     float ax[8], ay[8], bx[8], by[8], cx[8], cy[8], u[8], v[8], w[8];
     f8_store(ax, Ax);
@@ -922,10 +922,10 @@ static inline uint32_t woop8(const struct woop8_in *in, uint32_t valid, struct w
     struct f8 delta_x = f8_mul(f8_set1(mcpt_gamma(5)), f8_add(max_xt, max_z));
     struct f8 delta_y = f8_mul(f8_set1(mcpt_gamma(5)), f8_add(max_yt, max_z));
     struct f8 delta_z = f8_mul(f8_set1(mcpt_gamma(3)), max_zt);
-    struct f8 delta_e = f8_mul(
-        f8_set1(2.0f), f8_add(f8_add(f8_mul(f8_mul(f8_set1(mcpt_gamma(2)), max_xt), max_yt),
-                                     f8_mul(delta_y, max_xt)),
-                              f8_mul(delta_x, max_yt)));
+    struct f8 delta_e = f8_mul(f8_set1(2.0f),
+                               f8_add(f8_add(f8_mul(f8_mul(f8_set1(mcpt_gamma(2)), max_xt), max_yt),
+                                             f8_mul(delta_y, max_xt)),
+                                      f8_mul(delta_x, max_yt)));
     struct f8 delta_t = f8_mul(
         f8_mul(f8_set1(3.0f), f8_add(f8_add(f8_mul(f8_mul(f8_set1(mcpt_gamma(3)), max_e), max_zt),
                                             f8_mul(delta_e, max_zt)),
@@ -962,27 +962,27 @@ struct wide_ray {
     bool fast;          /* the fused form applies (every constant finite) */
     float t_min;
     struct ray_pre *rp; /* for Woop's constants, computed at the first leaf */
-}; /* 104 bytes */
+};                      /* 104 bytes */
 
 /* struct wide_ray broadcast to eight lanes, a local of the traversal loop. */
 struct wide_ray8 {
-    struct f8 o[3];               /* origin, slab order */
-    struct f8 inv_d[3];           /* 1 / d */
-    struct f8 inv_d_far[3];       /* the conservative far-plane factor */
-    struct f8 c_near[3];          /* fused form constants */
+    struct f8 o[3];         /* origin, slab order */
+    struct f8 inv_d[3];     /* 1 / d */
+    struct f8 inv_d_far[3]; /* the conservative far-plane factor */
+    struct f8 c_near[3];    /* fused form constants */
     struct f8 c_far[3];
     struct f8 t_min;
-    struct f8 o_k[3];             /* Woop: o[kx], o[ky], o[kz] (set at the first leaf) */
-    struct f8 sx;                 /* Woop's shear constants */
+    struct f8 o_k[3]; /* Woop: o[kx], o[ky], o[kz] (set at the first leaf) */
+    struct f8 sx;     /* Woop's shear constants */
     struct f8 sy;
     struct f8 sz;
-    int k[3];                     /* kx, ky, kz */
-    size_t near_off[3];           /* byte offsets of the near and far bounds rows in a node */
+    int k[3];           /* kx, ky, kz */
+    size_t near_off[3]; /* byte offsets of the near and far bounds rows in a node */
     size_t far_off[3];
     int order_shift;              /* 3 octant: the ray's child order (struct wide_node) */
     const struct wide_node *wide; /* the node array */
     struct ray_pre *rp;           /* the caller's; Woop's constants go there at the first leaf */
-}; /* 640 bytes with AVX2 */
+};                                /* 640 bytes with AVX2 */
 
 /* The slab test takes max(max(t_0, t_1), max(t_2, t_min)) as a tree, which shortens the chain
  * of dependent instructions per node.  A slab distance is NaN only where inv_d is infinite
@@ -1100,8 +1100,7 @@ static inline struct m8 wide_box_hit(const struct wide_node *node, const struct 
 
 /* woop8 of one ray against the n (1..8) triangles of the leaf at wide triangle `first`. */
 static inline uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint32_t n,
-                                     const struct wide_ray8 *v, float t_max,
-                                     struct woop8_out *out)
+                                     const struct wide_ray8 *v, float t_max, struct woop8_out *out)
 {
     const float *base = bvh->leaf_tris + 9 * (size_t)first;
     struct woop8_in in;
@@ -1121,7 +1120,7 @@ static inline uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint
 
 /* The closest hit so far. */
 struct wide_hit {
-    float t;      /* t_hit, initially the ray's t_max */
+    float t; /* t_hit, initially the ray's t_max */
     float u;
     float v;
     uint32_t tri; /* wide triangle index, UINT32_MAX while none */
@@ -1149,9 +1148,8 @@ static inline uint32_t push_ordered(uint32_t *stack_ref, float *stack_t, uint32_
 }
 
 /* Closest hit below wide reference `root` (a node or a leaf) for t in (t_min, hit->t). */
-static ALWAYS_INLINE void wide_closest(const struct bvh *bvh, uint32_t root,
-                                       struct wide_ray8 *v, struct wide_hit *hit,
-                                       const bool fast)
+static ALWAYS_INLINE void wide_closest(const struct bvh *bvh, uint32_t root, struct wide_ray8 *v,
+                                       struct wide_hit *hit, const bool fast)
 {
     bool woop_ready = false;
     /* a visit pushes at most 7 entries (and writes 8 lanes) */
@@ -1284,8 +1282,8 @@ static bool wide_any_safe(const struct bvh *bvh, uint32_t root, struct wide_ray8
     return wide_any(bvh, root, v, t_max, false);
 }
 
-static inline void wide_closest_ray(const struct bvh *bvh, uint32_t root,
-                                    const struct wide_ray *wr, struct wide_hit *hit)
+static inline void wide_closest_ray(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
+                                    struct wide_hit *hit)
 {
     struct wide_ray8 v;
     wide_ray8_box(bvh, wr, &v);
@@ -1307,8 +1305,8 @@ static inline bool wide_any_ray(const struct bvh *bvh, uint32_t root, const stru
  * them return before the traversal's setup.  The general setup is scalar: ray_setup_box, the
  * reference test box_hit, wide_ray_setup; *wr (which keeps a pointer to *rp) is then ready for
  * wide_closest_ray / wide_any_ray.  Rays with finite constants take wide_ray8_fast first. */
-static inline bool wide_ray_begin(const struct bvh *bvh, const struct ray *ray,
-                                  struct ray_pre *rp, struct wide_ray *wr)
+static inline bool wide_ray_begin(const struct bvh *bvh, const struct ray *ray, struct ray_pre *rp,
+                                  struct wide_ray *wr)
 {
     ray_setup_box(ray, rp);
     float t_entry;
@@ -1327,8 +1325,8 @@ static inline bool wide_ray_begin(const struct bvh *bvh, const struct ray *ray,
  * infinite (the NaN-aware form is needed); otherwise *is_miss says whether the ray misses the
  * tree's box, and if not *v is ready for wide_closest_fast / wide_any_fast. */
 #if BVH_FUSED_SLABS
-static inline bool wide_ray8_fast(const struct bvh *bvh, const struct ray *ray,
-                                  struct ray_pre *rp, struct wide_ray8 *v, bool *is_miss)
+static inline bool wide_ray8_fast(const struct bvh *bvh, const struct ray *ray, struct ray_pre *rp,
+                                  struct wide_ray8 *v, bool *is_miss)
 {
     const float far_scale = 1.0f + 4.0f * mcpt_gamma(3); /* wide_ray_setup's */
     const __m128 zero = _mm_setzero_ps();
@@ -1466,7 +1464,7 @@ struct packet_pre {
     struct f8 o[3];
     struct f8 inv_d[3];
     struct f8 inv_d_far[3];
-    struct f8 c_near[3];  /* the fused slab constants of wide_ray_setup, per lane */
+    struct f8 c_near[3]; /* the fused slab constants of wide_ray_setup, per lane */
     struct f8 c_far[3];
     struct m8 is_neg[3];  /* near plane is max */
     struct m8 k_is[3][2]; /* k_is[j][m]: lane's k[j] == m (m = 0, 1; else 2) */
@@ -1518,8 +1516,8 @@ static void packet_setup(const struct bvh_packet *p, uint32_t active, struct pac
         pp->is_neg[a] = f8_lt(pp->inv_d[a], zero);
         struct f8 o_inv = f8_mul(pp->o[a], pp->inv_d[a]);
         struct f8 o_inv_far = f8_mul(pp->o[a], pp->inv_d_far[a]);
-        pp->c_near[a] = f8_add(o_inv, f8_add(f8_mul(f8_set1(SLAB_BIAS), f8_abs(o_inv)),
-                                             f8_set1(FLT_MIN)));
+        pp->c_near[a] = f8_add(o_inv,
+                               f8_add(f8_mul(f8_set1(SLAB_BIAS), f8_abs(o_inv)), f8_set1(FLT_MIN)));
         pp->c_far[a] = f8_sub(o_inv_far, f8_add(f8_mul(f8_set1(SLAB_BIAS), f8_abs(o_inv_far)),
                                                 f8_set1(FLT_MIN)));
         magnitude = f8_add(magnitude, f8_add(f8_add(f8_abs(pp->inv_d[a]), f8_abs(pp->inv_d_far[a])),
@@ -1604,8 +1602,10 @@ static void packet_setup_woop(struct packet_pre *pp)
 /* Lane `lane` of a packet as one ray (bvh_packet_set's inverse). */
 static struct ray packet_lane(const struct bvh_packet *p, int lane)
 {
-    return (struct ray){{p->o[0][lane], p->o[1][lane], p->o[2][lane]}, p->t_min[lane],
-                        {p->d[0][lane], p->d[1][lane], p->d[2][lane]}, p->t_max[lane]};
+    return (struct ray){{p->o[0][lane], p->o[1][lane], p->o[2][lane]},
+                        p->t_min[lane],
+                        {p->d[0][lane], p->d[1][lane], p->d[2][lane]},
+                        p->t_max[lane]};
 }
 
 /* The single-ray constants of lane `lane`, for the rays that leave the packet (*wr keeps a
@@ -1693,9 +1693,9 @@ static inline struct f8 pick_k(const struct packet_pre *pp, int j, struct f8 x, 
 }
 
 /* woop8 of triangle i of the leaf at `first` (n triangles) against the rays in mask. */
-static inline uint32_t packet_tri_hit(const struct bvh *bvh, uint32_t first, uint32_t n,
-                                      uint32_t i, const struct packet_pre *pp, struct f8 t_max,
-                                      uint32_t mask, struct woop8_out *out)
+static inline uint32_t packet_tri_hit(const struct bvh *bvh, uint32_t first, uint32_t n, uint32_t i,
+                                      const struct packet_pre *pp, struct f8 t_max, uint32_t mask,
+                                      struct woop8_out *out)
 {
     const float *base = bvh->leaf_tris + 9 * (size_t)first;
     struct woop8_in in;
@@ -1724,13 +1724,12 @@ struct packet_entry {
     uint32_t ref;  /* wide reference */
     uint32_t mask; /* rays that hit its box */
     float t_entry; /* smallest entry distance among them */
-}; /* 12 bytes */
+};                 /* 12 bytes */
 
 /* The closest-hit packet loop; `coherent` selects packet_box_hit's form (a constant at each
  * call, so there are two specialised copies). */
-static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh,
-                                             const struct bvh_packet *packet, uint32_t active,
-                                             struct packet_pre *pp, float t_hit[8],
+static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh, const struct bvh_packet *packet,
+                                             uint32_t active, struct packet_pre *pp, float t_hit[8],
                                              struct bvh_packet_hit *hit, const bool coherent)
 {
     float u_hit[8];
@@ -1774,8 +1773,8 @@ static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh,
             const uint32_t base = n_stack;
             for (uint32_t c = 0; c < BVH_WIDTH && node->child[c] != 0; c++) {
                 struct f8 t_entry;
-                uint32_t mask =
-                    packet_box_hit(node, (int)c, pp, t_hit8, &t_entry, coherent) & cur.mask;
+                uint32_t mask = packet_box_hit(node, (int)c, pp, t_hit8, &t_entry, coherent) &
+                                cur.mask;
                 if (!mask)
                     continue;
                 struct f8 t_in = f8_select(m8_from_bits(mask), t_entry, f8_set1(INFINITY));
@@ -1908,8 +1907,8 @@ static ALWAYS_INLINE uint32_t packet_any(const struct bvh *bvh, const struct bvh
             const struct wide_node *node = &bvh->wide[cur.ref];
             for (uint32_t c = 0; c < BVH_WIDTH && node->child[c] != 0; c++) {
                 struct f8 t_entry;
-                uint32_t mask =
-                    packet_box_hit(node, (int)c, pp, t_max8, &t_entry, coherent) & cur.mask;
+                uint32_t mask = packet_box_hit(node, (int)c, pp, t_max8, &t_entry, coherent) &
+                                cur.mask;
                 if (mask)
                     stack[n_stack++] = (struct packet_entry){node->child[c], mask, 0.0f};
             }

@@ -94,10 +94,10 @@ static void embree_free(struct embree *e)
 }
 
 enum embree_method {
-    EMBREE_1,         /* rtcIntersect1 / rtcOccluded1 */
-    EMBREE_8,         /* rtcIntersect8 / rtcOccluded8, 8 consecutive rays a packet */
-    EMBREE_16,        /* rtcIntersect16 / rtcOccluded16, 16 consecutive rays a packet */
-    EMBREE_STREAM,    /* rtcIntersect1M / rtcOccluded1M on EMBREE_STREAM_SIZE rays at a time */
+    EMBREE_1,      /* rtcIntersect1 / rtcOccluded1 */
+    EMBREE_8,      /* rtcIntersect8 / rtcOccluded8, 8 consecutive rays a packet */
+    EMBREE_16,     /* rtcIntersect16 / rtcOccluded16, 16 consecutive rays a packet */
+    EMBREE_STREAM, /* rtcIntersect1M / rtcOccluded1M on EMBREE_STREAM_SIZE rays at a time */
 };
 #define EMBREE_N_METHODS 4
 #define EMBREE_STREAM_SIZE 256
@@ -105,8 +105,7 @@ enum embree_method {
 static const char *const embree_method_names[2][EMBREE_N_METHODS] = {
     {"Embree rtcIntersect1", "Embree rtcIntersect8", "Embree rtcIntersect16",
      "Embree rtcIntersect1M"},
-    {"Embree rtcOccluded1", "Embree rtcOccluded8", "Embree rtcOccluded16",
-     "Embree rtcOccluded1M"},
+    {"Embree rtcOccluded1", "Embree rtcOccluded8", "Embree rtcOccluded16", "Embree rtcOccluded1M"},
 };
 
 struct embree_trace {
@@ -135,56 +134,56 @@ static void set_ray1(struct RTCRay *r, const struct ray *ray)
 }
 
 /* Lane `lane` of an Embree SoA packet of K rays (struct RTCRay8 or RTCRay16). */
-#define SET_RAY_K(r, lane, ray)                                                                   \
-    do {                                                                                          \
-        (r)->org_x[lane] = (ray)->o.x;                                                            \
-        (r)->org_y[lane] = (ray)->o.y;                                                            \
-        (r)->org_z[lane] = (ray)->o.z;                                                            \
-        (r)->tnear[lane] = (ray)->t_min;                                                          \
-        (r)->dir_x[lane] = (ray)->d.x;                                                            \
-        (r)->dir_y[lane] = (ray)->d.y;                                                            \
-        (r)->dir_z[lane] = (ray)->d.z;                                                            \
-        (r)->time[lane] = 0.0f;                                                                   \
-        (r)->tfar[lane] = (ray)->t_max;                                                           \
-        (r)->mask[lane] = UINT32_MAX;                                                             \
-        (r)->id[lane] = 0;                                                                        \
-        (r)->flags[lane] = 0;                                                                     \
+#define SET_RAY_K(r, lane, ray)                                                                    \
+    do {                                                                                           \
+        (r)->org_x[lane] = (ray)->o.x;                                                             \
+        (r)->org_y[lane] = (ray)->o.y;                                                             \
+        (r)->org_z[lane] = (ray)->o.z;                                                             \
+        (r)->tnear[lane] = (ray)->t_min;                                                           \
+        (r)->dir_x[lane] = (ray)->d.x;                                                             \
+        (r)->dir_y[lane] = (ray)->d.y;                                                             \
+        (r)->dir_z[lane] = (ray)->d.z;                                                             \
+        (r)->time[lane] = 0.0f;                                                                    \
+        (r)->tfar[lane] = (ray)->t_max;                                                            \
+        (r)->mask[lane] = UINT32_MAX;                                                              \
+        (r)->id[lane] = 0;                                                                         \
+        (r)->flags[lane] = 0;                                                                      \
     } while (0)
 
 /* rays [i, i + K) (fewer at the end: inactive lanes) through rtcIntersectK / rtcOccludedK */
-#define TRACE_PACKET_K(K)                                                                         \
-    static void embree_trace_##K(const struct embree_trace *tr, struct RTCIntersectContext *ctx,  \
-                                 uint64_t begin, uint64_t end)                                    \
-    {                                                                                             \
-        const struct ray *rays = tr->rays->rays;                                                  \
-        bool occlusion = tr->rays->kind == BENCH_KIND_OCCLUSION;                                  \
-        for (uint64_t i = begin; i < end; i += K) {                                               \
-            _Alignas(64) int valid[K];                                                            \
-            int n = end - i < K ? (int)(end - i) : K;                                             \
-            if (occlusion) {                                                                      \
-                _Alignas(64) struct RTCRay##K r;                                                  \
-                for (int lane = 0; lane < K; lane++) {                                            \
-                    valid[lane] = lane < n ? -1 : 0;                                              \
-                    SET_RAY_K(&r, lane, &rays[i + (uint64_t)(lane < n ? lane : 0)]);              \
-                }                                                                                 \
-                rtcOccluded##K(valid, tr->scene, ctx, &r);                                        \
-                for (int lane = 0; lane < n; lane++)                                              \
-                    tr->prim[i + (uint64_t)lane] = r.tfar[lane] < 0.0f ? 0 : UINT32_MAX;          \
-                continue;                                                                         \
-            }                                                                                     \
-            _Alignas(64) struct RTCRayHit##K rh;                                                  \
-            for (int lane = 0; lane < K; lane++) {                                                \
-                valid[lane] = lane < n ? -1 : 0;                                                  \
-                SET_RAY_K(&rh.ray, lane, &rays[i + (uint64_t)(lane < n ? lane : 0)]);             \
-                rh.hit.geomID[lane] = RTC_INVALID_GEOMETRY_ID;                                    \
-            }                                                                                     \
-            rtcIntersect##K(valid, tr->scene, ctx, &rh);                                          \
-            for (int lane = 0; lane < n; lane++) {                                                \
-                bool is_hit = rh.hit.geomID[lane] != RTC_INVALID_GEOMETRY_ID;                     \
-                tr->prim[i + (uint64_t)lane] = is_hit ? rh.hit.primID[lane] : UINT32_MAX;         \
-                tr->t[i + (uint64_t)lane] = is_hit ? rh.ray.tfar[lane] : 0.0f;                    \
-            }                                                                                     \
-        }                                                                                         \
+#define TRACE_PACKET_K(K)                                                                          \
+    static void embree_trace_##K(const struct embree_trace *tr, struct RTCIntersectContext *ctx,   \
+                                 uint64_t begin, uint64_t end)                                     \
+    {                                                                                              \
+        const struct ray *rays = tr->rays->rays;                                                   \
+        bool occlusion = tr->rays->kind == BENCH_KIND_OCCLUSION;                                   \
+        for (uint64_t i = begin; i < end; i += K) {                                                \
+            _Alignas(64) int valid[K];                                                             \
+            int n = end - i < K ? (int)(end - i) : K;                                              \
+            if (occlusion) {                                                                       \
+                _Alignas(64) struct RTCRay##K r;                                                   \
+                for (int lane = 0; lane < K; lane++) {                                             \
+                    valid[lane] = lane < n ? -1 : 0;                                               \
+                    SET_RAY_K(&r, lane, &rays[i + (uint64_t)(lane < n ? lane : 0)]);               \
+                }                                                                                  \
+                rtcOccluded##K(valid, tr->scene, ctx, &r);                                         \
+                for (int lane = 0; lane < n; lane++)                                               \
+                    tr->prim[i + (uint64_t)lane] = r.tfar[lane] < 0.0f ? 0 : UINT32_MAX;           \
+                continue;                                                                          \
+            }                                                                                      \
+            _Alignas(64) struct RTCRayHit##K rh;                                                   \
+            for (int lane = 0; lane < K; lane++) {                                                 \
+                valid[lane] = lane < n ? -1 : 0;                                                   \
+                SET_RAY_K(&rh.ray, lane, &rays[i + (uint64_t)(lane < n ? lane : 0)]);              \
+                rh.hit.geomID[lane] = RTC_INVALID_GEOMETRY_ID;                                     \
+            }                                                                                      \
+            rtcIntersect##K(valid, tr->scene, ctx, &rh);                                           \
+            for (int lane = 0; lane < n; lane++) {                                                 \
+                bool is_hit = rh.hit.geomID[lane] != RTC_INVALID_GEOMETRY_ID;                      \
+                tr->prim[i + (uint64_t)lane] = is_hit ? rh.hit.primID[lane] : UINT32_MAX;          \
+                tr->t[i + (uint64_t)lane] = is_hit ? rh.ray.tfar[lane] : 0.0f;                     \
+            }                                                                                      \
+        }                                                                                          \
     }
 TRACE_PACKET_K(8)
 TRACE_PACKET_K(16)
@@ -229,10 +228,17 @@ static void embree_trace_range(void *arg, uint64_t begin, uint64_t end)
     ctx.flags = tr->coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT
                              : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
     switch (tr->method) {
-    case EMBREE_8: embree_trace_8(tr, &ctx, begin, end); return;
-    case EMBREE_16: embree_trace_16(tr, &ctx, begin, end); return;
-    case EMBREE_STREAM: embree_trace_stream(tr, &ctx, begin, end); return;
-    case EMBREE_1: break;
+    case EMBREE_8:
+        embree_trace_8(tr, &ctx, begin, end);
+        return;
+    case EMBREE_16:
+        embree_trace_16(tr, &ctx, begin, end);
+        return;
+    case EMBREE_STREAM:
+        embree_trace_stream(tr, &ctx, begin, end);
+        return;
+    case EMBREE_1:
+        break;
     }
     for (uint64_t i = begin; i < end; i++) {
         if (occlusion) {
@@ -314,9 +320,15 @@ int main(int argc, char **argv)
     int c;
     while ((c = getopt_long(argc, argv, "h", long_opts, NULL)) != -1) {
         switch (c) {
-        case 'r': runs = atoi(optarg); break;
-        case 't': n_threads = atoi(optarg); break;
-        case 'R': robust = true; break;
+        case 'r':
+            runs = atoi(optarg);
+            break;
+        case 't':
+            n_threads = atoi(optarg);
+            break;
+        case 'R':
+            robust = true;
+            break;
         case 'q':
             if (strcmp(optarg, "high") == 0) {
                 quality = RTC_BUILD_QUALITY_HIGH;
@@ -330,8 +342,12 @@ int main(int argc, char **argv)
                 return 2;
             }
             break;
-        case 'h': fputs(usage, stdout); return 0;
-        default: fputs(usage, stderr); return 2;
+        case 'h':
+            fputs(usage, stdout);
+            return 0;
+        default:
+            fputs(usage, stderr);
+            return 2;
         }
     }
     if (argc - optind < 2 || runs < 1 || runs > 64 || n_threads < 1 || n_threads > 256) {
@@ -358,15 +374,15 @@ int main(int argc, char **argv)
         }
     }
     printf("model: %s: %u triangles; load average %.2f on %d CPUs; mcpt kernels %s; Embree %s%s\n",
-           model, mesh.n_tris, bench_loadavg(), bench_n_cpus(), bvh_simd_name(),
-           RTC_VERSION_STRING, robust ? " (robust)" : "");
+           model, mesh.n_tris, bench_loadavg(), bench_n_cpus(), bvh_simd_name(), RTC_VERSION_STRING,
+           robust ? " (robust)" : "");
     /* builds, interleaved, 1 thread then all threads: mcpt's default (spatial splits) and
      * binned builds, Embree's high-quality (spatial splits) and medium (binned) builds; the
      * BVHs traced below are mcpt's default and Embree's at `quality` */
     enum { MCPT_SPATIAL, MCPT_BINNED, EMBREE_HIGH, EMBREE_MEDIUM, N_BUILDS };
-    static const char *const build_names[N_BUILDS] = {
-        "mcpt spatial splits (default)", "mcpt binned", "Embree high quality",
-        "Embree medium quality"};
+    static const char *const build_names[N_BUILDS] = {"mcpt spatial splits (default)",
+                                                      "mcpt binned", "Embree high quality",
+                                                      "Embree medium quality"};
     double build_ms[N_BUILDS][2][64];
     double bytes_per_tri[N_BUILDS];
     struct bvh *bvh = NULL;
@@ -395,8 +411,8 @@ int main(int argc, char **argv)
                         bvh_free(b);
                     }
                 } else {
-                    enum RTCBuildQuality q =
-                        k == EMBREE_HIGH ? RTC_BUILD_QUALITY_HIGH : RTC_BUILD_QUALITY_MEDIUM;
+                    enum RTCBuildQuality q = k == EMBREE_HIGH ? RTC_BUILD_QUALITY_HIGH
+                                                              : RTC_BUILD_QUALITY_MEDIUM;
                     struct embree e = {0};
                     if (!embree_build(&mesh, threads, robust, q, &e)) {
                         fprintf(stderr, "embree_bench: Embree build failed\n");
@@ -420,8 +436,7 @@ int main(int argc, char **argv)
         for (int mt = 0; mt < 2; mt++)
             build_median[k][mt] = bench_median(build_ms[k][mt], runs);
         printf("build %-30s %8.1f ms 1 thread, %8.1f ms %d threads; %5.1f bytes/triangle\n",
-               build_names[k], build_median[k][0], build_median[k][1], n_threads,
-               bytes_per_tri[k]);
+               build_names[k], build_median[k][0], build_median[k][1], n_threads, bytes_per_tri[k]);
     }
     printf("build ratios mcpt / Embree, 1 thread (< 1: mcpt faster): spatial / high %.2f, "
            "binned / medium %.2f\n",
@@ -472,8 +487,8 @@ int main(int argc, char **argv)
         };
         for (int k = 0; k <= EMBREE_N_METHODS; k++) {
             enum embree_method m = k < EMBREE_N_METHODS ? (enum embree_method)k : EMBREE_STREAM;
-            e[k] = (struct embree_trace){emb.scene, &rays, m, k == EMBREE_STREAM, prim[2 + k],
-                                         t[2 + k]};
+            e[k] = (struct embree_trace){emb.scene,          &rays,       m,
+                                         k == EMBREE_STREAM, prim[2 + k], t[2 + k]};
             tr[2 + k] = (struct tracer){.name = embree_method_names[occlusion][m],
                                         .fn = embree_trace_range,
                                         .ctx = &e[k]};
@@ -484,8 +499,9 @@ int main(int argc, char **argv)
         for (int k = 0; k < N_TRACERS; k++) {
             char name[64];
             snprintf(name, sizeof name, "%s%s", tr[k].name,
-                     k < 2 + EMBREE_STREAM ? "" : k == 2 + EMBREE_STREAM ? " coherent"
-                                                                        : " incoherent");
+                     k < 2 + EMBREE_STREAM    ? ""
+                     : k == 2 + EMBREE_STREAM ? " coherent"
+                                              : " incoherent");
             printf("  %-33s %8.3f Mrays/s 1 thread (CPU time; %.3f wall), %8.3f on %d threads; "
                    "hits %llu",
                    name, tr[k].mrays_1t, tr[k].mrays_1t_wall, tr[k].mrays_mt, n_threads,
@@ -536,8 +552,12 @@ int main(int argc, char **argv)
                (unsigned long long)tr[0].sum.hits, (unsigned long long)tr[2].sum.hits,
                tr[0].sum.t_sum, tr[2].sum.t_sum, (unsigned long long)tr[0].sum.prim_sum,
                (unsigned long long)tr[2].sum.prim_sum);
-        static const char *const keys[N_TRACERS] = {"mcpt", "mcpt_packet", "embree1", "embree8",
-                                                    "embree16", "embree_stream_coherent",
+        static const char *const keys[N_TRACERS] = {"mcpt",
+                                                    "mcpt_packet",
+                                                    "embree1",
+                                                    "embree8",
+                                                    "embree16",
+                                                    "embree_stream_coherent",
                                                     "embree_stream_incoherent"};
         for (int k = 0; k < N_TRACERS; k++)
             printf("\"mrays_1t_wall_%s\":%.4f,\"mrays_1t_cpu_%s\":%.4f,\"mrays_mt_%s\":%.4f,",

@@ -42,8 +42,8 @@ Test(bvh, single_triangle_hit_inside)
     vec3 p0 = tri_vertex(&m, 0, 0);
     vec3 n = v3_normalize(
         v3_cross(v3_sub(tri_vertex(&m, 0, 1), p0), v3_sub(tri_vertex(&m, 0, 2), p0)));
-    const vec3 dirs[6] = {v3(1, 0, 0), v3(-1, 0, 0), v3(0, 1, 0),
-                          v3(0, -1, 0), v3(0, 0, 1), v3(0, 0, -1)};
+    const vec3 dirs[6] = {v3(1, 0, 0),  v3(-1, 0, 0), v3(0, 1, 0),
+                          v3(0, -1, 0), v3(0, 0, 1),  v3(0, 0, -1)};
     const float barys[4][2] = {{0.2f, 0.3f}, {0.7f, 0.1f}, {0.05f, 0.9f}, {1.0f / 3, 1.0f / 3}};
     struct rng r = {1};
     int n_rays = 0;
@@ -78,7 +78,10 @@ Test(bvh, single_triangle_miss_outside)
     vec3 p0 = tri_vertex(&m, 0, 0);
     vec3 e1 = v3_sub(tri_vertex(&m, 0, 1), p0);
     vec3 n = v3_normalize(v3_cross(e1, v3_sub(tri_vertex(&m, 0, 2), p0)));
-    const float outside[5][2] = {{-0.05f, 0.5f}, {0.5f, -0.05f}, {0.6f, 0.45f}, {1.1f, 0.1f},
+    const float outside[5][2] = {{-0.05f, 0.5f},
+                                 {0.5f, -0.05f},
+                                 {0.6f, 0.45f},
+                                 {1.1f, 0.1f},
                                  {-0.2f, -0.2f}};
     struct bvh_hit hit;
     for (int j = 0; j < 5; j++) {
@@ -188,8 +191,8 @@ Test(bvh, shared_edge_and_vertex_never_missed)
             n_tri_hits += bvh_intersect(one, &ray, &h);
             bvh_free(one);
         }
-        cr_assert_geq(n_tri_hits, 1, "ray through (%a, %a, 0) from (%a %a %a) slips through", s,
-                      s, o.x, o.y, o.z);
+        cr_assert_geq(n_tri_hits, 1, "ray through (%a, %a, 0) from (%a %a %a) slips through", s, s,
+                      o.x, o.y, o.z);
         struct bvh_hit hit;
         cr_assert(bvh_intersect(bvh, &ray, &hit));
         cr_assert_float_eq(hit.t, 1.0f, 1e-5f);
@@ -383,7 +386,7 @@ Test(bvh, identical_centroids)
         struct bvh_stats st = bvh_get_stats(bvh);
         cr_assert_eq(st.n_tris, 1000u);
         cr_assert_eq(st.n_nodes, 2 * st.n_leaves - 1);
-        cr_assert_geq(st.n_leaves, 2u); /* 1000 triangles are not one leaf */
+        cr_assert_geq(st.n_leaves, 2u);   /* 1000 triangles are not one leaf */
         cr_assert_leq(st.max_depth, 12u); /* about log2(1000 / leaf size) */
         struct rng r = {6};
         int n_hits = 0;
@@ -406,9 +409,9 @@ Test(bvh, identical_centroids)
 Test(bvh, zero_area_triangles_never_hit)
 {
     struct mesh m = {0};
-    mesh_add_tri_pos(&m, v3(0, 0, 0), v3(1, 1, 1), v3(2, 2, 2));            /* collinear */
+    mesh_add_tri_pos(&m, v3(0, 0, 0), v3(1, 1, 1), v3(2, 2, 2));             /* collinear */
     mesh_add_tri_pos(&m, v3(0.5f, 0, 0), v3(0.5f, 0, 0), v3(0.5f, 1, 0.5f)); /* repeated */
-    mesh_add_tri_pos(&m, v3(1, 0, 1), v3(1, 0, 1), v3(1, 0, 1));            /* a point */
+    mesh_add_tri_pos(&m, v3(1, 0, 1), v3(1, 0, 1), v3(1, 0, 1));             /* a point */
     /* p, 2 p, 4 p: collinear exactly, since scaling by 2 is exact */
     mesh_add_tri_pos(&m, v3(0.1f, 0.3f, 0.7f), v3(0.2f, 0.6f, 1.4f), v3(0.4f, 1.2f, 2.8f));
     mesh_add_tri_pos(&m, v3(3, 0, 0), v3(4, 0, 0), v3(3, 1, 0)); /* the one real triangle */
@@ -556,8 +559,8 @@ Test(bvh, ray_from_surface_with_t_min_zero)
         if (bvh_intersect(bvh, &ray, &hit) && hit.prim_idx == prim) {
             /* the origin is within rounding of the plane: |t (w . n)| is its distance */
             vec3 p0 = tri_vertex(&m, prim, 0);
-            vec3 n = v3_normalize(v3_cross(v3_sub(tri_vertex(&m, prim, 1), p0),
-                                           v3_sub(tri_vertex(&m, prim, 2), p0)));
+            vec3 n = v3_normalize(
+                v3_cross(v3_sub(tri_vertex(&m, prim, 1), p0), v3_sub(tri_vertex(&m, prim, 2), p0)));
             cr_assert_lt(fabsf(hit.t * v3_dot(w, n)), 1e-6f, "self hit off the plane: t %g", hit.t);
             n_self++;
         }
@@ -969,8 +972,8 @@ Test(bvh, spatial_splits_stay_watertight)
     for (int end = 0; end < 2; end++) {
         for (int i = 0; i < SIDES; i++) {
             float phi = 2.0f * MCPT_PI * (float)i / (float)SIDES;
-            ring[end][i] = mesh_add_vertex(
-                &m, tube_point(end ? 10.0f : -10.0f, 0.5f * cosf(phi), 0.5f * sinf(phi)));
+            ring[end][i] = mesh_add_vertex(&m, tube_point(end ? 10.0f : -10.0f, 0.5f * cosf(phi),
+                                                          0.5f * sinf(phi)));
         }
     }
     uint32_t cap[2] = {mesh_add_vertex(&m, tube_point(-10.0f, 0, 0)),
