@@ -181,7 +181,7 @@ uninstall:
 # Embree 3 in the same invocation and prints mcpt/Embree ratios; it is built only where Embree
 # is installed (Debian: libembree-dev), and nothing else depends on Embree.
 BENCH_MODELS_DIR ?= ../shared/models
-BENCH_MODELS ?= stanford-bunny stanford-dragon-100k sponza-dabrovic
+BENCH_MODELS ?= stanford-bunny stanford-dragon-100k sponza-dabrovic lucy-100k
 BENCH_RUNS ?= 5
 BENCH_DIR := $(BUILD)/bench
 BENCH_OBJS := $(BUILD)/bvh.o $(BUILD)/bvh_wide.o $(BUILD)/obj.o $(BUILD)/camera.o $(BUILD)/sample.o
