@@ -145,7 +145,14 @@ static int run_compare(int argc, char **argv)
     struct image a_exr = {0}, ref_exr = {0};
     struct stats_image a, ref;
     struct stats_metrics m;
-    bool ok = read_image(a_path, &a_exr, &a, &err) && read_image(ref_path, &ref_exr, &ref, &err);
+    struct output_file files[3] = {{.role = "the heat map (--heatmap)"},
+                                   {.role = "the image A"},
+                                   {.role = "the reference"}};
+    const char *paths[3] = {heatmap, a_path, ref_path};
+    for (int k = 0; k < 3; k++)
+        snprintf(files[k].path, sizeof files[k].path, "%s", paths[k] ? paths[k] : "");
+    bool ok = (!heatmap || output_check(files, 1, files + 1, 2, &err)) &&
+              read_image(a_path, &a_exr, &a, &err) && read_image(ref_path, &ref_exr, &ref, &err);
     if (ok && !stats_compare_where(&a, &ref, max_lum, &m, &err)) {
         snprintf(err.file, sizeof err.file, "%s", ref_path);
         ok = false;
@@ -365,6 +372,33 @@ static void print_merge(int n_parts, const struct film *film, const struct parti
     printf("%s\n", paths->png);
 }
 
+/* The merged image and its preview may overwrite no part and must be creatable. */
+static bool check_merge_outputs(const struct output_paths *paths, char **parts, int n_parts,
+                                struct mcpt_error *err)
+{
+    struct output_file *files = malloc(sizeof *files * ((size_t)n_parts + 2));
+    if (!files) {
+        mcpt_error_runtime(err, NULL, "out of memory checking the output files");
+        return false;
+    }
+    int n_out = 0; /* the EXR and its preview, or the PNG alone */
+    if (paths->exr[0]) {
+        snprintf(files[n_out].path, sizeof files[0].path, "%s", paths->exr);
+        files[n_out++].role = "the merged image (-o)";
+    }
+    if (paths->png[0]) {
+        snprintf(files[n_out].path, sizeof files[0].path, "%s", paths->png);
+        files[n_out++].role = paths->exr[0] ? "its PNG preview" : "the merged image (-o)";
+    }
+    for (int k = 0; k < n_parts; k++) {
+        snprintf(files[n_out + k].path, sizeof files[0].path, "%s", parts[k]);
+        files[n_out + k].role = "a part";
+    }
+    bool ok = output_check(files, n_out, files + n_out, n_parts, err);
+    free(files);
+    return ok;
+}
+
 static int run_merge(int argc, char **argv)
 {
     enum { OPT_PARTIAL = 256, OPT_NO_PREVIEW, OPT_QUIET };
@@ -426,7 +460,7 @@ static int run_merge(int argc, char **argv)
                              keep_partial ? "--partial" : "--no-preview", out);
     struct film film = {0};
     struct partial_info info;
-    ok = ok &&
+    ok = ok && check_merge_outputs(&paths, argv + optind, argc - optind, &err) &&
          partial_merge_files((const char *const *)argv + optind, argc - optind, &film, &info, &err);
     /* the whole render is an ordinary image, unless asked to stay mergeable */
     bool is_plain = ok && partial_is_whole(&info) && !keep_partial;

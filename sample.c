@@ -8,6 +8,7 @@
  * PBRT 4e, ch. A.5, "Sampling Multidimensional Functions"; Veach 1997, ch. 9 (MIS). */
 #include "sample.h"
 
+#include <assert.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -126,28 +127,45 @@ static uint32_t cmj_columns(uint32_t n_samples)
     return root;
 }
 
-static uint32_t sobol_joint_index(const struct sampler *s);
+static void sobol_pixel_seeds(struct sampler *s);
+static void sobol_joint_point(struct sampler *s);
 
-void sample_start_spp(struct sampler *s, enum sampler_kind kind, uint64_t seed, uint32_t pixel_idx,
-                      uint32_t sample_idx, uint32_t set_spp)
+void sample_start_pixel(struct sampler *s, enum sampler_kind kind, uint64_t seed,
+                        uint32_t pixel_idx, uint32_t set_spp)
 {
     s->kind = kind;
     s->seed = seed;
     s->pixel_idx = pixel_idx;
-    s->sample_idx = sample_idx;
+    s->sample_idx = 0;
     s->dim = 0;
     s->set_spp = set_spp;
-    s->cmj_cols = 1;
+    s->cmj_cols = kind == SAMPLER_STRATIFIED && set_spp > 1 ? cmj_columns(set_spp) : 1;
     s->pixel_hash = sample_hash64(seed ^ sample_hash64(0x9e3779b97f4a7c15ULL + pixel_idx));
-    if (kind == SAMPLER_INDEPENDENT) {
-        uint64_t h = sample_hash64(seed ^ sample_hash64(((uint64_t)pixel_idx << 32) | sample_idx));
+    s->rng = (struct pcg32){0, 1};
+    s->pad_dim0 = SAMPLE_PAD_NONE;
+    if (kind == SAMPLER_SOBOL)
+        sobol_pixel_seeds(s);
+}
+
+void sample_start_index(struct sampler *s, uint32_t sample_idx)
+{
+    s->sample_idx = sample_idx;
+    s->dim = 0;
+    if (s->kind == SAMPLER_INDEPENDENT) {
+        uint64_t h = sample_hash64(s->seed ^
+                                   sample_hash64(((uint64_t)s->pixel_idx << 32) | sample_idx));
         sample_pcg32_seed(&s->rng, h, sample_hash64(h));
-    } else {
-        s->rng = (struct pcg32){0, 1};
-        if (kind == SAMPLER_STRATIFIED && set_spp > 1)
-            s->cmj_cols = cmj_columns(set_spp);
+    } else if (s->kind == SAMPLER_SOBOL) {
+        s->pad_dim0 = SAMPLE_PAD_NONE;
+        sobol_joint_point(s);
     }
-    s->sobol_index = kind == SAMPLER_SOBOL ? sobol_joint_index(s) : 0;
+}
+
+void sample_start_spp(struct sampler *s, enum sampler_kind kind, uint64_t seed, uint32_t pixel_idx,
+                      uint32_t sample_idx, uint32_t set_spp)
+{
+    sample_start_pixel(s, kind, seed, pixel_idx, set_spp);
+    sample_start_index(s, sample_idx);
 }
 
 void sample_start(struct sampler *s, enum sampler_kind kind, uint64_t seed, uint32_t pixel_idx,
@@ -182,6 +200,7 @@ static float fraction_to_float(uint32_t x) { return (float)(x >> 8) * 0x1p-24f; 
  * (a hash restricted to the next power of two, cycle-walked back into [0, l)). */
 static uint32_t kensler_permute(uint32_t i, uint32_t l, uint32_t p)
 {
+    assert(l > 0); /* the cycle walk ends only in a non-empty range */
     uint32_t w = l - 1;
     w |= w >> 1;
     w |= w >> 2;
@@ -257,7 +276,9 @@ static vec2 stratified_2d(const struct sampler *s, uint32_t dim)
     uint32_t p;
     uint32_t i = strat_position(s, dim, &p);
     uint32_t n_set = s->set_spp > 1 ? s->set_spp : 1;
-    uint32_t m = s->cmj_cols, n = (n_set + m - 1) / m;
+    /* rows n = ceil(N / m), written so that N near 2^32 cannot wrap (n = 0 would never end
+     * kensler_permute's cycle walk) */
+    uint32_t m = s->cmj_cols, n = n_set / m + (n_set % m != 0);
     uint32_t sp = kensler_permute(i, n_set, p * 0x51633e2du);
     uint32_t sx = kensler_permute(sp % m, m, p * 0x68bc21ebu);
     uint32_t sy = kensler_permute(sp / m, n, p * 0x02e5be93u);
@@ -269,9 +290,12 @@ static vec2 stratified_2d(const struct sampler *s, uint32_t dim)
 
 /* -- Sobol': Burley 2020, "Practical Hash-based Owen Scrambling", JCGT 9(4) -- */
 
+/* Swaps halves, bytes, nibbles, pairs and bits: written with shifts and masks only (no
+ * byte-swap builtin), so the compiler can also run it on a vector of lanes. */
 static uint32_t reverse_bits32(uint32_t x)
 {
-    x = __builtin_bswap32(x); /* GCC and Clang builtin: the bytes reversed */
+    x = (x << 16) | (x >> 16);
+    x = ((x & 0x00ff00ffu) << 8) | ((x & 0xff00ff00u) >> 8);
     x = ((x & 0x0f0f0f0fu) << 4) | ((x & 0xf0f0f0f0u) >> 4);
     x = ((x & 0x33333333u) << 2) | ((x & 0xccccccccu) >> 2);
     x = ((x & 0x55555555u) << 1) | ((x & 0xaaaaaaaau) >> 1);
@@ -328,115 +352,189 @@ static uint32_t nested_uniform_scramble(uint32_t x, uint32_t seed)
     return reverse_bits32(laine_karras_permutation(reverse_bits32(x), seed));
 }
 
-/* nested_uniform_scramble(sample_sobol_u32(index, dim), seed).  For dimensions 0 and 1 the
- * scramble's first reversal undoes the one that puts the digits in fraction order, so both are
- * skipped: the hot path of every padding request. */
-static uint32_t scrambled_sobol(uint32_t index, uint32_t dim, uint32_t seed)
+static void pad_block_seeds(const struct sampler *s, uint32_t dim0, struct sample_pad_seeds *seeds);
+
+/* The first bounce block with a padded dimension: the blocks whose seeds a sampler keeps per
+ * pixel are this one and the next SAMPLE_PAD_KEPT - 1. */
+static const uint32_t PAD_FIRST_KEPT = SAMPLE_SOBOL_JOINT_DIMS <= SAMPLE_DIM_BOUNCE0
+                                           ? 0
+                                           : (SAMPLE_SOBOL_JOINT_DIMS - SAMPLE_DIM_BOUNCE0) /
+                                                 SAMPLE_DIMS_PER_BOUNCE;
+
+/* The per-pixel seeds: the joint point's index shuffle, one scramble seed per dimension of the
+ * joint lane (those past SAMPLE_SOBOL_JOINT_DIMS are computed for the lanes' sake, never read),
+ * and the padding seeds of the bounce blocks every path reaches first. */
+static void sobol_pixel_seeds(struct sampler *s)
 {
-    if (dim == 0)
-        return reverse_bits32(laine_karras_permutation(index, seed));
-    if (dim == 1)
-        return reverse_bits32(laine_karras_permutation(pascal_digits(index), seed));
-    return nested_uniform_scramble(sample_sobol_u32(index, dim), seed);
+    s->shuffle_seed = dim_seed(s, UINT32_MAX, 0);
+    for (uint32_t d = 0; d < SAMPLE_SOBOL_JOINT_LANES; d++)
+        s->joint_seed[d] = dim_seed(s, d, 1);
+    for (uint32_t k = 0; k < SAMPLE_PAD_KEPT; k++)
+        pad_block_seeds(s, SAMPLE_DIM_BOUNCE0 + (PAD_FIRST_KEPT + k) * SAMPLE_DIMS_PER_BOUNCE,
+                        &s->pad_kept[k]);
 }
 
-/* The per-pixel shuffle of the sample index: Owen-scrambled, so power-of-two prefixes of a
- * pixel's samples map to aligned blocks of the sequence, which are (t, m, s)-nets. */
-static uint32_t sobol_joint_index(const struct sampler *s)
+/* The joint point of the sample, every dimension at once (Burley 2020: shuffled_scrambled_sobol4d
+ * for SAMPLE_SOBOL_JOINT_DIMS dimensions):
+ *   index = nested_uniform_scramble(sample_idx, shuffle_seed)   (the per-pixel shuffle: power-
+ *           of-two prefixes of a pixel's samples map to aligned blocks of the sequence, which
+ *           are (t, m, s)-nets)
+ *   x_d = C_d * bits(index) over GF(2), as the XOR of one table row per 4-bit digit of index
+ *   u_d = nested_uniform_scramble(x_d, joint_seed_d).
+ * The loops over d run a lane per dimension with no branch, so the compiler vectorises them;
+ * u_d is nested_uniform_scramble(sample_sobol_u32(index, d), joint_seed_d) to the bit. */
+static void sobol_joint_point(struct sampler *s)
 {
-    return nested_uniform_scramble(s->sample_idx, dim_seed(s, UINT32_MAX, 0));
-}
-
-/* Dimension dim < SAMPLE_SOBOL_JOINT_DIMS: one shuffled Sobol' point per sample for all the
- * joint dimensions (Burley 2020: shuffled_scrambled_sobol4d, the index Owen-scrambled too);
- * its index, sobol_joint_index, is computed once in sample_start_spp. */
-static float sobol_joint_1d(const struct sampler *s, uint32_t dim)
-{
-    return fraction_to_float(scrambled_sobol(s->sobol_index, dim, dim_seed(s, dim, 1)));
+    s->sample_idx_rev = reverse_bits32(s->sample_idx);
+    uint32_t index = reverse_bits32(laine_karras_permutation(s->sample_idx_rev, s->shuffle_seed));
+    uint32_t x[SAMPLE_SOBOL_JOINT_LANES] = {0};
+    for (int p = 0; p < 8; p++) {
+        const uint32_t *row = SOBOL_NIBBLES[p][index >> 4 * p & 15u];
+        for (int d = 0; d < SAMPLE_SOBOL_JOINT_LANES; d++)
+            x[d] ^= row[d];
+    }
+    for (int d = 0; d < SAMPLE_SOBOL_JOINT_LANES; d++)
+        s->joint_u[d] = fraction_to_float(nested_uniform_scramble(x[d], s->joint_seed[d]));
 }
 
 /* Padding (Burley 2020): a request at dimension dim >= the joint ones reads Sobol' dimensions
  * 0 (and 1), a (0,2)-sequence, with its own index shuffle and its own scrambles, so requests
- * are mutually independent and each is stratified in itself. */
-struct pad_seeds {
-    uint32_t index; /* shuffle of the sample index */
-    uint32_t x;     /* scramble of the first coordinate */
-    uint32_t y;     /* scramble of the second */
-};
-
-/* The three seeds of a padding request from one 64-bit hash: its halves lo and hi, and
- * lo ^ mix(hi); each uniform, and pairwise independent for a uniform hash. */
-static struct pad_seeds pad_seeds(const struct sampler *s, uint32_t dim)
+ * are mutually independent and each is stratified in itself:
+ *   index = nested_uniform_scramble(sample_idx, seed_index)
+ *   x = scrambled_sobol(index, 0, seed_x),  y = scrambled_sobol(index, 1, seed_y)   (2D only)
+ * The three seeds of the request at dim come from one 64-bit hash h of (pixel, dim): its halves
+ * lo and hi, and lo ^ mix(hi); each uniform, and pairwise independent for a uniform hash. */
+static void request_seeds(const struct sampler *s, uint32_t dim, uint32_t *seed_index,
+                          uint32_t *seed_x, uint32_t *seed_y)
 {
     uint64_t h = sample_hash64(s->pixel_hash ^ ((uint64_t)dim << 32 | 2u));
     uint32_t lo = (uint32_t)h, hi = (uint32_t)(h >> 32);
-    return (struct pad_seeds){lo, hi, lo ^ (hi * 0x9e3779b9u + 0x7f4a7c15u)};
+    *seed_index = lo;
+    *seed_x = hi;
+    *seed_y = lo ^ (hi * 0x9e3779b9u + 0x7f4a7c15u);
 }
 
-static float sobol_pad_1d(const struct sampler *s, uint32_t dim)
+/* The request with these seeds, 1D (x) and 2D (x, y) alike: the x of a 2D request is the 1D
+ * request's value.  sample_idx_rev is sample_idx bit-reversed, the first step of the index
+ * shuffle.  x = nested_uniform_scramble(sample_sobol_u32(index, 0), seed_x), in which the
+ * scramble's first reversal undoes the one that puts dimension 0's digits in fraction order, so
+ * both are skipped; y likewise for dimension 1. */
+static inline vec2 pad_request(uint32_t sample_idx_rev, uint32_t seed_index, uint32_t seed_x,
+                               uint32_t seed_y)
 {
-    struct pad_seeds seed = pad_seeds(s, dim);
-    uint32_t index = nested_uniform_scramble(s->sample_idx, seed.index);
-    return fraction_to_float(scrambled_sobol(index, 0, seed.x));
-}
-
-static vec2 sobol_pad_2d(const struct sampler *s, uint32_t dim)
-{
-    struct pad_seeds seed = pad_seeds(s, dim);
-    uint32_t index = nested_uniform_scramble(s->sample_idx, seed.index);
-    uint32_t x = scrambled_sobol(index, 0, seed.x);
-    uint32_t y = scrambled_sobol(index, 1, seed.y);
+    uint32_t index = reverse_bits32(laine_karras_permutation(sample_idx_rev, seed_index));
+    uint32_t x = reverse_bits32(laine_karras_permutation(index, seed_x));
+    uint32_t y = reverse_bits32(laine_karras_permutation(pascal_digits(index), seed_y));
     return (vec2){fraction_to_float(x), fraction_to_float(y)};
 }
 
-float sample_1d(struct sampler *s)
+/* The padded dimensions of the bounce blocks (sample.h: SAMPLE_DIMS_PER_BOUNCE dimensions from
+ * SAMPLE_DIM_BOUNCE0 on) are computed a block at a time, the request at every dimension of the
+ * block at once, a lane each (the compiler vectorises the loop, hashes included), and kept until
+ * the sample leaves the block: lane l holds x and y of a request at dimension pad_dim0 + l.
+ * Other dimensions (the light-sample block, any dimension below the first bounce) are requested
+ * one at a time. */
+static bool pad_in_blocks(uint32_t dim)
 {
-    uint32_t dim = s->dim++;
+    return dim >= SAMPLE_DIM_BOUNCE0 && dim < SAMPLE_DIM_LIGHT_EXTRA;
+}
+
+/* The seeds of the requests at dimensions dim0 + lane. */
+static void pad_block_seeds(const struct sampler *s, uint32_t dim0, struct sample_pad_seeds *seeds)
+{
+    for (int l = 0; l < SAMPLE_PAD_LANES; l++)
+        request_seeds(s, dim0 + (uint32_t)l, &seeds->index[l], &seeds->x[l], &seeds->y[l]);
+}
+
+/* Fills the block cache with the block of dimension dim (pad_in_blocks(dim)). */
+static void pad_block(struct sampler *s, uint32_t dim)
+{
+    uint32_t block = (dim - SAMPLE_DIM_BOUNCE0) / SAMPLE_DIMS_PER_BOUNCE;
+    uint32_t dim0 = SAMPLE_DIM_BOUNCE0 + block * SAMPLE_DIMS_PER_BOUNCE;
+    struct sample_pad_seeds computed;
+    const struct sample_pad_seeds *seeds = &computed;
+    if (block - PAD_FIRST_KEPT < SAMPLE_PAD_KEPT)
+        seeds = &s->pad_kept[block - PAD_FIRST_KEPT];
+    else
+        pad_block_seeds(s, dim0, &computed);
+    for (int l = 0; l < SAMPLE_PAD_LANES; l++) {
+        vec2 u = pad_request(s->sample_idx_rev, seeds->index[l], seeds->x[l], seeds->y[l]);
+        s->pad_x[l] = u.x;
+        s->pad_y[l] = u.y;
+    }
+    s->pad_dim0 = dim0;
+}
+
+/* The Sobol' request at dimension dim >= SAMPLE_SOBOL_JOINT_DIMS: x, and y for a 2D request. */
+static vec2 sobol_pad(struct sampler *s, uint32_t dim)
+{
+    if (pad_in_blocks(dim)) {
+        if (dim - s->pad_dim0 >= SAMPLE_DIMS_PER_BOUNCE)
+            pad_block(s, dim);
+        uint32_t lane = dim - s->pad_dim0;
+        return (vec2){s->pad_x[lane], s->pad_y[lane]};
+    }
+    uint32_t seed_index, seed_x, seed_y;
+    request_seeds(s, dim, &seed_index, &seed_x, &seed_y);
+    return pad_request(s->sample_idx_rev, seed_index, seed_x, seed_y);
+}
+
+float sample_1d_compute(struct sampler *s, uint32_t dim)
+{
     switch (s->kind) {
     case SAMPLER_STRATIFIED:
         return stratified_1d(s, dim);
     case SAMPLER_SOBOL:
-        return dim < SAMPLE_SOBOL_JOINT_DIMS ? sobol_joint_1d(s, dim) : sobol_pad_1d(s, dim);
+        return dim < SAMPLE_SOBOL_JOINT_DIMS ? s->joint_u[dim] : sobol_pad(s, dim).x;
     case SAMPLER_INDEPENDENT:
         break;
     }
     return sample_pcg32_float(&s->rng);
 }
 
-vec2 sample_2d(struct sampler *s)
+vec2 sample_2d_compute(struct sampler *s, uint32_t dim)
 {
-    uint32_t dim = s->dim;
-    if (s->kind == SAMPLER_STRATIFIED) {
-        s->dim += 2;
+    if (s->kind == SAMPLER_STRATIFIED)
         return stratified_2d(s, dim);
-    }
-    if (s->kind == SAMPLER_SOBOL && dim >= SAMPLE_SOBOL_JOINT_DIMS) {
-        s->dim += 2;
-        return sobol_pad_2d(s, dim);
-    }
-    /* independent, and Sobol' inside the joint dimensions: two consecutive dimensions */
-    float x = sample_1d(s);
-    float y = sample_1d(s);
+    if (s->kind == SAMPLER_SOBOL && dim >= SAMPLE_SOBOL_JOINT_DIMS)
+        return sobol_pad(s, dim);
+    /* independent, and Sobol' across the end of the joint dimensions: two consecutive
+     * dimensions */
+    float x = sample_1d_compute(s, dim);
+    float y = sample_1d_compute(s, dim + 1);
     return (vec2){x, y};
 }
 
 /* ---- warps ---- */
 
+/* cos and sin of phi in [-pi/4, pi/4] by the minimax polynomials of the Cephes library's cosf
+ * and sinf on that interval (Moshier 1989, "Methods and Programs for Mathematical Functions";
+ * relative error about 3e-8): the concentric map needs no argument reduction, so it is cheaper
+ * than the library's sincosf. */
+static vec2 cos_sin_quarter(float phi)
+{
+    float z = phi * phi;
+    float c = ((2.443315711809948e-5f * z - 1.388731625493765e-3f) * z + 4.166664568298827e-2f) *
+                  z * z -
+              0.5f * z + 1.0f;
+    float sn = ((-1.9515295891e-4f * z + 8.3321608736e-3f) * z - 1.6666654611e-1f) * z * phi + phi;
+    return (vec2){c, sn};
+}
+
 vec2 sample_concentric_disk(vec2 u)
 {
-    /* map u to [-1,1]^2, then squares to concentric rings (Shirley & Chiu 1997) */
+    /* map u to [-1,1]^2, then squares to concentric rings (Shirley & Chiu 1997):
+     * r = ox, theta = pi/4 oy/ox when |ox| > |oy|, else r = oy, theta = pi/2 - pi/4 ox/oy, whose
+     * cos and sin are the sin and cos of pi/4 ox/oy */
     float ox = 2.0f * u.x - 1.0f, oy = 2.0f * u.y - 1.0f;
     if (ox == 0.0f && oy == 0.0f)
         return (vec2){0.0f, 0.0f};
-    float r, theta;
     if (fabsf(ox) > fabsf(oy)) {
-        r = ox;
-        theta = (MCPT_PI / 4.0f) * (oy / ox);
-    } else {
-        r = oy;
-        theta = (MCPT_PI / 2.0f) - (MCPT_PI / 4.0f) * (ox / oy);
+        vec2 cs = cos_sin_quarter((MCPT_PI / 4.0f) * (oy / ox));
+        return (vec2){ox * cs.x, ox * cs.y};
     }
-    return (vec2){r * cosf(theta), r * sinf(theta)};
+    vec2 cs = cos_sin_quarter((MCPT_PI / 4.0f) * (ox / oy));
+    return (vec2){oy * cs.y, oy * cs.x};
 }
 
 vec2 sample_invert_concentric_disk(vec2 p)

@@ -15,6 +15,8 @@
 #include <stdlib.h>
 #include <unistd.h>
 
+#include "file.h"
+
 /* A small scene in the grammar this file reads:
  *
  *   # Cornell box lit by its ceiling quad
@@ -825,6 +827,7 @@ static int next_byte(struct parser *ps)
             ps->at_eof = true;
             return -1;
         }
+        ps->scene->file_hash = file_fnv1a64(ps->scene->file_hash, ps->in, (size_t)got);
         ps->in_pos = 0;
         ps->in_len = (size_t)got;
     }
@@ -1190,6 +1193,22 @@ static char *resolve_path(const char *dir, const char *file)
     return p;
 }
 
+/* Adds *path (malloc'ed; the scene takes it, *path becomes NULL) to the files the scene
+ * loaded, which no output of a render may overwrite (main.c). */
+static bool add_loaded(struct parser *ps, char **path)
+{
+    struct scene *sc = ps->scene;
+    char **grown = realloc(sc->loaded_paths, sizeof *grown * ((size_t)sc->n_loaded + 1));
+    if (!grown) {
+        mcpt_error_runtime(ps->err, ps->path, "out of memory");
+        return false;
+    }
+    sc->loaded_paths = grown;
+    sc->loaded_paths[sc->n_loaded++] = *path;
+    *path = NULL;
+    return true;
+}
+
 static bool do_mesh(struct parser *ps, const struct stmt *st)
 {
     struct scene *sc = ps->scene;
@@ -1206,7 +1225,7 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
     }
     /* a mesh that cannot be opened is an error of this line; what is inside is the OBJ's */
     const char *not_regular = NULL;
-    int fd = obj_open_input(full, false, &not_regular);
+    int fd = file_open_input(full, false, &not_regular);
     if (fd < 0) {
         char where[SHOW_OUT_BYTES + 8] = "";
         if (strcmp(full, file->text) != 0)
@@ -1318,7 +1337,9 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
     sc->n_normals += mesh.n_normals;
     sc->n_uvs += mesh.n_uvs;
     sc->n_tris += mesh.n_tris;
-    ok = true;
+    ok = add_loaded(ps, &full);
+    for (uint32_t i = 0; ok && i < mesh.n_mtl_paths; i++)
+        ok = add_loaded(ps, &mesh.mtl_paths[i]);
 done:
     obj_free(&mesh);
     free(full);
@@ -1857,6 +1878,7 @@ static bool load(int fd, const char *path, size_t n_dir, struct scene *scene,
     bool ok = false;
     bool is_opened = fd < 0;
     memset(scene, 0, sizeof *scene);
+    scene->file_hash = FILE_FNV_OFFSET;
     scene->width = 512;
     scene->height = 512;
     scene->render = (struct render_settings){.spp = 64,
@@ -1868,7 +1890,7 @@ static bool load(int fd, const char *path, size_t n_dir, struct scene *scene,
      * never waits for a FIFO's writer */
     const char *not_regular = NULL;
     if (is_opened)
-        ps.fd = obj_open_input(path, true, &not_regular);
+        ps.fd = file_open_input(path, true, &not_regular);
     if (ps.fd < 0) {
         if (not_regular)
             mcpt_error_set(ps.err, path, 0, 0, "expected a regular file, got %s", not_regular);
@@ -1947,5 +1969,8 @@ void scene_free(struct scene *scene)
     free(scene->quads);
     free(scene->planes);
     free(scene->lights);
+    for (uint32_t i = 0; i < scene->n_loaded; i++)
+        free(scene->loaded_paths[i]);
+    free(scene->loaded_paths);
     memset(scene, 0, sizeof *scene);
 }

@@ -160,6 +160,12 @@ struct scene {
      * first SCENE_MAX_WARNINGS of n_warnings */
     char warnings[SCENE_MAX_WARNINGS][SCENE_WARNING_BYTES];
     uint32_t n_warnings;
+
+    uint64_t file_hash;  /* FNV-1a 64 of the scene file's bytes as read (file.h): a checkpoint
+                             names its scene by it, and a pipe cannot be read twice */
+    char **loaded_paths; /* every mesh and MTL file loaded, as opened (paths from the scene's
+                             folder): inputs no output may overwrite */
+    uint32_t n_loaded;
 };
 
 /* Parses the scene file at path (and the OBJ/MTL files it names, relative to its folder).

@@ -28,6 +28,12 @@
 #include "light.h"
 #include "material.h"
 
+/* Camera rays are intersected TRACE_PACKET at a time (a BVH packet), the samples of one pixel
+ * (render_pixel); fewer than TRACE_PACKET_MIN go one by one, and so do all of them with
+ * trace_options.single_rays (the same image to the bit).  docs/performance.md measures it. */
+#define TRACE_PACKET BVH_PACKET_SIZE
+#define TRACE_PACKET_MIN 2
+
 /* PBRT 4e, ch. 6, "Robust Spawned Ray Origins": shadow rays stop this fraction short of the
  * light point, whose own origin is offset by its error bound. */
 static const float SHADOW_EPSILON = 1e-4f;
@@ -43,6 +49,13 @@ struct trace_scene {
 struct hit_record {
     struct surface sf;
     uint32_t light_idx; /* or LIGHT_NONE */
+};
+
+/* The first intersection of a camera ray, found before its path starts (the packets of the
+ * render loop). */
+struct first_hit {
+    bool hit;
+    struct hit_record hr; /* when hit */
 };
 
 /* A path vertex as the estimators see it. */
@@ -65,7 +78,13 @@ struct last_bounce {
     bool is_specular;  /* the sample came from a delta lobe: no MIS */
 };
 
+static void count_ray(const struct trace_options *opt, const struct ray *ray, bool is_shadow,
+                      uint64_t *n_rays);
+static vec3 radiance(const struct trace_scene *ts, const struct trace_options *opt, struct ray ray,
+                     const struct first_hit *first, struct sampler *sampler, uint64_t *n_rays);
 static bool intersect(const struct trace_scene *ts, const struct ray *ray, struct hit_record *hr);
+static bool intersect_camera_rays(const struct trace_scene *ts, const struct trace_options *opt,
+                                  const struct ray *rays, uint32_t n, struct first_hit *first);
 static bool occluded(const struct trace_scene *ts, const struct ray *ray);
 static struct ray spawn_ray(const struct surface *sf, vec3 d);
 static struct ray spawn_ray_to(const struct surface *from, vec3 p_to, vec3 p_to_error, vec3 n_to);
@@ -95,6 +114,13 @@ static bool split_keeps(enum render_split split, uint32_t n_bounces)
 vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *opt, struct ray ray,
                     struct sampler *sampler, uint64_t *n_rays)
 {
+    return radiance(ts, opt, ray, NULL, sampler, n_rays);
+}
+
+/* trace_radiance, with the camera ray's intersection already found when first is not NULL. */
+static vec3 radiance(const struct trace_scene *ts, const struct trace_options *opt, struct ray ray,
+                     const struct first_hit *first, struct sampler *sampler, uint64_t *n_rays)
+{
     const struct scene *scene = ts->scene;
     const uint32_t n_ls = opt->light_samples ? opt->light_samples : 1;
     const uint32_t rr_depth = opt->rr_depth ? opt->rr_depth : TRACE_RR_DEPTH_DEFAULT;
@@ -115,8 +141,11 @@ vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *op
     for (uint32_t n_bounces = 0;;) {
         /* find the next vertex */
         struct hit_record hr;
-        (*n_rays)++;
-        bool hit = intersect(ts, &ray, &hr);
+        count_ray(opt, &ray, false, n_rays);
+        bool hit = first ? first->hit : intersect(ts, &ray, &hr);
+        if (first && hit)
+            hr = first->hr;
+        first = NULL;
         vec3 wo_world = v3_normalize(v3_neg(ray.d));
 
         /* emission where the ray ends, or the sky where it escapes: L += beta Le w_bsdf */
@@ -266,22 +295,6 @@ static bool adaptive_converged(const struct trace_options *opt, const struct fil
 /* The tag hashed into the seed of the pilots' stream ("pilot" in ASCII). */
 static const uint64_t PILOT_SEED_TAG = 0x70696c6f74ull;
 
-/* One camera sample of pixel (x, y) with the given sampler stream: its radiance estimate. */
-static vec3 camera_sample(const struct render_job *job, struct worker *w, uint32_t x, uint32_t y,
-                          uint64_t seed, uint32_t sample_idx)
-{
-    const struct trace_options *opt = job->opt;
-    struct sampler sampler;
-    uint32_t pixel_idx = y * (uint32_t)job->film->width + x;
-    sample_start_spp(&sampler, opt->sampler, seed, pixel_idx, sample_idx, job->set_spp);
-    /* box filter: uniform jitter inside the pixel */
-    vec2 u_pixel = sample_2d(&sampler);
-    vec2 u_lens = sample_2d(&sampler);
-    struct ray ray = camera_ray(&job->ts->camera, (float)x + u_pixel.x, (float)y + u_pixel.y,
-                                u_lens);
-    return trace_radiance(job->ts, opt, ray, &sampler, &w->result.n_rays);
-}
-
 /* Adaptive sampling, the pilot rule (two-stage sampling, Kirk & Arvo 1991, "Unbiased Sampling
  * Techniques for Image Synthesis", SIGGRAPH 91): the samples pixel (x, y) gets.  A pilot of
  * pilot_spp samples from a stream of its own (the seed hashed with PILOT_SEED_TAG, so its
@@ -291,18 +304,26 @@ static vec3 camera_sample(const struct render_job *job, struct worker *w, uint32
  * which is independent of them, E[estimate | N] = E[one sample] = the pixel's value.  The stop
  * rule's estimate is biased because one set of samples both decides and estimates.  The count
  * is a pure function of (seed, pixel), the same for every call; opt->pilot_target keeps it. */
-static uint32_t pilot_target(const struct render_job *job, struct worker *w, uint32_t x, uint32_t y)
+static uint32_t pilot_target(const struct render_job *job, struct worker *w, uint32_t x, uint32_t y,
+                             uint64_t *n_rays)
 {
     const struct trace_options *opt = job->opt;
     uint32_t pixel_idx = y * (uint32_t)job->film->width + x;
     if (opt->pilot_target && opt->pilot_target[pixel_idx])
         return opt->pilot_target[pixel_idx];
-    uint64_t seed = sample_hash64(opt->seed ^ PILOT_SEED_TAG);
+    struct sampler sampler;
+    sample_start_pixel(&sampler, opt->sampler, sample_hash64(opt->seed ^ PILOT_SEED_TAG), pixel_idx,
+                       job->set_spp);
     double s1 = 0.0, s2 = 0.0;
     uint64_t n = 0;
     uint32_t n_pilot = opt->pilot_spp ? opt->pilot_spp : TRACE_ADAPTIVE_PILOT_SPP;
     for (uint32_t i = 0; i < n_pilot; i++) {
-        vec3 L = camera_sample(job, w, x, y, seed, i);
+        sample_start_index(&sampler, i);
+        vec2 u_pixel = sample_2d(&sampler);
+        vec2 u_lens = sample_2d(&sampler);
+        struct ray ray = camera_ray(&job->ts->camera, (float)x + u_pixel.x, (float)y + u_pixel.y,
+                                    u_lens);
+        vec3 L = trace_radiance(job->ts, opt, ray, &sampler, n_rays);
         w->result.n_pilot++;
         if (!v3_is_finite(L))
             continue; /* as in the film: not counted */
@@ -319,6 +340,22 @@ static uint32_t pilot_target(const struct render_job *job, struct worker *w, uin
     return target;
 }
 
+/* How many samples the pixel may take, from `taken`, before its next adaptive test point
+ * (min_spp + k batch) of the stop rule: a batch of samples never steps over one. */
+static uint32_t samples_to_test(const struct trace_options *opt, uint32_t taken)
+{
+    if (!opt->adaptive || opt->adaptive_rule != RENDER_ADAPTIVE_STOP)
+        return UINT32_MAX;
+    if (taken < opt->min_spp)
+        return opt->min_spp - taken;
+    uint32_t batch = opt->batch ? opt->batch : 1;
+    return batch - (taken - opt->min_spp) % batch;
+}
+
+/* The samples of a pixel are taken TRACE_PACKET at a time (fewer before a test point or the
+ * end): their camera rays are made from their own samplers, intersected together
+ * (intersect_camera_rays), and each path then goes on alone from its first hit.  A sample's
+ * numbers, rays and film updates are those of one taken alone, in sample-index order. */
 static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, uint32_t y)
 {
     const struct trace_options *opt = job->opt;
@@ -327,15 +364,19 @@ static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, u
     struct film_pixel *px = &film->pixels[pixel_idx];
     uint64_t done = 0;
     uint64_t skipped = 0; /* samples adaptive sampling saved, counted as progress */
+    uint64_t n_rays = 0;  /* kept here, added to the worker's count once per pixel */
     uint32_t spp = opt->spp;
     if (opt->adaptive && opt->adaptive_rule == RENDER_ADAPTIVE_PILOT &&
         px->n + px->n_dropped < opt->spp) {
-        uint32_t target = pilot_target(job, w, x, y);
+        uint32_t target = pilot_target(job, w, x, y, &n_rays);
         if (target < spp) {
             skipped = spp - (px->n + px->n_dropped > target ? px->n + px->n_dropped : target);
             spp = target;
         }
     }
+    struct sampler samplers[TRACE_PACKET];
+    uint32_t n_started = 1; /* samplers started on the pixel: copies of the first */
+    sample_start_pixel(&samplers[0], opt->sampler, opt->seed, pixel_idx, job->set_spp);
     while (px->n + px->n_dropped < spp) {
         if (opt->cancel && atomic_load_explicit(opt->cancel, memory_order_relaxed)) {
             w->result.cancelled = true;
@@ -345,22 +386,43 @@ static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, u
             skipped = opt->spp - (px->n + px->n_dropped);
             break;
         }
-        uint32_t sample_idx = opt->sample_offset + px->n + px->n_dropped;
-        vec3 L = camera_sample(job, w, x, y, opt->seed, sample_idx);
-        if (v3_is_finite(L)) {
-            film_add(px, L);
-        } else {
-            if (w->result.n_nonfinite == 0) {
-                w->result.first_bad_x = x;
-                w->result.first_bad_y = y;
-                w->result.first_bad_sample = sample_idx;
-            }
-            w->result.n_nonfinite++;
-            px->n_dropped++;
+        uint32_t taken = px->n + px->n_dropped;
+        uint32_t n = spp - taken;
+        uint32_t to_test = samples_to_test(opt, taken);
+        n = n < to_test ? n : to_test;
+        n = n < TRACE_PACKET ? n : TRACE_PACKET;
+        /* the camera rays: box filter (uniform jitter inside the pixel), then the lens */
+        struct ray rays[TRACE_PACKET];
+        for (; n_started < n; n_started++)
+            samplers[n_started] = samplers[0];
+        for (uint32_t i = 0; i < n; i++) {
+            sample_start_index(&samplers[i], opt->sample_offset + taken + i);
+            vec2 u_pixel = sample_2d(&samplers[i]);
+            vec2 u_lens = sample_2d(&samplers[i]);
+            rays[i] = camera_ray(&job->ts->camera, (float)x + u_pixel.x, (float)y + u_pixel.y,
+                                 u_lens);
         }
-        done++;
+        struct first_hit first[TRACE_PACKET];
+        bool packet = intersect_camera_rays(job->ts, opt, rays, n, first);
+        for (uint32_t i = 0; i < n; i++) {
+            vec3 L = packet ? radiance(job->ts, opt, rays[i], &first[i], &samplers[i], &n_rays)
+                            : trace_radiance(job->ts, opt, rays[i], &samplers[i], &n_rays);
+            if (v3_is_finite(L)) {
+                film_add(px, L);
+            } else {
+                if (w->result.n_nonfinite == 0) {
+                    w->result.first_bad_x = x;
+                    w->result.first_bad_y = y;
+                    w->result.first_bad_sample = samplers[i].sample_idx;
+                }
+                w->result.n_nonfinite++;
+                px->n_dropped++;
+            }
+        }
+        done += n;
     }
     w->result.n_samples += done;
+    w->result.n_rays += n_rays;
     atomic_fetch_add_explicit(&job->samples_done, done + skipped, memory_order_relaxed);
 }
 
@@ -604,9 +666,9 @@ static vec3 sample_one_light(const struct trace_scene *ts, const struct trace_op
     if (v3_is_zero(f))
         return zero;
     /* the shadow ray: to infinity for the sky, else to the light point */
-    (*n_rays)++;
     struct ray shadow = ls.is_infinite ? spawn_ray(sf, ls.wi)
                                        : spawn_ray_to(sf, ls.p, ls.p_error, ls.n);
+    count_ray(opt, &shadow, true, n_rays);
     if (occluded(ts, &shadow))
         return zero;
     vec3 Ld = v3_scale(v3_mul(f, ls.Le), fabsf(wi.z) / ((float)n_ls * pmf));
@@ -639,6 +701,15 @@ static bool sample_direction(const struct material *m, vec3 wo, enum render_dire
 
 /* ---- scene queries ---- */
 
+/* Every ray traced is counted, and shown to the benchmark's hook if there is one. */
+static void count_ray(const struct trace_options *opt, const struct ray *ray, bool is_shadow,
+                      uint64_t *n_rays)
+{
+    (*n_rays)++;
+    if (opt->ray_hook)
+        opt->ray_hook(opt->ray_hook_user, ray, is_shadow);
+}
+
 /* The surface of scene triangle tri_idx at the barycentrics (b1, b2) of a hit. */
 static struct surface triangle_surface(const struct scene *scene, uint32_t tri_idx, float b1,
                                        float b2)
@@ -659,17 +730,19 @@ static struct surface triangle_surface(const struct scene *scene, uint32_t tri_i
 
 enum hit_kind { HIT_NONE, HIT_TRI, HIT_SPHERE, HIT_QUAD, HIT_PLANE };
 
-static bool intersect(const struct trace_scene *ts, const struct ray *ray_in, struct hit_record *hr)
+/* The closest hit along ray_in among the analytic shapes, nearer than the triangle hit bh (NULL:
+ * none) the BVH found, as a hit record: the second half of every intersection. */
+static bool closest_hit(const struct trace_scene *ts, const struct ray *ray_in,
+                        const struct bvh_hit *bh, struct hit_record *hr)
 {
     const struct scene *scene = ts->scene;
     struct ray ray = *ray_in;
     enum hit_kind kind = HIT_NONE;
     uint32_t idx = 0;
-    struct bvh_hit bh;
-    if (bvh_intersect(ts->bvh, &ray, &bh)) {
+    if (bh) {
         kind = HIT_TRI;
-        idx = bh.prim_idx;
-        ray.t_max = bh.t;
+        idx = bh->prim_idx;
+        ray.t_max = bh->t;
     }
     float t;
     for (uint32_t i = 0; i < scene->n_spheres; i++)
@@ -694,7 +767,7 @@ static bool intersect(const struct trace_scene *ts, const struct ray *ray_in, st
     case HIT_NONE:
         return false;
     case HIT_TRI:
-        hr->sf = triangle_surface(scene, idx, bh.u, bh.v);
+        hr->sf = triangle_surface(scene, idx, bh->u, bh->v);
         hr->light_idx = light_idx_of(ts->lights, LIGHT_TRIANGLE, idx);
         return true;
     case HIT_SPHERE:
@@ -711,6 +784,34 @@ static bool intersect(const struct trace_scene *ts, const struct ray *ray_in, st
         return true;
     }
     return false;
+}
+
+static bool intersect(const struct trace_scene *ts, const struct ray *ray, struct hit_record *hr)
+{
+    struct bvh_hit bh;
+    bool tri_hit = bvh_intersect(ts->bvh, ray, &bh);
+    return closest_hit(ts, ray, tri_hit ? &bh : NULL, hr);
+}
+
+/* The first hits of n <= TRACE_PACKET camera rays of one pixel, their triangles found as one
+ * packet (bvh_intersect_packet reports each ray's bvh_intersect result).  Returns false, filling
+ * nothing, where a packet does not pay (fewer than TRACE_PACKET_MIN rays, a scene without
+ * triangles) or is not wanted (opt->single_rays). */
+static bool intersect_camera_rays(const struct trace_scene *ts, const struct trace_options *opt,
+                                  const struct ray *rays, uint32_t n, struct first_hit *first)
+{
+    if (opt->single_rays || n < TRACE_PACKET_MIN || ts->scene->n_tris == 0)
+        return false;
+    struct bvh_packet packet;
+    for (uint32_t i = 0; i < n; i++)
+        bvh_packet_set(&packet, (int)i, &rays[i]);
+    struct bvh_packet_hit ph;
+    uint32_t hits = bvh_intersect_packet(ts->bvh, &packet, (1u << n) - 1u, &ph);
+    for (uint32_t i = 0; i < n; i++) {
+        struct bvh_hit bh = {ph.t[i], ph.u[i], ph.v[i], ph.prim_idx[i]};
+        first[i].hit = closest_hit(ts, &rays[i], hits >> i & 1u ? &bh : NULL, &first[i].hr);
+    }
+    return true;
 }
 
 static bool occluded(const struct trace_scene *ts, const struct ray *ray)

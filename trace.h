@@ -63,6 +63,15 @@ struct trace_options {
                                   TRACE_RR_THRESHOLD_DEFAULT */
     uint32_t rr_depth;         /* roulette may end a path after its rr_depth-th bounce and any
                                   later one; 0 means TRACE_RR_DEPTH_DEFAULT */
+    /* benchmarking (may be NULL): every ray the render traces, from the thread that traces it
+     * (so the hook must be thread-safe, or the render use one thread): camera and bounce rays
+     * (closest hit, is_shadow false) and shadow rays (any hit, is_shadow true).  bench/raydump
+     * writes them as ray files for bench/raybench. */
+    void (*ray_hook)(void *user, const struct ray *ray, bool is_shadow);
+    void *ray_hook_user;
+    /* benchmarking and tests: every camera ray intersected alone, not in the packets of
+     * render_pixel; the image is the same to the bit (bench/packetbench times the two) */
+    bool single_rays;
 };
 
 #define TRACE_RR_DEPTH_DEFAULT 2u /* as PBRT 4e: the first two bounces are never cut short */
