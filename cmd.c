@@ -10,6 +10,7 @@
 #include "cmd.h"
 
 #include <errno.h>
+#include <float.h>
 #include <getopt.h>
 #include <stdlib.h>
 #include <strings.h>
@@ -78,12 +79,14 @@ static bool option_error(const char *subcommand, int c, const char *name, struct
 /* ---- mcpt compare A.exr REF.exr [--heatmap ERR.png] [--json] ---- */
 
 static const char COMPARE_USAGE[] =
-    "usage: mcpt compare A.exr REF.exr [--heatmap ERR.png] [--json]\n"
+    "usage: mcpt compare A.exr REF.exr [--heatmap ERR.png] [--json] [--max-ref-luminance L]\n"
     "Prints MSE, RMSE, relMSE, pbrt's MRSE, MAE, PSNR and the bias of A against REF; when REF\n"
     "has variance.R/G/B channels, also its noise floor and the MSE with REF's noise removed.\n"
     "See docs/convergence.md.\n"
-    "  --heatmap ERR.png   false-colour map of the per-pixel relative squared error\n"
-    "  --json              print one JSON object instead of text\n";
+    "  --heatmap ERR.png        false-colour map of the per-pixel relative squared error\n"
+    "  --json                   print one JSON object instead of text\n"
+    "  --max-ref-luminance L    compare only the pixels whose luminance in REF is <= L\n"
+    "                           (e.g. 1 leaves out a lamp seen directly)\n";
 
 /* Reads path and points img at its R, G, B (and variance) channels. */
 static bool read_image(const char *path, struct image *exr, struct stats_image *img,
@@ -94,15 +97,17 @@ static bool read_image(const char *path, struct image *exr, struct stats_image *
 
 static int run_compare(int argc, char **argv)
 {
-    enum { OPT_HEATMAP = 256, OPT_JSON };
+    enum { OPT_HEATMAP = 256, OPT_JSON, OPT_MAX_LUM };
     static const struct option long_opts[] = {
         {"heatmap", required_argument, NULL, OPT_HEATMAP},
         {"json", no_argument, NULL, OPT_JSON},
+        {"max-ref-luminance", required_argument, NULL, OPT_MAX_LUM},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
     const char *heatmap = NULL;
     bool json = false;
+    float max_lum = INFINITY;
     struct mcpt_error err = {0};
     opterr = 0;
     optind = 0;
@@ -115,6 +120,13 @@ static int run_compare(int argc, char **argv)
             break;
         case OPT_JSON:
             json = true;
+            break;
+        case OPT_MAX_LUM:
+            ok = cmd_parse_float(optarg, 0.0f, FLT_MAX, &max_lum) ||
+                 cmd_usage_error(&err,
+                                 "expected a luminance >= 0 after --max-ref-luminance, "
+                                 "got '%s'",
+                                 optarg);
             break;
         case 'h':
             fputs(COMPARE_USAGE, stdout);
@@ -141,7 +153,7 @@ static int run_compare(int argc, char **argv)
         snprintf(files[k].path, sizeof files[k].path, "%s", paths[k] ? paths[k] : "");
     bool ok = (!heatmap || output_check(files, 1, files + 1, 2, &err)) &&
               read_image(a_path, &a_exr, &a, &err) && read_image(ref_path, &ref_exr, &ref, &err);
-    if (ok && !stats_compare(&a, &ref, &m, &err)) {
+    if (ok && !stats_compare_where(&a, &ref, max_lum, &m, &err)) {
         snprintf(err.file, sizeof err.file, "%s", ref_path);
         ok = false;
     }

@@ -50,20 +50,30 @@ static const char USAGE[] =
     "      --light-samples N  shadow rays per path vertex, each to a light picked by power\n"
     "                         (1..1024, default 1)\n"
     "      --split S          full (default), direct (bounces 0-1) or indirect (bounces > 1)\n"
+    "      --light-sampling M area (default) or solid-angle: how triangle and quad lights\n"
+    "                         are sampled (Arvo 1995; Urena et al. 2013)\n"
     "      --rr P             Russian roulette: throughput (default: continue with probability\n"
-    "                         max beta) or a fixed continuation probability P in (0, 1]\n"
+    "                         max beta / threshold) or a fixed continuation probability P in\n"
+    "                         (0, 1]\n"
+    "      --rr-threshold B   throughput below which roulette plays (default 0.25; PBRT's 1)\n"
     "      --rr-depth D       bounces before roulette may end a path (1..1024, default 2)\n"
     "      --threads N        render threads (default: all cores)\n"
     "      --seed S           random seed, 0..2^64-1 (default 0)\n"
     "      --sampler K        independent, stratified or sobol (default: scene, else sobol);\n"
     "                         see docs/sampling.md\n"
-    "      --adaptive         adaptive sampling: a pixel stops when the 95% interval of its\n"
-    "                         mean luminance, 1.96 sigma/sqrt(n), is <= T max(mean, floor)\n"
+    "      --adaptive         adaptive sampling: each pixel gets the samples that bring the\n"
+    "                         95% interval of its mean luminance, 1.96 sigma/sqrt(n), to\n"
+    "                         T max(mean, floor) (docs/sampling.md)\n"
+    "      --adaptive-rule R  pilot (default: sigma from a discarded pilot; unbiased) or stop\n"
+    "                         (stop when the pixel's own interval is narrow; biased low)\n"
     "      --tolerance T      adaptive: relative tolerance (default 0.05)\n"
     "      --adaptive-floor F adaptive: luminance below which T applies absolutely\n"
     "                         (default 0.01)\n"
-    "      --batch B          adaptive: samples between tests (default 32)\n"
-    "      --min-spp N        adaptive: samples before the first test (default 64, >= 2)\n"
+    "      --pilot-spp P      adaptive pilot: samples of the pilot (default 16, >= 2)\n"
+    "      --batch B          adaptive: samples between tests, or pilot counts rounded up to\n"
+    "                         whole batches (default 32)\n"
+    "      --min-spp N        adaptive: samples before the first test, or the least a pixel\n"
+    "                         gets by the pilot (default 64, >= 2)\n"
     "      --max-spp N        adaptive: most samples per pixel (default: the spp)\n"
     "      --heatmap PNG      write a false-colour map of the samples per pixel with a legend\n"
     "                         (adaptive default: OUT.samples.png)\n"
@@ -119,6 +129,9 @@ struct options {
     bool has_sampler;
     enum sampler_kind sampler;
     bool adaptive;
+    bool has_adaptive_rule;
+    enum render_adaptive_rule adaptive_rule;
+    uint32_t pilot_spp;   /* 0: from the scene, else the default */
     float tolerance;      /* 0: from the scene, else the default */
     float adaptive_floor; /* < 0: from the scene, else the default */
     uint32_t batch;       /* 0: from the scene, else the default (likewise the next two) */
@@ -144,10 +157,13 @@ struct options {
     enum render_direct direct;
     bool has_split;
     enum render_split split;
+    bool has_light_sampling;
+    enum render_light_sampling light_sampling;
     bool has_rr;
     float rr_prob;                    /* 0: throughput-based */
     uint32_t light_samples;           /* --light-samples N; 0: from the scene, else 1 */
     uint32_t rr_depth;                /* --rr-depth D; 0: from the scene, else the default */
+    float rr_threshold;               /* --rr-threshold B; 0: from the scene, else the default */
     const char *resume_path;          /* --resume CKPT, or NULL */
     bool restart;                     /* --restart: discard an existing checkpoint */
     bool has_range;                   /* --sample-range A:B given */
@@ -193,6 +209,7 @@ struct run {
     struct film film;
     struct trace_scene *ts;
     struct trace_options topt; /* the render's settings: options, else the scene's */
+    uint32_t *pilot_target;    /* adaptive pilot: each pixel's sample count (topt.pilot_target) */
     struct partial_info part;  /* --sample-range: what the EXR records */
     struct convergence cv;
     struct progress prog;
@@ -267,6 +284,8 @@ enum {
     OPT_MIN_SPP,
     OPT_MAX_SPP,
     OPT_HEATMAP,
+    OPT_ADAPTIVE_RULE,
+    OPT_PILOT_SPP,
     OPT_SNAPSHOTS = 768,
     OPT_REFERENCE,
     OPT_CURVE,
@@ -278,6 +297,8 @@ enum {
     OPT_SPLIT,
     OPT_RR,
     OPT_RR_DEPTH,
+    OPT_LIGHT_SAMPLING,
+    OPT_RR_THRESHOLD,
     OPT_SAMPLE_RANGE = 1280,
     OPT_TONEMAP = 1536,
     OPT_SCALE,
@@ -291,12 +312,16 @@ static const struct option LONG_OPTS[] = {
     {"direct", required_argument, NULL, OPT_DIRECT},
     {"light-samples", required_argument, NULL, OPT_LIGHT_SAMPLES},
     {"split", required_argument, NULL, OPT_SPLIT},
+    {"light-sampling", required_argument, NULL, OPT_LIGHT_SAMPLING},
     {"rr", required_argument, NULL, OPT_RR},
     {"rr-depth", required_argument, NULL, OPT_RR_DEPTH},
+    {"rr-threshold", required_argument, NULL, OPT_RR_THRESHOLD},
     {"threads", required_argument, NULL, OPT_THREADS},
     {"seed", required_argument, NULL, OPT_SEED},
     {"sampler", required_argument, NULL, OPT_SAMPLER},
     {"adaptive", no_argument, NULL, OPT_ADAPTIVE},
+    {"adaptive-rule", required_argument, NULL, OPT_ADAPTIVE_RULE},
+    {"pilot-spp", required_argument, NULL, OPT_PILOT_SPP},
     {"tolerance", required_argument, NULL, OPT_TOLERANCE},
     {"adaptive-floor", required_argument, NULL, OPT_ADAPTIVE_FLOOR},
     {"batch", required_argument, NULL, OPT_BATCH},
@@ -387,6 +412,14 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
         return scene_split_parse(optarg, &o->split) ||
                cmd_usage_error(err, "expected --split to be full, direct or indirect, got '%s'",
                                optarg);
+    case OPT_RR_THRESHOLD:
+        return (cmd_parse_float(optarg, 0.0f, 1e6f, &o->rr_threshold) && o->rr_threshold > 0.0f) ||
+               cmd_usage_error(err, "expected --rr-threshold to be a number > 0, got '%s'", optarg);
+    case OPT_LIGHT_SAMPLING:
+        o->has_light_sampling = true;
+        return scene_light_sampling_parse(optarg, &o->light_sampling) ||
+               cmd_usage_error(err, "expected --light-sampling to be area or solid-angle, got '%s'",
+                               optarg);
     case OPT_RR:
         o->has_rr = true;
         o->rr_prob = 0.0f;
@@ -430,6 +463,11 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
     case OPT_ADAPTIVE:
         o->adaptive = true;
         return true;
+    case OPT_ADAPTIVE_RULE:
+        o->has_adaptive_rule = true;
+        return scene_adaptive_rule_parse(optarg, &o->adaptive_rule) ||
+               cmd_usage_error(err, "expected --adaptive-rule to be pilot or stop, got '%s'",
+                               optarg);
     case OPT_TOLERANCE:
         return (cmd_parse_float(optarg, 0.0f, 1e6f, &o->tolerance) && o->tolerance > 0.0f) ||
                cmd_usage_error(err, "expected --tolerance to be a number > 0, got '%s'", optarg);
@@ -439,17 +477,22 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
                                optarg);
     case OPT_BATCH:
     case OPT_MIN_SPP:
-    case OPT_MAX_SPP: {
+    case OPT_MAX_SPP:
+    case OPT_PILOT_SPP: {
         const char *what = c == OPT_BATCH     ? "--batch"
                            : c == OPT_MIN_SPP ? "--min-spp"
-                                              : "--max-spp";
-        uint64_t lo = c == OPT_MIN_SPP ? 2 : 1; /* one sample has no spread */
+                           : c == OPT_MAX_SPP ? "--max-spp"
+                                              : "--pilot-spp";
+        uint64_t lo = c == OPT_MIN_SPP || c == OPT_PILOT_SPP ? 2 : 1; /* one sample: no spread */
         if (!cmd_parse_u64(optarg, lo, UINT32_MAX, &v))
             return cmd_usage_error(err,
                                    "expected %s to be an integer in %llu..4294967295, got "
                                    "'%s'",
                                    what, (unsigned long long)lo, optarg);
-        *(c == OPT_BATCH ? &o->batch : c == OPT_MIN_SPP ? &o->min_spp : &o->max_spp) = (uint32_t)v;
+        *(c == OPT_BATCH     ? &o->batch
+          : c == OPT_MIN_SPP ? &o->min_spp
+          : c == OPT_MAX_SPP ? &o->max_spp
+                             : &o->pilot_spp) = (uint32_t)v;
         return true;
     }
     case OPT_HEATMAP:
@@ -773,9 +816,12 @@ static double cpu_seconds(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-/* build: the BVH, the camera and the light table (trace_prepare), timed for the report. */
+/* build: the BVH, the camera and the light table (trace_prepare), timed for the report.  The
+ * light table samples as --light-sampling says, else as the scene's render statement. */
 static bool build(struct run *run, struct mcpt_error *err)
 {
+    if (run->o.has_light_sampling)
+        run->scene.render.light_sampling = run->o.light_sampling;
     double t0 = now_seconds();
     run->ts = trace_prepare(&run->scene, run->o.n_threads, err);
     run->t_build_s = now_seconds() - t0;
@@ -791,13 +837,23 @@ static bool sampling_options(const struct options *o, const struct render_settin
 {
     topt->adaptive = o->adaptive || r->adaptive;
     if (!topt->adaptive) {
-        if (o->tolerance || o->adaptive_floor >= 0.0f || o->batch || o->min_spp || o->max_spp)
-            return cmd_usage_error(err,
-                                   "expected --adaptive (or the scene's render "
-                                   "adaptive=true) with --tolerance, --adaptive-floor, --batch, "
-                                   "--min-spp or --max-spp, got none");
+        if (o->tolerance || o->adaptive_floor >= 0.0f || o->batch || o->min_spp || o->max_spp ||
+            o->has_adaptive_rule || o->pilot_spp)
+            return cmd_usage_error(err, "expected --adaptive (or the scene's render "
+                                        "adaptive=true) with --adaptive-rule, --tolerance, "
+                                        "--adaptive-floor, --pilot-spp, --batch, --min-spp or "
+                                        "--max-spp, got none");
         return true;
     }
+    topt->adaptive_rule = o->has_adaptive_rule   ? o->adaptive_rule
+                          : r->has_adaptive_rule ? r->adaptive_rule
+                                                 : RENDER_ADAPTIVE_PILOT;
+    if (topt->adaptive_rule != RENDER_ADAPTIVE_PILOT && o->pilot_spp)
+        return cmd_usage_error(err, "expected --adaptive-rule pilot with --pilot-spp, got %s",
+                               scene_adaptive_rule_name(topt->adaptive_rule));
+    topt->pilot_spp = o->pilot_spp   ? o->pilot_spp
+                      : r->pilot_spp ? r->pilot_spp
+                                     : TRACE_ADAPTIVE_PILOT_SPP;
     topt->spp = o->max_spp ? o->max_spp : r->max_spp ? r->max_spp : topt->spp;
     topt->tolerance = o->tolerance   ? o->tolerance
                       : r->tolerance ? r->tolerance
@@ -813,6 +869,7 @@ static bool sampling_options(const struct options *o, const struct render_settin
                                "expected --min-spp <= the most samples per pixel (%u), got "
                                "%u",
                                topt->spp, topt->min_spp);
+    topt->max_spp = topt->spp;
     return true;
 }
 
@@ -821,8 +878,10 @@ static bool sampling_options(const struct options *o, const struct render_settin
  * disjoint ranges hold exactly the whole render's samples), and fills *info with the range and
  * every setting the parts of one render must share. */
 static bool sample_range_options(const struct options *o, bool measuring, uint64_t scene_hash,
-                                 const struct film *film, struct trace_options *topt,
-                                 struct partial_info *info, struct mcpt_error *err)
+                                 const struct film *film,
+                                 enum render_light_sampling scene_light_sampling,
+                                 struct trace_options *topt, struct partial_info *info,
+                                 struct mcpt_error *err)
 {
     if (topt->adaptive)
         return cmd_usage_error(err, "expected no adaptive sampling with --sample-range (where a "
@@ -840,12 +899,15 @@ static bool sample_range_options(const struct options *o, bool measuring, uint64
     info->ranges[0] = o->range;
     snprintf(info->render, sizeof info->render,
              "scene=%016llx film=%dx%d spp=%u seed=%llu sampler=%s max-depth=%u direct=%s "
-             "light-samples=%u split=%s rr=%.9g rr-depth=%u",
+             "light-samples=%u split=%s rr=%.9g rr-depth=%u rr-threshold=%.9g "
+             "light-sampling=%s",
              (unsigned long long)scene_hash, film->width, film->height, topt->spp,
              (unsigned long long)topt->seed, sample_sampler_name(topt->sampler), topt->max_depth,
              scene_direct_name(topt->direct), topt->light_samples ? topt->light_samples : 1u,
              scene_split_name(topt->split), (double)topt->rr_prob,
-             topt->rr_depth ? topt->rr_depth : TRACE_RR_DEPTH_DEFAULT);
+             topt->rr_depth ? topt->rr_depth : TRACE_RR_DEPTH_DEFAULT,
+             (double)(topt->rr_threshold > 0.0f ? topt->rr_threshold : TRACE_RR_THRESHOLD_DEFAULT),
+             scene_light_sampling_name(scene_light_sampling));
     topt->sampler_spp = topt->spp; /* the whole render's stratified sets */
     topt->sample_offset = o->range.begin;
     topt->spp = o->range.end - o->range.begin;
@@ -902,11 +964,23 @@ static bool render_options(struct run *run, struct mcpt_error *err)
         .split = o->has_split ? o->split : r->split,
         .rr_prob = o->has_rr ? o->rr_prob : r->rr_prob,
         .rr_depth = o->rr_depth ? o->rr_depth : r->rr_depth,
+        .rr_threshold = o->rr_threshold > 0.0f ? o->rr_threshold : r->rr_threshold,
     };
     if (!sampling_options(o, r, &run->topt, err))
         return false;
-    if (o->has_range && !sample_range_options(o, run->cv.measuring, run->scene_hash, &run->film,
-                                              &run->topt, &run->part, err))
+    if (run->topt.adaptive && run->topt.adaptive_rule == RENDER_ADAPTIVE_PILOT) {
+        /* the pilot's counts, kept between passes (render_seed clears them for each seed) */
+        run->pilot_target = calloc((size_t)run->film.width * (size_t)run->film.height,
+                                   sizeof *run->pilot_target);
+        if (!run->pilot_target) {
+            mcpt_error_runtime(err, NULL, "out of memory for the adaptive pilot's counts");
+            return false;
+        }
+        run->topt.pilot_target = run->pilot_target;
+    }
+    if (o->has_range &&
+        !sample_range_options(o, run->cv.measuring, run->scene_hash, &run->film,
+                              run->scene.render.light_sampling, &run->topt, &run->part, err))
         return false;
     return !o->resume_path || resume_matches(run, err);
 }
@@ -1290,6 +1364,9 @@ static bool render_seed(struct run *run, struct film *f, uint32_t k, struct mcpt
     bool is_checkpointed = o->checkpoint_every > 0.0 && k == 0;
     struct trace_options pass = run->topt;
     pass.seed = run->topt.seed + k;
+    if (pass.pilot_target) /* another seed, another pilot */
+        memset(pass.pilot_target, 0,
+               sizeof *pass.pilot_target * (size_t)f->width * (size_t)f->height);
     if (!pass.adaptive && !pass.sampler_spp)
         pass.sampler_spp = spp_final; /* the strata of the final spp in every pass */
     double seconds = 0.0, seconds_per_spp = 0.0, t_preview = now_seconds();
@@ -1493,27 +1570,50 @@ static bool write_outputs(struct run *run, struct mcpt_error *err)
 
 /* ---- report ---- */
 
-/* Where an adaptive render's samples went: mean, least and most per pixel, the share of pixels
- * at the maximum. */
-static void report_adaptive(const struct run *run)
+/* Where a render's samples went: mean, least and most per pixel, the share of pixels at the
+ * maximum. */
+struct spp_spread {
+    double mean;
+    uint32_t lo;
+    uint32_t hi;
+    double share_at_max; /* fraction of pixels with spp samples */
+};
+
+static struct spp_spread spp_spread_of(const struct film *film, uint32_t spp)
 {
-    const struct film *film = &run->film;
-    const struct trace_options *topt = &run->topt;
     size_t n_pixels = (size_t)film->width * (size_t)film->height, n_at_max = 0;
     uint64_t total = 0;
-    uint32_t lo = UINT32_MAX, hi = 0;
+    struct spp_spread sp = {.lo = UINT32_MAX};
     for (size_t i = 0; i < n_pixels; i++) {
         uint32_t n = film->pixels[i].n + film->pixels[i].n_dropped;
         total += n;
-        lo = n < lo ? n : lo;
-        hi = n > hi ? n : hi;
-        n_at_max += n >= topt->spp;
+        sp.lo = n < sp.lo ? n : sp.lo;
+        sp.hi = n > sp.hi ? n : sp.hi;
+        n_at_max += n >= spp;
     }
-    printf("mcpt: adaptive (T %g, floor %g, batch %u, %u..%u spp): mean %.1f spp, least %u, most "
-           "%u, %.1f%% of pixels at the maximum; sample map %s\n",
-           topt->tolerance, topt->adaptive_floor, topt->batch, topt->min_spp, topt->spp,
-           (double)total / (double)n_pixels, lo, hi, 100.0 * (double)n_at_max / (double)n_pixels,
-           run->out.heatmap);
+    sp.mean = (double)total / (double)n_pixels;
+    sp.share_at_max = (double)n_at_max / (double)n_pixels;
+    return sp;
+}
+
+/* An adaptive render's rule and settings, the share of pixels at the maximum and the map. */
+static void report_adaptive(const struct run *run)
+{
+    const struct trace_options *topt = &run->topt;
+    struct spp_spread sp = spp_spread_of(&run->film, topt->spp);
+    if (topt->adaptive_rule == RENDER_ADAPTIVE_PILOT)
+        printf("mcpt: adaptive, pilot rule (T %g, floor %g, pilot %u spp, batch %u, %u..%u "
+               "spp): %.1f%% of pixels at the maximum; %.1f pilot samples a pixel, not in the "
+               "image; sample map %s\n",
+               topt->tolerance, topt->adaptive_floor, topt->pilot_spp, topt->batch, topt->min_spp,
+               topt->spp, 100.0 * sp.share_at_max,
+               (double)run->res.n_pilot / ((double)run->film.width * run->film.height),
+               run->out.heatmap);
+    else
+        printf("mcpt: adaptive, stop rule (T %g, floor %g, batch %u, %u..%u spp): %.1f%% of "
+               "pixels at the maximum; sample map %s\n",
+               topt->tolerance, topt->adaptive_floor, topt->batch, topt->min_spp, topt->spp,
+               100.0 * sp.share_at_max, run->out.heatmap);
 }
 
 /* report: the dropped samples on stderr, then the summary on stdout, or on stderr where an
@@ -1548,11 +1648,19 @@ static int report(const struct run *run)
     struct bvh_stats bs = trace_bvh_stats(run->ts);
     double t = run->t_render_s;
     const struct output_paths *out = &run->out;
-    printf("mcpt: %dx%d, %u spp, %d threads: render %.2f s wall, %.2f s CPU, %.3f Msamples/s, "
+    char spp[96]; /* "256 spp", or an adaptive render's spread */
+    if (run->topt.adaptive) {
+        struct spp_spread sp = spp_spread_of(&run->film, run->topt.spp);
+        snprintf(spp, sizeof spp, "adaptive %.1f spp (least %u, most %u)", sp.mean, sp.lo, sp.hi);
+    } else {
+        snprintf(spp, sizeof spp, "%u spp", run->topt.spp);
+    }
+    /* samples/s counts every camera sample traced, the adaptive pilot's too */
+    printf("mcpt: %dx%d, %s, %d threads: render %.2f s wall, %.2f s CPU, %.3f Msamples/s, "
            "%.2f Mrays/s; BVH %u tris in %.1f ms; wrote %s%s%s\n",
-           run->film.width, run->film.height, run->topt.spp, o->n_threads, t, run->t_cpu_s,
-           (double)res->n_samples / t * 1e-6, (double)res->n_rays / t * 1e-6, bs.n_tris,
-           run->t_build_s * 1e3, out->exr[0] ? out->exr : out->png,
+           run->film.width, run->film.height, spp, o->n_threads, t, run->t_cpu_s,
+           (double)(res->n_samples + res->n_pilot) / t * 1e-6, (double)res->n_rays / t * 1e-6,
+           bs.n_tris, run->t_build_s * 1e3, out->exr[0] ? out->exr : out->png,
            out->exr[0] && out->png[0] ? " and " : "",
            !out->exr[0] ? " (8-bit sRGB only: -o OUT.exr keeps the float image)" : out->png);
     if (run->cv.measuring)
@@ -1569,6 +1677,7 @@ static void run_free(struct run *run)
     plot_sheet_free(&run->cv.sheet);
     image_free(&run->cv.ref_img);
     trace_free(run->ts);
+    free(run->pilot_target);
     film_free(&run->film);
     if (run->has_scene)
         scene_free(&run->scene);

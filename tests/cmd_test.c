@@ -92,12 +92,14 @@ Test(cmd, subcommand_exit_statuses, .init = setup, .fini = teardown, .timeout = 
                              {"merge", "--help", NULL}};
     for (int i = 0; i < 3; i++)
         cr_assert_eq(run_mcpt(help[i], err, sizeof err), 0, "%s --help: %s", help[i][0], err);
-    const char *usage[][4] = {{"compare", "--bogus", NULL},
+    const char *usage[][6] = {{"compare", "--bogus", NULL},
                               {"integrate", "--bogus", NULL},
                               {"merge", "--bogus", NULL},
                               {"compare", img, "missing.exr", NULL},
-                              {"merge", "missing.exr", "-o", NULL}};
-    for (int i = 0; i < 5; i++)
+                              {"merge", "missing.exr", "-o", NULL},
+                              {"compare", img, img, "--max-ref-luminance", "-1", NULL},
+                              {"compare", img, img, "--max-ref-luminance", "nan", NULL}};
+    for (int i = 0; i < 7; i++)
         cr_assert_eq(run_mcpt(usage[i], err, sizeof err), 2, "%s %s: %s", usage[i][0], usage[i][1],
                      err);
 
