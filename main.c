@@ -1015,14 +1015,27 @@ static void shell_word(const char *word, char *out, size_t out_bytes)
 }
 
 /* The command that continues the render saved at ckpt: the program as it was invoked
- * (./mcpt, mcpt, a full path), the scene and --resume. */
+ * (./mcpt, mcpt, a full path), the scene and --resume.  A scene read from standard input must
+ * come that way again: from the file it was given (/proc/self/fd/0 names it), else as said. */
 static void resume_command(const struct run *run, const char *ckpt, char *out, size_t out_bytes)
 {
     char prog[FILE_PATH_BYTES], scene[FILE_PATH_BYTES], path[FILE_PATH_BYTES];
     shell_word(run->argv0, prog, sizeof prog);
     shell_word(run->o.scene_path, scene, sizeof scene);
     shell_word(ckpt, path, sizeof path);
-    snprintf(out, out_bytes, "%s %s --resume %s", prog, scene, path);
+    int n = snprintf(out, out_bytes, "%s %s --resume %s", prog, scene, path);
+    if (strcmp(run->o.scene_path, "-") != 0 || n < 0 || (size_t)n >= out_bytes)
+        return;
+    char target[FILE_PATH_BYTES];
+    ssize_t len = readlink("/proc/self/fd/0", target, sizeof target - 1);
+    struct stat st;
+    if (len > 0 && target[0] == '/' && fstat(STDIN_FILENO, &st) == 0 && S_ISREG(st.st_mode)) {
+        target[len] = '\0';
+        shell_word(target, scene, sizeof scene);
+        snprintf(out + n, out_bytes - (size_t)n, " < %s", scene);
+    } else {
+        snprintf(out + n, out_bytes - (size_t)n, " (the scene on standard input again)");
+    }
 }
 
 /* Bytes a thread's stack takes: pthread's default, RLIMIT_STACK (glibc), else 8 MiB. */

@@ -497,6 +497,22 @@ Test(restart, existing_checkpoint_refused_until_resume_or_restart, .init = setup
     const char *restart[] = {scene, "--spp", "2", "-o", out, "--restart", "--quiet", NULL};
     cr_assert_eq(run(restart, err, sizeof err), 0, "%s", err);
     cr_assert_not(test_exists(ckpt));
+    /* a scene on standard input: the command gives it the same way, from the file it was */
+    save_checkpoint(ckpt, scene, 4, out);
+    int saved_stdin = dup(0);
+    int fd = open(scene, O_RDONLY);
+    cr_assert(saved_stdin >= 0 && fd >= 0 && dup2(fd, 0) == 0);
+    close(fd);
+    const char *from_stdin[] = {"-", "--spp", "4", "-o", out, NULL};
+    int rc = run(from_stdin, err, sizeof err);
+    cr_assert(dup2(saved_stdin, 0) == 0);
+    close(saved_stdin);
+    char *scene_abs = realpath(scene, NULL);
+    cr_assert_not_null(scene_abs);
+    snprintf(want, sizeof want, "continue it with '%s - --resume %s < %s'", bin, ckpt, scene_abs);
+    free(scene_abs);
+    cr_assert_eq(rc, 2, "%s", err);
+    cr_assert(strstr(err, want), "want %s\ngot  %s", want, err);
 }
 
 /* ---- a full disk, kill -9: the image and its preview stay a pair ---- */
