@@ -182,6 +182,13 @@ static inline bool box_hit(const struct bvh_node *node, const struct ray_pre *rp
     return t0 <= t1;
 }
 
+/* A ray the traversals accept: finite origin and direction, direction not zero.  Any other ray
+ * hits nothing (a NaN ray would pass every slab test, the empty lanes of wide nodes included). */
+static inline bool ray_is_valid(const struct ray *ray)
+{
+    return v3_is_finite(ray->o) && v3_is_finite(ray->d) && !v3_is_zero(ray->d);
+}
+
 /* A traversal stack entry of the closest-hit loops. */
 struct stack_entry {
     uint32_t node_idx; /* node still to visit (binary index or wide reference) */
@@ -204,6 +211,14 @@ void bvh_load_tri(struct bvh_tri *tri, const vec3 *positions, const uint32_t *in
  * 2D vertices A, B, C, each from two exact double products and one rounding. */
 void bvh_edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx, float Cy,
                                float *U, float *V, float *W);
+
+/* Woop's test in double for a (ray, triangle) pair whose float test (tri_hit, woop8) found
+ * inside but could not decide on which side of the origin the hit lies; edge[] are the float
+ * edge functions U, V, W (after Woop's fallback).  True with t in (t_min, t_max), u and v when
+ * the hit is certainly in front (bvh.c, "Watertight ray-triangle test").  rp needs Woop's
+ * constants (ray_setup_woop). */
+bool bvh_tri_hit_double(const struct bvh_tri *tri, const struct ray_pre *rp, const float edge[3],
+                        float t_min, float t_max, float *t_out, float *u_out, float *v_out);
 
 /* Brute force's step: tests tri (the caller's triangle prim) with the scalar watertight test and
  * keeps it in *best when it is hit before best->t (prim_idx UINT32_MAX while nothing is hit). */

@@ -670,8 +670,10 @@ struct woop8_in {
 
 struct woop8_out {
     struct f8 t;
-    struct f8 u; /* V / det */
-    struct f8 v; /* W / det */
+    struct f8 u;        /* V / det */
+    struct f8 v;        /* W / det */
+    uint32_t undecided; /* inside lanes whose side of the origin float could not decide */
+    struct f8 edge[3];  /* U, V, W, filled only when undecided != 0 */
 };
 
 static void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, struct f8 Bx,
@@ -697,9 +699,13 @@ static void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, struct f8
     *W = f8_loadu(w);
 }
 
+/* Returns the lanes certainly hit in (t_min, t_max); out->undecided gets the inside lanes whose
+ * side of the origin the float bounds leave open, for the caller to decide with
+ * bvh_tri_hit_double (it has the stored vertices, woop8 only their translated copies). */
 static inline uint32_t woop8(const struct woop8_in *in, uint32_t valid, struct woop8_out *out)
 {
     const struct f8 zero = f8_set1(0.0f);
+    out->undecided = 0;
     /* shear so each lane's ray direction becomes (0, 0, 1) */
     struct f8 Ax = f8_sub(in->a[0], f8_mul(in->sx, in->a[2]));
     struct f8 Ay = f8_sub(in->a[1], f8_mul(in->sy, in->a[2]));
@@ -717,12 +723,12 @@ static inline uint32_t woop8(const struct woop8_in *in, uint32_t valid, struct w
     /* outside when the edge functions disagree in sign */
     struct m8 any_neg = m8_or(m8_or(f8_lt(U, zero), f8_lt(V, zero)), f8_lt(W, zero));
     struct m8 any_pos = m8_or(m8_or(f8_gt(U, zero), f8_gt(V, zero)), f8_gt(W, zero));
-    uint32_t hit = valid & ~m8_bits(m8_and(any_neg, any_pos));
-    if (!hit)
+    uint32_t inside = valid & ~m8_bits(m8_and(any_neg, any_pos));
+    if (!inside)
         return 0;
     struct f8 det = f8_add(f8_add(U, V), W);
-    hit &= ~m8_bits(f8_eq(det, zero));
-    if (!hit)
+    inside &= ~m8_bits(f8_eq(det, zero));
+    if (!inside)
         return 0;
     struct f8 Az = f8_mul(in->sz, in->a[2]);
     struct f8 Bz = f8_mul(in->sz, in->b[2]);
@@ -730,28 +736,45 @@ static inline uint32_t woop8(const struct woop8_in *in, uint32_t valid, struct w
     struct f8 T = f8_add(f8_add(f8_mul(U, Az), f8_mul(V, Bz)), f8_mul(W, Cz));
     struct f8 inv_det = f8_div(f8_set1(1.0f), det);
     struct f8 t = f8_mul(T, inv_det);
-    hit &= m8_bits(m8_and(f8_gt(t, in->t_min), f8_lt(t, in->t_max)));
-    if (!hit)
-        return 0;
-    /* PBRT 4e, ch. 6, "Avoiding Intersections Behind Ray Origins", as in tri_hit */
+    /* the error bounds of T and det, as in tri_hit (docs/theory.md, "Self-intersection") */
+    const struct f8 tiny = f8_set1(FLT_MIN);
     struct f8 max_xt = f8_max_num(f8_max_num(f8_abs(Ax), f8_abs(Bx)), f8_abs(Cx));
     struct f8 max_yt = f8_max_num(f8_max_num(f8_abs(Ay), f8_abs(By)), f8_abs(Cy));
+    struct f8 max_zu = f8_max_num(f8_max_num(f8_abs(in->a[2]), f8_abs(in->b[2])), f8_abs(in->c[2]));
     struct f8 max_zt = f8_max_num(f8_max_num(f8_abs(Az), f8_abs(Bz)), f8_abs(Cz));
     struct f8 max_e = f8_max_num(f8_max_num(f8_abs(U), f8_abs(V)), f8_abs(W));
-    struct f8 max_z = f8_max_num(f8_max_num(f8_abs(in->a[2]), f8_abs(in->b[2])), f8_abs(in->c[2]));
-    struct f8 delta_x = f8_mul(f8_set1(mcpt_gamma(5)), f8_add(max_xt, max_z));
-    struct f8 delta_y = f8_mul(f8_set1(mcpt_gamma(5)), f8_add(max_yt, max_z));
-    struct f8 delta_z = f8_mul(f8_set1(mcpt_gamma(3)), max_zt);
-    struct f8 delta_e = f8_mul(
-        f8_set1(2.0f), f8_add(f8_add(f8_mul(f8_mul(f8_set1(mcpt_gamma(2)), max_xt), max_yt),
-                                     f8_mul(delta_y, max_xt)),
-                              f8_mul(delta_x, max_yt)));
-    struct f8 delta_t = f8_mul(
-        f8_mul(f8_set1(3.0f), f8_add(f8_add(f8_mul(f8_mul(f8_set1(mcpt_gamma(3)), max_e), max_zt),
-                                            f8_mul(delta_e, max_zt)),
-                                     f8_mul(delta_z, max_e))),
-        f8_abs(inv_det));
-    hit &= m8_bits(f8_gt(t, delta_t));
+    struct f8 two_zu = f8_mul(f8_set1(2.0f), max_zu);
+    struct f8 delta_x = f8_add(f8_mul(f8_set1(mcpt_gamma(5)), f8_add(max_xt, two_zu)), tiny);
+    struct f8 delta_y = f8_add(f8_mul(f8_set1(mcpt_gamma(5)), f8_add(max_yt, two_zu)), tiny);
+    struct f8 delta_z = f8_add(f8_mul(f8_set1(mcpt_gamma(4)), max_zt), tiny);
+    struct f8 delta_e =
+        f8_add(f8_mul(f8_set1(2.0f),
+                      f8_add(f8_add(f8_add(f8_mul(f8_mul(f8_set1(mcpt_gamma(3)), max_xt), max_yt),
+                                           f8_mul(delta_y, max_xt)),
+                                    f8_mul(delta_x, max_yt)),
+                             f8_mul(delta_x, delta_y))),
+               tiny);
+    struct f8 delta_T =
+        f8_add(f8_mul(f8_set1(3.0f),
+                      f8_add(f8_add(f8_add(f8_mul(f8_mul(f8_set1(mcpt_gamma(4)), max_e), max_zt),
+                                           f8_mul(delta_z, max_e)),
+                                    f8_mul(delta_e, max_zt)),
+                             f8_mul(delta_z, delta_e))),
+               tiny);
+    struct f8 delta_det = f8_mul(f8_set1(3.0f),
+                                 f8_add(f8_mul(f8_set1(mcpt_gamma(3)), max_e), delta_e));
+    struct f8 abs_T = f8_abs(T);
+    uint32_t decided = m8_bits(m8_and(m8_and(f8_gt(abs_T, delta_T), f8_le(abs_T, f8_set1(FLT_MAX))),
+                                      f8_gt(f8_abs(det), delta_det)));
+    out->undecided = inside & ~decided;
+    if (out->undecided) {
+        out->edge[0] = U;
+        out->edge[1] = V;
+        out->edge[2] = W;
+    }
+    uint32_t hit = inside & decided &
+                   m8_bits(
+                       m8_and(m8_and(f8_gt(t, zero), f8_gt(t, in->t_min)), f8_lt(t, in->t_max)));
     out->t = t;
     out->u = f8_mul(V, inv_det);
     out->v = f8_mul(W, inv_det);
@@ -797,6 +820,8 @@ struct wide_ray8 {
     struct f8 sy;
     struct f8 sz;
     int k[3];                     /* kx, ky, kz */
+    const struct ray_pre *rp;     /* the ray's constants, for bvh_tri_hit_double */
+    float rp_t_min;               /* the ray's t_min, likewise */
     size_t near_off[3];           /* byte offsets of the near and far bounds rows in a node */
     size_t far_off[3];
     const struct wide_node *wide; /* the node array */
@@ -871,6 +896,7 @@ static inline void wide_ray8_box(const struct bvh *bvh, const struct wide_ray *w
         v->c_far[j] = f8_set1(wr->c_far[j]);
     }
     v->t_min = f8_set1(wr->t_min);
+    v->rp_t_min = wr->t_min;
 }
 
 /* Woop's constants: computed into *rp (which the caller owns) on the first leaf. */
@@ -886,6 +912,7 @@ static inline void wide_ray8_woop(const struct wide_ray *wr, struct wide_ray8 *v
     v->sx = f8_set1(rp->sx);
     v->sy = f8_set1(rp->sy);
     v->sz = f8_set1(rp->sz);
+    v->rp = rp;
 }
 
 /* Slab test of one ray against a wide node's children; returns the mask of children hit in
@@ -913,6 +940,48 @@ static inline uint32_t wide_box_hit(const struct wide_node *node, const struct w
     return m8_bits(f8_le(t0, t1));
 }
 
+/* Triangle i of the leaf at wide triangle `first` (n triangles), unpacked from SoA. */
+static void leaf_tri(const struct bvh *bvh, uint32_t first, uint32_t n, uint32_t i,
+                     struct bvh_tri *tri)
+{
+    const float *base = bvh->leaf_tris + 9 * (size_t)first;
+    float *p[3] = {tri->p0, tri->p1, tri->p2};
+    for (int k = 0; k < 3; k++)
+        for (int a = 0; a < 3; a++)
+            p[k][a] = base[(size_t)(3 * k + a) * n + i];
+}
+
+/* The lanes woop8 left undecided, decided by bvh_tri_hit_double (rare: hits at t ~ 0, grazing
+ * hits, extreme coordinates): one ray rp against the leaf's triangles in `lanes`.  Their t, u, v
+ * replace the lanes' in *out; returns the lanes hit. */
+static uint32_t leaf_undecided(const struct bvh *bvh, uint32_t first, uint32_t n,
+                               const struct ray_pre *rp, float t_min, float t_max, uint32_t lanes,
+                               struct woop8_out *out)
+{
+    float t[8];
+    float u[8];
+    float v[8];
+    float e[3][8];
+    f8_store(t, out->t);
+    f8_store(u, out->u);
+    f8_store(v, out->v);
+    for (int j = 0; j < 3; j++)
+        f8_store(e[j], out->edge[j]);
+    uint32_t hits = 0;
+    for (uint32_t bits = lanes; bits; bits &= bits - 1) {
+        int i = lowest_bit(bits);
+        struct bvh_tri tri;
+        leaf_tri(bvh, first, n, (uint32_t)i, &tri);
+        const float edge[3] = {e[0][i], e[1][i], e[2][i]};
+        if (bvh_tri_hit_double(&tri, rp, edge, t_min, t_max, &t[i], &u[i], &v[i]))
+            hits |= 1u << i;
+    }
+    out->t = f8_loadu(t);
+    out->u = f8_loadu(u);
+    out->v = f8_loadu(v);
+    return hits;
+}
+
 /* woop8 of one ray against the n (1..8) triangles of the leaf at wide triangle `first`. */
 static inline uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint32_t n,
                                      const struct wide_ray8 *v, float t_max,
@@ -931,7 +1000,10 @@ static inline uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint
     in.sz = v->sz;
     in.t_min = v->t_min;
     in.t_max = f8_set1(t_max);
-    return woop8(&in, (1u << n) - 1u, out);
+    uint32_t hits = woop8(&in, (1u << n) - 1u, out);
+    if (out->undecided)
+        hits |= leaf_undecided(bvh, first, n, v->rp, v->rp_t_min, t_max, out->undecided, out);
+    return hits;
 }
 
 /* The closest hit so far. */
@@ -1120,7 +1192,7 @@ static inline bool wide_any_ray(const struct bvh *bvh, uint32_t root, const stru
 static inline bool wide_ray_begin(const struct bvh *bvh, const struct ray *ray,
                                   struct ray_pre *rp, struct wide_ray *wr)
 {
-    if (bvh->n_wide == 0)
+    if (bvh->n_wide == 0 || !ray_is_valid(ray))
         return false;
     ray_setup_box(ray, rp);
     float t_entry;
@@ -1335,10 +1407,13 @@ static inline struct f8 pick_k(const struct packet_pre *pp, int j, struct f8 x, 
     return f8_select(pp->k_is[j][0], x, f8_select(pp->k_is[j][1], y, z));
 }
 
-/* woop8 of triangle i of the leaf at `first` (n triangles) against the rays in mask. */
-static inline uint32_t packet_tri_hit(const struct bvh *bvh, uint32_t first, uint32_t n,
-                                      uint32_t i, const struct packet_pre *pp, struct f8 t_max,
-                                      uint32_t mask, struct woop8_out *out)
+/* woop8 of triangle i of the leaf at `first` (n triangles) against the rays in mask; the lanes
+ * it leaves undecided go to bvh_tri_hit_double with their single-ray constants, which equal the
+ * packet's to the bit (packet_setup). */
+static inline uint32_t packet_tri_hit(const struct bvh *bvh, const struct bvh_packet *packet,
+                                      uint32_t first, uint32_t n, uint32_t i,
+                                      const struct packet_pre *pp, struct f8 t_max, uint32_t mask,
+                                      struct woop8_out *out)
 {
     const float *base = bvh->leaf_tris + 9 * (size_t)first;
     struct woop8_in in;
@@ -1360,7 +1435,37 @@ static inline uint32_t packet_tri_hit(const struct bvh *bvh, uint32_t first, uin
     in.sz = pp->sz;
     in.t_min = pp->t_min;
     in.t_max = t_max;
-    return woop8(&in, mask, out);
+    uint32_t hits = woop8(&in, mask, out);
+    if (out->undecided) {
+        struct bvh_tri tri;
+        leaf_tri(bvh, first, n, i, &tri);
+        float t[8];
+        float u[8];
+        float v[8];
+        float t_hi[8];
+        float e[3][8];
+        f8_store(t, out->t);
+        f8_store(u, out->u);
+        f8_store(v, out->v);
+        f8_store(t_hi, t_max);
+        for (int j = 0; j < 3; j++)
+            f8_store(e[j], out->edge[j]);
+        for (uint32_t bits = out->undecided; bits; bits &= bits - 1) {
+            int lane = lowest_bit(bits);
+            struct ray r = packet_lane(packet, lane);
+            struct ray_pre rp;
+            ray_setup_box(&r, &rp);
+            ray_setup_woop(&rp);
+            const float edge[3] = {e[0][lane], e[1][lane], e[2][lane]};
+            if (bvh_tri_hit_double(&tri, &rp, edge, r.t_min, t_hi[lane], &t[lane], &u[lane],
+                                   &v[lane]))
+                hits |= 1u << lane;
+        }
+        out->t = f8_loadu(t);
+        out->u = f8_loadu(u);
+        out->v = f8_loadu(v);
+    }
+    return hits;
 }
 
 struct packet_entry {
@@ -1430,7 +1535,8 @@ static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh,
             uint32_t n = (cur.ref & 7u) + 1;
             for (uint32_t i = 0; i < n; i++) {
                 struct woop8_out out;
-                uint32_t hits = packet_tri_hit(bvh, first, n, i, pp, t_hit8, cur.mask, &out);
+                uint32_t hits = packet_tri_hit(bvh, packet, first, n, i, pp, t_hit8, cur.mask,
+                                               &out);
                 if (!hits)
                     continue;
                 /* a lane's later triangle is tested against the t_hit its earlier one set, as
@@ -1476,10 +1582,23 @@ done:
     return hits;
 }
 
+/* The lanes of active whose rays the traversals accept (ray_is_valid). */
+static uint32_t packet_valid(const struct bvh_packet *packet, uint32_t active)
+{
+    uint32_t valid = 0;
+    for (uint32_t bits = active & ((1u << BVH_PACKET_SIZE) - 1u); bits; bits &= bits - 1) {
+        int lane = lowest_bit(bits);
+        struct ray r = packet_lane(packet, lane);
+        if (ray_is_valid(&r))
+            valid |= 1u << lane;
+    }
+    return valid;
+}
+
 uint32_t bvh_intersect_packet(const struct bvh *bvh, const struct bvh_packet *packet,
                               uint32_t active, struct bvh_packet_hit *hit)
 {
-    active &= (1u << BVH_PACKET_SIZE) - 1u;
+    active = packet_valid(packet, active);
     if (!(bvh->layouts & BVH_LAYOUT_WIDE) || bvh->n_wide == 0) {
         uint32_t hits = 0;
         for (uint32_t bits = active; bits; bits &= bits - 1) {
@@ -1540,8 +1659,8 @@ static ALWAYS_INLINE uint32_t packet_any(const struct bvh *bvh, const struct bvh
             uint32_t n = (cur.ref & 7u) + 1;
             for (uint32_t i = 0; i < n && (cur.mask & ~occluded); i++) {
                 struct woop8_out out;
-                occluded |= packet_tri_hit(bvh, first, n, i, pp, t_max8, cur.mask & ~occluded,
-                                           &out);
+                occluded |= packet_tri_hit(bvh, packet, first, n, i, pp, t_max8,
+                                           cur.mask & ~occluded, &out);
             }
         }
         if (occluded == active || n_stack == 0)
@@ -1553,7 +1672,7 @@ static ALWAYS_INLINE uint32_t packet_any(const struct bvh *bvh, const struct bvh
 uint32_t bvh_occluded_packet(const struct bvh *bvh, const struct bvh_packet *packet,
                              uint32_t active)
 {
-    active &= (1u << BVH_PACKET_SIZE) - 1u;
+    active = packet_valid(packet, active);
     if (!(bvh->layouts & BVH_LAYOUT_WIDE) || bvh->n_wide == 0) {
         uint32_t occluded = 0;
         for (uint32_t bits = active; bits; bits &= bits - 1) {
@@ -1605,13 +1724,9 @@ void bvh_wide_brute(const struct bvh *bvh, const struct ray_pre *rp, float t_min
         }
         uint32_t first = (ref & ~WIDE_LEAF) >> 3;
         uint32_t n = (ref & 7u) + 1;
-        const float *base = bvh->leaf_tris + 9 * (size_t)first;
         for (uint32_t i = 0; i < n; i++) {
             struct bvh_tri tri;
-            float *p[3] = {tri.p0, tri.p1, tri.p2};
-            for (int k = 0; k < 3; k++)
-                for (int a = 0; a < 3; a++)
-                    p[k][a] = base[(size_t)(3 * k + a) * n + i];
+            leaf_tri(bvh, first, n, i, &tri);
             bvh_brute_step(&tri, bvh->wide_prim_idx[first + i], rp, t_min, best);
         }
     }
