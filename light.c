@@ -58,7 +58,7 @@ static double light_power(const struct scene *scene, const struct light *l, doub
         break;
     case LIGHT_QUAD:
         m = &scene->materials[scene->quads[l->prim_idx].mat_idx];
-        *area = v3_length(v3_cross(scene->quads[l->prim_idx].e1, scene->quads[l->prim_idx].e2));
+        *area = shape_quad_area(&scene->quads[l->prim_idx]);
         break;
     case LIGHT_SPHERE: {
         const struct sphere *s = &scene->spheres[l->prim_idx];
