@@ -1171,8 +1171,8 @@ void bvh_edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx,
  * is exact in double; the translation, shear, edge functions, T and det are recomputed, with the
  * same error bounds in units of u = 2^-53.  For float inputs no double operation here
  * overflows or underflows (products of at most four floats stay within 2^+-600), so the bounds
- * need no absolute term.  A hit needs t certainly > 0 and t_min < t < t_max; the float t
- * returned is the double one rounded, kept inside the open interval.  When even double cannot
+ * need no absolute term.  A hit needs t certainly > 0 and t_min < t < t_max, the latter tested
+ * on the float t returned (the double one rounded).  When even double cannot
  * decide (the origin within about 2^-50 of the plane, relative to the triangle's extent from
  * it), the hit is rejected: the origin lies on the plane, and t_min is exclusive. */
 bool bvh_tri_hit_double(const struct bvh_tri *tri, const struct ray_pre *rp, const float edge[3],
@@ -1233,16 +1233,13 @@ bool bvh_tri_hit_double(const struct bvh_tri *tri, const struct ray_pre *rp, con
     if (!(fabs(T) > delta_T && fabs(det) > delta_det))
         return false; /* undecided even in double: the origin is on the plane */
     double t = T / det;
-    if (!(t > 0.0 && t > (double)t_min && t < (double)t_max))
+    if (!(t > 0.0))
         return false;
-    /* round into the open interval (t_min, t_max) and above 0 */
-    float tf = (float)t;
-    float lo = t_min > 0.0f ? t_min : 0.0f;
-    if (!(tf > lo))
-        tf = next_float_up(lo);
-    if (!(tf < t_max))
-        tf = next_float_down(t_max);
-    if (!(tf > lo && tf < t_max))
+    /* t rounded to float (a positive t that underflows becomes the least positive float), then
+     * tested against the interval as float tests it: the result depends on t_min and t_max only
+     * through that test, so every traversal gets the same bits */
+    float tf = (float)t > 0.0f ? (float)t : FLT_TRUE_MIN;
+    if (!(tf > t_min && tf < t_max))
         return false;
     *t_out = tf;
     *u_out = (float)(V / det);
@@ -1315,8 +1312,22 @@ static bool tri_hit(const struct bvh_tri *tri, const struct ray_pre *rp, float t
                             delta_z * delta_e) +
                     FLT_MIN;
     float delta_det = 3.0f * (mcpt_gamma(3) * max_e + delta_e);
-    /* decided: T finite and both signs exact (a NaN or infinite bound leaves it undecided) */
-    bool decided = fabsf(T) > delta_T && fabsf(T) <= FLT_MAX && fabsf(det) > delta_det;
+    /* the hit's own precision: with b = (U, V, W) / det, sum |b_i - b_i*| <= (3 delta_e +
+     * delta_det) / |det| <= 2 delta_det / |det| (delta_det >= 3 delta_e); the point
+     * b0 p0 + b1 p1 + b2 p2 then moves by that times the triangle's extent, at most 2 (X + Y)
+     * across the ray and the spread of Az, Bz, Cz along it, measured in units of t by |sz|.  So
+     *   |p - p*| / |d| |det| <= 2 delta_det (2 (X + Y) |sz| + spread) + delta_z |det|
+     * small beside t for a triangle small beside its distance, large for a huge one near the
+     * origin (a floor of size 1e7 seen from 1 away, whose float barycentrics are off by whole
+     * units) */
+    float z_lo = min_num(min_num(Az, Bz), Cz);
+    float z_hi = max_num(max_num(Az, Bz), Cz);
+    float extent = 2.0f * (max_xt + max_yt) * fabsf(rp->sz) + (z_hi - z_lo);
+    float err_p = 2.0f * delta_det * extent + delta_z * fabsf(det);
+    /* decided: T finite, both signs exact (a NaN or infinite bound leaves it undecided), and
+     * the hit point known to 2^-10 of its distance in the worst case (typically 2^-20) */
+    bool decided = fabsf(T) > delta_T && fabsf(T) <= FLT_MAX && fabsf(det) > delta_det &&
+                   err_p <= 0x1p-10f * fabsf(T);
     if (!decided) {
         const float edge[3] = {U, V, W};
         return bvh_tri_hit_double(tri, rp, edge, t_min, t_max, t_out, u_out, v_out);

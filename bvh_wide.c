@@ -763,9 +763,19 @@ static inline uint32_t woop8(const struct woop8_in *in, uint32_t valid, struct w
                tiny);
     struct f8 delta_det = f8_mul(f8_set1(3.0f),
                                  f8_add(f8_mul(f8_set1(mcpt_gamma(3)), max_e), delta_e));
+    /* the hit's own precision, as in tri_hit */
+    struct f8 z_lo = f8_min_num(f8_min_num(Az, Bz), Cz);
+    struct f8 z_hi = f8_max_num(f8_max_num(Az, Bz), Cz);
+    struct f8 extent = f8_add(f8_mul(f8_mul(f8_set1(2.0f), f8_add(max_xt, max_yt)), f8_abs(in->sz)),
+                              f8_sub(z_hi, z_lo));
+    struct f8 abs_det = f8_abs(det);
+    struct f8 err_p = f8_add(f8_mul(f8_mul(f8_set1(2.0f), delta_det), extent),
+                             f8_mul(delta_z, abs_det));
     struct f8 abs_T = f8_abs(T);
-    uint32_t decided = m8_bits(m8_and(m8_and(f8_gt(abs_T, delta_T), f8_le(abs_T, f8_set1(FLT_MAX))),
-                                      f8_gt(f8_abs(det), delta_det)));
+    uint32_t decided = m8_bits(
+        m8_and(m8_and(m8_and(f8_gt(abs_T, delta_T), f8_le(abs_T, f8_set1(FLT_MAX))),
+                      f8_gt(abs_det, delta_det)),
+               f8_le(err_p, f8_mul(f8_set1(0x1p-10f), abs_T))));
     out->undecided = inside & ~decided;
     if (out->undecided) {
         out->edge[0] = U;
