@@ -120,20 +120,16 @@ static vec3 plane_normal(struct dvec3 e1, struct dvec3 e2, double *eta)
     return d3_to_float(d3_scale(c, 1.0 / len));
 }
 
-/* The ray parameter t (a double, certainly > 0) as a float inside (t_min, t_max): false when it
- * is not in that interval. */
+/* The ray parameter t (a double, whose sign is certain) as a float, when it is > 0 and in
+ * (t_min, t_max) as float compares it (a positive t that underflows becomes the least positive
+ * float). */
 static bool t_to_float(double t, const struct ray *ray, float *t_hit)
 {
-    if (!(t > (double)ray->t_min && t < (double)ray->t_max && t > 0.0))
+    if (!(t > 0.0))
         return false;
-    float lo = ray->t_min > 0.0f ? ray->t_min : 0.0f;
-    float tf = (float)t;
-    if (!(tf > lo))
-        tf = next_float_up(lo);
-    if (!(tf < ray->t_max))
-        tf = next_float_down(ray->t_max);
+    float tf = (float)t > 0.0f ? (float)t : FLT_TRUE_MIN;
     *t_hit = tf;
-    return tf > lo && tf < ray->t_max;
+    return tf > ray->t_min && tf < ray->t_max;
 }
 
 /* ---- from area to solid angle ---- */
@@ -514,31 +510,70 @@ struct surface shape_plane_surface(const struct plane *pl, const struct ray *ray
 
 /* ---- triangle (the BVH finds the hit) ---- */
 
-/* The triangle's point p0 + b1 (p1 - p0) + b2 (p2 - p0), barycentrics clamped to the
- * triangle (so the point lies in it, not past an edge that a neighbour shares at an angle),
- * with its error bound and unit normal (plane_point, plane_normal). */
-static vec3 triangle_point(const vec3 p[3], double b1, double b2, vec3 *ng, vec3 *p_error)
+/* The triangle's point p0 + b1 e1 + b2 e2 (e1 = p1 - p0, e2 = p2 - p0 in double) with its
+ * error bound and unit normal (plane_point, plane_normal), pulled inside the triangle: the
+ * barycentrics are clamped to the triangle and shrunk towards its centre so that each b_i is at
+ * least eps_i = 2 E / h_i, with E the sum of the point's error bounds and h_i the height over
+ * edge i.  So the rounded point lies inside every edge by at least its error, as offset_ray_origin
+ * puts it off the plane: at a concave edge a spawned ray then meets the neighbour in front of
+ * its origin, not at t = 0.  A point more than eps outside (only from the ray's point of a huge
+ * triangle, whose float inside test is off by u times its size) is left where it is. */
+static vec3 triangle_point(const vec3 p[3], struct dvec3 e1, struct dvec3 e2, double b1, double b2,
+                           vec3 *ng, vec3 *p_error)
 {
-    b1 = fmax(0.0, b1);
-    b2 = fmax(0.0, b2);
-    if (b1 + b2 > 1.0) {
-        double s = b1 + b2;
-        b1 /= s;
-        b2 /= s;
-    }
-    struct dvec3 e1 = d3_sub(d3(p[1]), d3(p[0]));
-    struct dvec3 e2 = d3_sub(d3(p[2]), d3(p[0]));
     double eta;
     *ng = plane_normal(e1, e2, &eta);
+    vec3 err0;
+    plane_point(p[0], e1, e2, b1, b2, eta, &err0);
+    double area2 = d3_length(d3_cross(e1, e2));
+    double E = (double)err0.x + (double)err0.y + (double)err0.z;
+    /* eps_i = 2 E / h_i = 2 E |edge_i| / (2 area) */
+    double eps[3] = {2.0 * E * d3_length(d3_sub(e2, e1)) / area2, 2.0 * E * d3_length(e2) / area2,
+                     2.0 * E * d3_length(e1) / area2};
+    double b[3] = {1.0 - b1 - b2, b1, b2};
+    double eps_sum = eps[0] + eps[1] + eps[2];
+    if (b[0] >= -eps[0] && b[1] >= -eps[1] && b[2] >= -eps[2] && area2 > 0.0) {
+        if (!(eps_sum < 1.0)) {
+            b1 = b2 = 1.0 / 3.0; /* smaller than its error: the centre */
+        } else {
+            double sum = 0.0;
+            for (int i = 0; i < 3; i++) {
+                b[i] = fmax(0.0, b[i]);
+                sum += b[i];
+            }
+            /* clamped and normalised, then shrunk: b_i' = eps_i + (1 - sum eps) b_i */
+            b1 = eps[1] + (1.0 - eps_sum) * b[1] / sum;
+            b2 = eps[2] + (1.0 - eps_sum) * b[2] / sum;
+        }
+    }
     return plane_point(p[0], e1, e2, b1, b2, eta, p_error);
 }
 
-struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec2 *uv, float b1,
-                                      float b2, uint32_t mat_idx)
+struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec2 *uv,
+                                      const struct ray *ray, float t_hit, float b1, float b2,
+                                      uint32_t mat_idx)
 {
+    struct dvec3 e1 = d3_sub(d3(p[1]), d3(p[0]));
+    struct dvec3 e2 = d3_sub(d3(p[2]), d3(p[0]));
+    double b1_d = b1;
+    double b2_d = b2;
+    /* float barycentrics place the point to 2^-24 of the triangle's size, the ray's t to 2^-24
+     * of the hit distance: for a triangle larger than that distance (a huge floor seen from
+     * nearby) the barycentrics of o + t d, in double, are the more precise */
+    if (ray && fmax(d3_length(e1), d3_length(e2)) > (double)t_hit * d3_length(d3(ray->d))) {
+        struct dvec3 q = d3_sub(d3_add(d3(ray->o), d3_scale(d3(ray->d), t_hit)), d3(p[0]));
+        struct dvec3 n = d3_cross(e1, e2);
+        double nn = d3_dot(n, n);
+        if (nn > 0.0) {
+            b1_d = d3_dot(d3_cross(q, e2), n) / nn;
+            b2_d = d3_dot(d3_cross(e1, q), n) / nn;
+            b1 = (float)b1_d;
+            b2 = (float)b2_d;
+        }
+    }
     float b0 = 1.0f - b1 - b2;
     struct surface sf;
-    sf.p = triangle_point(p, b1, b2, &sf.ng, &sf.p_error);
+    sf.p = triangle_point(p, e1, e2, b1_d, b2_d, &sf.ng, &sf.p_error);
     sf.ns = sf.ng;
     if (ns) {
         vec3 n = v3_add(v3_add(v3_scale(ns[0], b0), v3_scale(ns[1], b1)), v3_scale(ns[2], b2));
@@ -578,7 +613,8 @@ bool shape_triangle_sample(const vec3 p[3], const struct surface *ref, vec2 u,
      * warp (sample.c), pdf_area = 1 / A */
     vec2 b = sample_uniform_triangle(u);
     vec3 n, p_error;
-    vec3 pt = triangle_point(p, b.y, 1.0 - (double)b.x - (double)b.y, &n, &p_error);
+    vec3 pt = triangle_point(p, d3_sub(d3(p[1]), d3(p[0])), d3_sub(d3(p[2]), d3(p[0])), b.y,
+                             1.0 - (double)b.x - (double)b.y, &n, &p_error);
     double area = 0.5 * triangle_area2(p);
     if (!(area > 0.0))
         return false;

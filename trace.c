@@ -555,9 +555,9 @@ static bool sample_direction(const struct material *m, vec3 wo, enum render_dire
 
 /* ---- scene queries ---- */
 
-/* The surface of scene triangle tri_idx at the barycentrics (b1, b2) of a hit. */
-static struct surface triangle_surface(const struct scene *scene, uint32_t tri_idx, float b1,
-                                       float b2)
+/* The surface of scene triangle tri_idx where ray hit it, at t_hit and barycentrics (b1, b2). */
+static struct surface triangle_surface(const struct scene *scene, uint32_t tri_idx,
+                                       const struct ray *ray, float t_hit, float b1, float b2)
 {
     const struct scene_tri *tri = &scene->tris[tri_idx];
     vec3 p[3], ns[3];
@@ -570,7 +570,8 @@ static struct surface triangle_surface(const struct scene *scene, uint32_t tri_i
         ns[k] = tri->vn[k] >= 0 ? scene->normals[tri->vn[k]] : v3_splat(0.0f);
         uv[k] = tri->vt[k] >= 0 ? scene->uvs[tri->vt[k]] : (vec2){0.0f, 0.0f};
     }
-    return shape_triangle_surface(p, has_ns ? ns : NULL, has_uv ? uv : NULL, b1, b2, tri->mat_idx);
+    return shape_triangle_surface(p, has_ns ? ns : NULL, has_uv ? uv : NULL, ray, t_hit, b1, b2,
+                                  tri->mat_idx);
 }
 
 enum hit_kind { HIT_NONE, HIT_TRI, HIT_SPHERE, HIT_QUAD, HIT_PLANE };
@@ -610,7 +611,7 @@ static bool intersect(const struct trace_scene *ts, const struct ray *ray_in, st
     case HIT_NONE:
         return false;
     case HIT_TRI:
-        hr->sf = triangle_surface(scene, idx, bh.u, bh.v);
+        hr->sf = triangle_surface(scene, idx, &ray, bh.t, bh.u, bh.v);
         hr->light_idx = light_idx_of(ts->lights, LIGHT_TRIANGLE, idx);
         return true;
     case HIT_SPHERE:
