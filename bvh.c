@@ -70,20 +70,20 @@
 
 /* What the build knows of one triangle: its box (the centre is derived from it). */
 struct prim_ref {
-    float min[3];      /* lower corner of the box of the stored vertices */
-    uint32_t prim_idx; /* the caller's index of the triangle */
-    float max[3];      /* upper corner */
+    float min[3];           /* lower corner of the box of the stored vertices */
+    uint32_t prim_idx;      /* the caller's index of the triangle */
+    float max[3];           /* upper corner */
     uint32_t is_degenerate; /* 1 for a zero-area triangle (dropped from the wide layout) */
-}; /* 32 bytes */
+};                          /* 32 bytes */
 
 struct bin {
     struct box box; /* union of the boxes of the triangles whose centre falls in the bin */
     uint32_t n;     /* number of those triangles */
-}; /* 36 bytes */
+};                  /* 36 bytes */
 
 struct bins {
     struct bin b[3][BVH_N_BINS]; /* per axis */
-}; /* 1728 bytes */
+};                               /* 1728 bytes */
 
 /* A node waiting to be built: refs[begin, end) at depth, with the bounds of the refs' boxes
  * and of their centres (computed while the parent partitioned them). */
@@ -95,14 +95,14 @@ struct build_task {
     uint32_t node_base;       /* parallel subtrees: first node index of its reserved range */
     struct box bounds;        /* of the refs' boxes */
     struct box centre_bounds; /* of their centres */
-}; /* 84 bytes */
+};                            /* 84 bytes */
 
 /* A split candidate: sah_sum = A_L N_L + A_R N_R (half areas), the part of C_split that varies. */
 struct split {
     int axis;      /* 0, 1, 2; -1 when no candidate separates the centres */
     int bin;       /* the left child takes bins 0..bin */
     float sah_sum; /* A_L * N_L + A_R * N_R */
-}; /* 12 bytes */
+};                 /* 12 bytes */
 
 struct build_ctx {
     struct prim_ref *refs;  /* n_tris refs, permuted into BVH order by the build */
@@ -155,13 +155,10 @@ static void bins_clear(struct bins *bins)
 #if defined(__SSE2__) && !defined(BVH_NO_SIMD)
 #include <emmintrin.h>
 
-static inline __m128 box_lane_mask(void)
-{
-    return _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
-}
+static inline __m128 box_lane_mask(void) { return _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0)); }
 
-static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t begin,
-                      uint32_t end, const struct box *centre_bounds)
+static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t begin, uint32_t end,
+                      const struct box *centre_bounds)
 {
     const __m128 xyz = box_lane_mask();
     const __m128 c_min = _mm_and_ps(_mm_loadu_ps(centre_bounds->min), xyz);
@@ -187,8 +184,8 @@ static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t b
     }
 }
 #else
-static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t begin,
-                      uint32_t end, const struct box *centre_bounds)
+static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t begin, uint32_t end,
+                      const struct box *centre_bounds)
 {
     float scale[3];
     for (int axis = 0; axis < 3; axis++)
@@ -198,8 +195,8 @@ static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t b
         float c[3];
         ref_centre(r, c);
         for (int axis = 0; axis < 3; axis++) {
-            struct bin *b = &bins->b[axis][bin_index(c[axis], centre_bounds->min[axis],
-                                                     scale[axis])];
+            struct bin *b =
+                &bins->b[axis][bin_index(c[axis], centre_bounds->min[axis], scale[axis])];
             box_grow(&b->box, r->min, r->max);
             b->n++;
         }
@@ -507,18 +504,18 @@ static bool build_node(const struct build_ctx *ctx, const struct build_task *tas
     *next += 2;
     node->left_first = left_idx;
     node->n_tris = 0;
-    child[0] = (struct build_task){left_idx, task->begin, mid, task->depth + 1, 0,
+    child[0] = (struct build_task){left_idx,        task->begin,     mid, task->depth + 1, 0,
                                    child_bounds[0], child_centres[0]};
-    child[1] = (struct build_task){left_idx + 1, mid, task->end, task->depth + 1, 0,
-                                   child_bounds[1], child_centres[1]};
+    child[1] = (struct build_task){left_idx + 1,    mid, task->end,
+                                   task->depth + 1, 0,   child_bounds[1],
+                                   child_centres[1]};
     return true;
 }
 
 /* Builds the subtree of root depth first from an explicit stack, allocating child pairs from
  * root.node_base on.  Returns the deepest depth reached; *n_next is one past the last node
  * used.  Started at the root with node_base 2, this numbers nodes in the canonical order. */
-static uint32_t build_subtree(const struct build_ctx *ctx, struct build_task root,
-                              uint32_t *n_next)
+static uint32_t build_subtree(const struct build_ctx *ctx, struct build_task root, uint32_t *n_next)
 {
     struct build_task stack[BVH_MAX_DEPTH + 2]; /* one pending right child per level + current */
     int n_stack = 0;
@@ -846,8 +843,9 @@ struct bvh *bvh_build_with(const vec3 *positions, const uint32_t *indices, uint3
     unsigned layouts = o.layouts ? o.layouts : BVH_LAYOUT_WIDE;
     if (n_tris >= BVH_WIDE_MAX_TRIS)
         layouts = BVH_LAYOUT_BINARY;
-    int n_threads = o.n_threads < 1 ? 1 : o.n_threads > BVH_MAX_THREADS ? BVH_MAX_THREADS
-                                                                          : o.n_threads;
+    int n_threads = o.n_threads < 1                 ? 1
+                    : o.n_threads > BVH_MAX_THREADS ? BVH_MAX_THREADS
+                                                    : o.n_threads;
     struct build_ctx ctx = {NULL, NULL, n_threads};
     uint8_t *degenerate = NULL; /* per binary triangle position, for the conversion */
     struct bvh *bvh = calloc(1, sizeof *bvh);
@@ -1152,8 +1150,8 @@ static inline double gamma_double(int n)
 }
 
 /* The double-precision fallback for one triangle's sheared 2D vertices (woop8 uses it too). */
-void bvh_edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx, float Cy,
-                               float *U, float *V, float *W)
+void bvh_edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx, float Cy, float *U,
+                               float *V, float *W)
 {
     double CxBy = (double)Cx * (double)By;
     double CyBx = (double)Cy * (double)Bx;
@@ -1167,9 +1165,9 @@ void bvh_edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx,
 }
 
 /* Woop's test redone in double for a (ray, triangle) pair whose float result could not decide
- * the side of the origin (tri_hit, woop8).  Every float input (vertex, origin, shear constant)
- * is exact in double; the translation, shear, edge functions, T and det are recomputed, with the
- * same error bounds in units of u = 2^-53.  For float inputs no double operation here
+ * the side of the origin (tri_hit, woop8).  Every float input (vertex, origin, direction) is
+ * exact in double; the shear constants, translation, shear, edge functions, T and det are
+ * recomputed, with the same error bounds in units of u = 2^-53.  For float inputs no double operation here
  * overflows or underflows (products of at most four floats stay within 2^+-600), so the bounds
  * need no absolute term.  A hit needs t certainly > 0 and t_min < t < t_max, the latter tested
  * on the float t returned (the double one rounded).  When even double cannot
@@ -1182,9 +1180,36 @@ bool bvh_tri_hit_double(const struct bvh_tri *tri, const struct ray_pre *rp, con
     const int ky = rp->ky;
     const int kz = rp->kz;
     const double o[3] = {rp->o[0], rp->o[1], rp->o[2]};
-    const double sx = rp->sx;
-    const double sy = rp->sy;
-    const double sz = rp->sz;
+    /* First the side alone, from the plane, n = (p1 - p0) x (p2 - p0) in double: t has the sign
+     * of n . (p0 - o) / n . d.  With n's components off by gamma(2) of the sums of their terms'
+     * magnitudes (n_abs) and p0 - o by gamma(1), both dot products are within gamma(6) n_abs .
+     * |.| of exact.  A hit certainly behind the origin (a spawned ray's own triangle, most of
+     * this function's calls) needs nothing more. */
+    double e1[3], e2[3], po[3];
+    for (int a = 0; a < 3; a++) {
+        e1[a] = (double)tri->p1[a] - tri->p0[a];
+        e2[a] = (double)tri->p2[a] - tri->p0[a];
+        po[a] = (double)tri->p0[a] - o[a];
+    }
+    double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                   e1[0] * e2[1] - e1[1] * e2[0]};
+    double n_abs[3] = {fabs(e1[1] * e2[2]) + fabs(e1[2] * e2[1]),
+                       fabs(e1[2] * e2[0]) + fabs(e1[0] * e2[2]),
+                       fabs(e1[0] * e2[1]) + fabs(e1[1] * e2[0])};
+    double num = n[0] * po[0] + n[1] * po[1] + n[2] * po[2];
+    double den = n[0] * rp->d[0] + n[1] * rp->d[1] + n[2] * rp->d[2];
+    double num_err = gamma_double(6) *
+                     (n_abs[0] * fabs(po[0]) + n_abs[1] * fabs(po[1]) + n_abs[2] * fabs(po[2]));
+    double den_err = gamma_double(6) * (n_abs[0] * fabs(rp->d[0]) + n_abs[1] * fabs(rp->d[1]) +
+                                        n_abs[2] * fabs(rp->d[2]));
+    if (fabs(num) > num_err && fabs(den) > den_err && (num > 0.0) != (den > 0.0))
+        return false;
+    /* the shear of the ray itself, in double: the float constants turn its direction by up to
+     * 2^-24, which decides the side of a ray that grazes the plane at a smaller angle (within
+     * the bounds below: they cover one rounding of sx, sy and sz) */
+    const double sx = (double)rp->d[kx] / (double)rp->d[kz];
+    const double sy = (double)rp->d[ky] / (double)rp->d[kz];
+    const double sz = 1.0 / (double)rp->d[kz];
     double a_x = (double)tri->p0[kx] - o[kx];
     double a_y = (double)tri->p0[ky] - o[ky];
     double a_z = (double)tri->p0[kz] - o[kz];
@@ -1312,22 +1337,20 @@ static bool tri_hit(const struct bvh_tri *tri, const struct ray_pre *rp, float t
                             delta_z * delta_e) +
                     FLT_MIN;
     float delta_det = 3.0f * (mcpt_gamma(3) * max_e + delta_e);
-    /* the hit's own precision: with b = (U, V, W) / det, sum |b_i - b_i*| <= (3 delta_e +
-     * delta_det) / |det| <= 2 delta_det / |det| (delta_det >= 3 delta_e); the point
-     * b0 p0 + b1 p1 + b2 p2 then moves by that times the triangle's extent, at most 2 (X + Y)
-     * across the ray and the spread of Az, Bz, Cz along it, measured in units of t by |sz|.  So
-     *   |p - p*| / |d| |det| <= 2 delta_det (2 (X + Y) |sz| + spread) + delta_z |det|
-     * small beside t for a triangle small beside its distance, large for a huge one near the
-     * origin (a floor of size 1e7 seen from 1 away, whose float barycentrics are off by whole
-     * units) */
+    /* t's own precision: t = sum b_i z_i with b = (U, V, W) / det and sum b_i = 1, so
+     *   |t - t*| |det| <= spread (3 delta_e + delta_det) + delta_z |det|
+     *                  <= 2 spread delta_det + delta_z |det| = err_t     (delta_det >= 3 delta_e)
+     * with spread the extent of Az, Bz, Cz.  A hit in front needs err_t <= 2^-10 |det| (|t| +
+     * |o| |sz|): t known to 2^-10 of the larger of itself and the origin's magnitude, in units
+     * of t (a bound, pessimistic: typically 2^-20 is met).  A triangle huge beside both (a floor
+     * of size 1e7 seen from 1 away, whose float t is off by whole units) goes to double. */
     float z_lo = min_num(min_num(Az, Bz), Cz);
     float z_hi = max_num(max_num(Az, Bz), Cz);
-    float extent = 2.0f * (max_xt + max_yt) * fabsf(rp->sz) + (z_hi - z_lo);
-    float err_p = 2.0f * delta_det * extent + delta_z * fabsf(det);
-    /* decided: T finite, both signs exact (a NaN or infinite bound leaves it undecided), and
-     * the hit point known to 2^-10 of its distance in the worst case (typically 2^-20) */
+    float err_t = 2.0f * (z_hi - z_lo) * delta_det + delta_z * fabsf(det);
+    /* decided: T finite and both signs exact (a NaN or infinite bound leaves it undecided), and
+     * behind the origin, or in front with a precise t */
     bool decided = fabsf(T) > delta_T && fabsf(T) <= FLT_MAX && fabsf(det) > delta_det &&
-                   err_p <= 0x1p-10f * fabsf(T);
+                   (!(t > 0.0f) || err_t <= 0x1p-10f * (fabsf(T) + fabsf(det) * rp->o_scale));
     if (!decided) {
         const float edge[3] = {U, V, W};
         return bvh_tri_hit_double(tri, rp, edge, t_min, t_max, t_out, u_out, v_out);
@@ -1346,8 +1369,8 @@ static bool tri_hit(const struct bvh_tri *tri, const struct ray_pre *rp, float t
  * bit-identical to what the traversals compute for it; among exactly equal t the lowest BVH
  * position wins.  Without the binary layout it walks the wide leaves in their stored order
  * (bvh_wide_brute). */
-void bvh_brute_step(const struct bvh_tri *tri, uint32_t prim, const struct ray_pre *rp,
-                    float t_min, struct bvh_hit *best)
+void bvh_brute_step(const struct bvh_tri *tri, uint32_t prim, const struct ray_pre *rp, float t_min,
+                    struct bvh_hit *best)
 {
     float t;
     float u;

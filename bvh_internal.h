@@ -30,7 +30,7 @@ struct bvh_tri {
     float p0[3]; /* vertex 0, scene units */
     float p1[3]; /* vertex 1 */
     float p2[3]; /* vertex 2 */
-}; /* 36 bytes */
+};               /* 36 bytes */
 
 struct wide_node; /* bvh_wide.c */
 
@@ -57,7 +57,7 @@ struct bvh {
 struct box {
     float min[4]; /* lower corner; +inf when empty; [3] is padding for 4-lane SIMD (kept 0) */
     float max[4]; /* upper corner; -inf when empty; [3] likewise */
-}; /* 32 bytes */
+};                /* 32 bytes */
 
 static const struct box empty_box = {{INFINITY, INFINITY, INFINITY, 0.0f},
                                      {-INFINITY, -INFINITY, -INFINITY, 0.0f}};
@@ -96,14 +96,15 @@ static inline float node_half_area(const struct bvh_node *node)
 
 /* Per-ray constants, computed once per ray and shared by every box and triangle test. */
 struct ray_pre {
-    float o[3];        /* origin */
-    float d[3];        /* direction */
-    float inv_d[3];    /* 1 / d per axis; +-inf where d is +-0 */
-    int is_neg[3];     /* inv_d[a] < 0: the slab's near plane is max[a], the far plane min[a] */
-    float far_scale;   /* 1 + 2 gamma(3), PBRT 4e, ch. 6, "Conservative Ray-Bounds Intersections" */
-    int kx, ky, kz;    /* Woop et al. 2013: kz = argmax |d|, (kx, ky) swapped when d[kz] < 0 */
-    float sx, sy, sz;  /* shear: sx = d[kx] / d[kz], sy = d[ky] / d[kz], sz = 1 / d[kz] */
-}; /* 72 bytes */
+    float o[3];       /* origin */
+    float d[3];       /* direction */
+    float inv_d[3];   /* 1 / d per axis; +-inf where d is +-0 */
+    int is_neg[3];    /* inv_d[a] < 0: the slab's near plane is max[a], the far plane min[a] */
+    float far_scale;  /* 1 + 2 gamma(3), PBRT 4e, ch. 6, "Conservative Ray-Bounds Intersections" */
+    int kx, ky, kz;   /* Woop et al. 2013: kz = argmax |d|, (kx, ky) swapped when d[kz] < 0 */
+    float sx, sy, sz; /* shear: sx = d[kx] / d[kz], sy = d[ky] / d[kz], sz = 1 / d[kz] */
+    float o_scale;    /* max |o_a| |sz|: the origin's magnitude in units of t (t's precision) */
+};                    /* 76 bytes */
 
 /* max(running, candidate) and min(...) where a NaN candidate leaves running unchanged: fmaxf /
  * fminf semantics for the one operand that can be NaN, written as a comparison so that gcc
@@ -151,6 +152,7 @@ static inline void ray_setup_woop(struct ray_pre *rp)
     rp->sx = d[kx] / d[kz];
     rp->sy = d[ky] / d[kz];
     rp->sz = 1.0f / d[kz];
+    rp->o_scale = fmaxf(fabsf(rp->o[0]), fmaxf(fabsf(rp->o[1]), fabsf(rp->o[2]))) * fabsf(rp->sz);
 }
 
 /* Slab test (Kay, Kajiya 1986, "Ray Tracing Complex Scenes") in the (min - o) * inv_d form of
@@ -193,7 +195,7 @@ static inline bool ray_is_valid(const struct ray *ray)
 struct stack_entry {
     uint32_t node_idx; /* node still to visit (binary index or wide reference) */
     float t_entry;     /* where the ray enters its box */
-}; /* 8 bytes */
+};                     /* 8 bytes */
 
 /* ---- What bvh.c lends bvh_wide.c ------------------------------------------------------------- */
 
@@ -209,8 +211,8 @@ void bvh_load_tri(struct bvh_tri *tri, const vec3 *positions, const uint32_t *in
 
 /* Woop et al. 2013's double-precision fallback: the three edge functions U, V, W of the sheared
  * 2D vertices A, B, C, each from two exact double products and one rounding. */
-void bvh_edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx, float Cy,
-                               float *U, float *V, float *W);
+void bvh_edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx, float Cy, float *U,
+                               float *V, float *W);
 
 /* Woop's test in double for a (ray, triangle) pair whose float test (tri_hit, woop8) found
  * inside but could not decide on which side of the origin the hit lies; edge[] are the float
@@ -222,8 +224,8 @@ bool bvh_tri_hit_double(const struct bvh_tri *tri, const struct ray_pre *rp, con
 
 /* Brute force's step: tests tri (the caller's triangle prim) with the scalar watertight test and
  * keeps it in *best when it is hit before best->t (prim_idx UINT32_MAX while nothing is hit). */
-void bvh_brute_step(const struct bvh_tri *tri, uint32_t prim, const struct ray_pre *rp,
-                    float t_min, struct bvh_hit *best);
+void bvh_brute_step(const struct bvh_tri *tri, uint32_t prim, const struct ray_pre *rp, float t_min,
+                    struct bvh_hit *best);
 
 /* ---- What bvh_wide.c lends bvh.c ------------------------------------------------------------- */
 

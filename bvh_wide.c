@@ -59,7 +59,8 @@ _Static_assert(sizeof(struct wide_node) == 256, "wide_node must be 256 bytes");
  * becomes a small wide subtree of 8-triangle parts.  A first pass counts nodes and triangles so
  * that the arrays are allocated once at their exact size. */
 #define WIDE_COST_NODE 1.0f /* c_node: one wide node visit (eight box tests) */
-#define WIDE_COST_LEAF 1.0f /* c_leaf: one leaf (woop8), in units of c_node; 1.5 and 2.0 gave
+#define WIDE_COST_LEAF                                                                             \
+    1.0f /* c_leaf: one leaf (woop8), in units of c_node; 1.5 and 2.0 gave
                                the same visits per ray within 1% (docs/bvh.md) */
 
 #define CHOICE_FEWER 0   /* C(n, i) = C(n, i - 1) */
@@ -75,20 +76,20 @@ struct collapse_entry {
 }; /* 52 bytes */
 
 struct convert {
-    const struct bvh *bvh;       /* binary tree: nodes, prim_idx */
-    const uint8_t *degenerate;   /* per binary triangle position: zero area, dropped */
+    const struct bvh *bvh;           /* binary tree: nodes, prim_idx */
+    const uint8_t *degenerate;       /* per binary triangle position: zero area, dropped */
     const struct collapse_entry *dp; /* per binary node */
-    const vec3 *positions;       /* the caller's mesh, read again for the leaves */
-    const uint32_t *indices;     /* (the wide leaves keep the same vertices as struct bvh_tri) */
-    struct wide_node *wide;      /* NULL in the counting pass */
-    float *leaf_tris;            /* SoA leaves */
-    uint32_t *prim_idx;          /* of the wide triangles */
-    uint32_t *scratch;           /* valid triangles of one leaf */
-    uint32_t n_wide;             /* nodes allocated so far */
-    uint32_t n_wide_tris;        /* triangles written so far */
-    uint32_t n_leaves;           /* wide leaves */
-    uint32_t depth;              /* current wide depth, root = 0 */
-    uint32_t max_depth;          /* deepest wide node */
+    const vec3 *positions;           /* the caller's mesh, read again for the leaves */
+    const uint32_t *indices; /* (the wide leaves keep the same vertices as struct bvh_tri) */
+    struct wide_node *wide;  /* NULL in the counting pass */
+    float *leaf_tris;        /* SoA leaves */
+    uint32_t *prim_idx;      /* of the wide triangles */
+    uint32_t *scratch;       /* valid triangles of one leaf */
+    uint32_t n_wide;         /* nodes allocated so far */
+    uint32_t n_wide_tris;    /* triangles written so far */
+    uint32_t n_leaves;       /* wide leaves */
+    uint32_t depth;          /* current wide depth, root = 0 */
+    uint32_t max_depth;      /* deepest wide node */
 };
 
 /* Wide depth stays below the binary depth cap plus the levels of one oversized leaf
@@ -406,15 +407,15 @@ struct m8 {
 #endif
 
 /* The scalar forms: r.v[i] = expr for each lane i (a mask lane is -1 where expr holds). */
-#define F8_MAP(expr)                                                                              \
-    struct f8 r;                                                                                  \
-    for (int i = 0; i < 8; i++)                                                                   \
-        r.v[i] = (expr);                                                                          \
+#define F8_MAP(expr)                                                                               \
+    struct f8 r;                                                                                   \
+    for (int i = 0; i < 8; i++)                                                                    \
+        r.v[i] = (expr);                                                                           \
     return r
-#define M8_MAP(expr)                                                                              \
-    struct m8 r;                                                                                  \
-    for (int i = 0; i < 8; i++)                                                                   \
-        r.v[i] = (expr) ? -1 : 0;                                                                 \
+#define M8_MAP(expr)                                                                               \
+    struct m8 r;                                                                                   \
+    for (int i = 0; i < 8; i++)                                                                    \
+        r.v[i] = (expr) ? -1 : 0;                                                                  \
     return r
 
 const char *bvh_simd_name(void) { return BVH_AVX2 ? "avx2" : "scalar"; }
@@ -664,7 +665,8 @@ struct woop8_in {
     struct f8 sx;   /* shear constants of each lane's ray */
     struct f8 sy;
     struct f8 sz;
-    struct f8 t_min; /* hit interval (t_min, t_max) */
+    struct f8 o_scale; /* ray_pre's o_scale of each lane's ray */
+    struct f8 t_min;   /* hit interval (t_min, t_max) */
     struct f8 t_max;
 };
 
@@ -676,9 +678,8 @@ struct woop8_out {
     struct f8 edge[3];  /* U, V, W, filled only when undecided != 0 */
 };
 
-static void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, struct f8 Bx,
-                               struct f8 By, struct f8 Cx, struct f8 Cy, struct f8 *U,
-                               struct f8 *V, struct f8 *W)
+static void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, struct f8 Bx, struct f8 By,
+                           struct f8 Cx, struct f8 Cy, struct f8 *U, struct f8 *V, struct f8 *W)
 {
     float ax[8], ay[8], bx[8], by[8], cx[8], cy[8], u[8], v[8], w[8];
     f8_store(ax, Ax);
@@ -702,7 +703,8 @@ static void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, struct f8
 /* Returns the lanes certainly hit in (t_min, t_max); out->undecided gets the inside lanes whose
  * side of the origin the float bounds leave open, for the caller to decide with
  * bvh_tri_hit_double (it has the stored vertices, woop8 only their translated copies). */
-static inline uint32_t woop8(const struct woop8_in *in, uint32_t valid, struct woop8_out *out)
+static ALWAYS_INLINE uint32_t woop8(const struct woop8_in *in, uint32_t valid,
+                                    struct woop8_out *out)
 {
     const struct f8 zero = f8_set1(0.0f);
     out->undecided = 0;
@@ -763,19 +765,20 @@ static inline uint32_t woop8(const struct woop8_in *in, uint32_t valid, struct w
                tiny);
     struct f8 delta_det = f8_mul(f8_set1(3.0f),
                                  f8_add(f8_mul(f8_set1(mcpt_gamma(3)), max_e), delta_e));
-    /* the hit's own precision, as in tri_hit */
+    /* t's own precision, as in tri_hit */
     struct f8 z_lo = f8_min_num(f8_min_num(Az, Bz), Cz);
     struct f8 z_hi = f8_max_num(f8_max_num(Az, Bz), Cz);
-    struct f8 extent = f8_add(f8_mul(f8_mul(f8_set1(2.0f), f8_add(max_xt, max_yt)), f8_abs(in->sz)),
-                              f8_sub(z_hi, z_lo));
     struct f8 abs_det = f8_abs(det);
-    struct f8 err_p = f8_add(f8_mul(f8_mul(f8_set1(2.0f), delta_det), extent),
+    struct f8 err_t = f8_add(f8_mul(f8_mul(f8_set1(2.0f), f8_sub(z_hi, z_lo)), delta_det),
                              f8_mul(delta_z, abs_det));
+    /* decided: T finite, both signs exact, and behind the origin or a precise t, as in tri_hit */
     struct f8 abs_T = f8_abs(T);
-    uint32_t decided = m8_bits(
-        m8_and(m8_and(m8_and(f8_gt(abs_T, delta_T), f8_le(abs_T, f8_set1(FLT_MAX))),
-                      f8_gt(abs_det, delta_det)),
-               f8_le(err_p, f8_mul(f8_set1(0x1p-10f), abs_T))));
+    struct m8 t_pos = f8_gt(t, zero);
+    struct m8 sign_known = m8_and(m8_and(f8_gt(abs_T, delta_T), f8_le(abs_T, f8_set1(FLT_MAX))),
+                                  f8_gt(abs_det, delta_det));
+    struct m8 precise = f8_le(err_t, f8_mul(f8_set1(0x1p-10f),
+                                            f8_add(abs_T, f8_mul(abs_det, in->o_scale))));
+    uint32_t decided = m8_bits(sign_known) & ~(m8_bits(t_pos) & ~m8_bits(precise));
     out->undecided = inside & ~decided;
     if (out->undecided) {
         out->edge[0] = U;
@@ -783,8 +786,7 @@ static inline uint32_t woop8(const struct woop8_in *in, uint32_t valid, struct w
         out->edge[2] = W;
     }
     uint32_t hit = inside & decided &
-                   m8_bits(
-                       m8_and(m8_and(f8_gt(t, zero), f8_gt(t, in->t_min)), f8_lt(t, in->t_max)));
+                   m8_bits(m8_and(m8_and(t_pos, f8_gt(t, in->t_min)), f8_lt(t, in->t_max)));
     out->t = t;
     out->u = f8_mul(V, inv_det);
     out->v = f8_mul(W, inv_det);
@@ -815,27 +817,28 @@ struct wide_ray {
     bool fast;          /* the fused form applies (every constant finite) */
     float t_min;
     struct ray_pre *rp; /* for Woop's constants, computed at the first leaf */
-}; /* 104 bytes */
+};                      /* 104 bytes */
 
 /* struct wide_ray broadcast to eight lanes, a local of the traversal loop. */
 struct wide_ray8 {
-    struct f8 o[3];               /* origin, slab order */
-    struct f8 inv_d[3];           /* 1 / d */
-    struct f8 inv_d_far[3];       /* the conservative far-plane factor */
-    struct f8 c_near[3];          /* fused form constants */
+    struct f8 o[3];         /* origin, slab order */
+    struct f8 inv_d[3];     /* 1 / d */
+    struct f8 inv_d_far[3]; /* the conservative far-plane factor */
+    struct f8 c_near[3];    /* fused form constants */
     struct f8 c_far[3];
     struct f8 t_min;
-    struct f8 o_k[3];             /* Woop: o[kx], o[ky], o[kz] (set at the first leaf) */
-    struct f8 sx;                 /* Woop's shear constants */
+    struct f8 o_k[3]; /* Woop: o[kx], o[ky], o[kz] (set at the first leaf) */
+    struct f8 sx;     /* Woop's shear constants */
     struct f8 sy;
     struct f8 sz;
-    int k[3];                     /* kx, ky, kz */
-    const struct ray_pre *rp;     /* the ray's constants, for bvh_tri_hit_double */
-    float rp_t_min;               /* the ray's t_min, likewise */
-    size_t near_off[3];           /* byte offsets of the near and far bounds rows in a node */
+    struct f8 o_scale;        /* Woop: the origin's magnitude in units of t */
+    int k[3];                 /* kx, ky, kz */
+    const struct ray_pre *rp; /* the ray's constants, for bvh_tri_hit_double */
+    float rp_t_min;           /* the ray's t_min, likewise */
+    size_t near_off[3];       /* byte offsets of the near and far bounds rows in a node */
     size_t far_off[3];
     const struct wide_node *wide; /* the node array */
-}; /* 640 bytes with AVX2 */
+};                                /* 640 bytes with AVX2 */
 
 /* The slab test takes max(max(t_0, t_1), max(t_2, t_min)) as a tree, which shortens the chain
  * of dependent instructions per node.  A slab distance is NaN only where inv_d is infinite
@@ -922,6 +925,7 @@ static inline void wide_ray8_woop(const struct wide_ray *wr, struct wide_ray8 *v
     v->sx = f8_set1(rp->sx);
     v->sy = f8_set1(rp->sy);
     v->sz = f8_set1(rp->sz);
+    v->o_scale = f8_set1(rp->o_scale);
     v->rp = rp;
 }
 
@@ -994,8 +998,7 @@ static uint32_t leaf_undecided(const struct bvh *bvh, uint32_t first, uint32_t n
 
 /* woop8 of one ray against the n (1..8) triangles of the leaf at wide triangle `first`. */
 static inline uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint32_t n,
-                                     const struct wide_ray8 *v, float t_max,
-                                     struct woop8_out *out)
+                                     const struct wide_ray8 *v, float t_max, struct woop8_out *out)
 {
     const float *base = bvh->leaf_tris + 9 * (size_t)first;
     struct woop8_in in;
@@ -1008,6 +1011,7 @@ static inline uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint
     in.sx = v->sx;
     in.sy = v->sy;
     in.sz = v->sz;
+    in.o_scale = v->o_scale;
     in.t_min = v->t_min;
     in.t_max = f8_set1(t_max);
     uint32_t hits = woop8(&in, (1u << n) - 1u, out);
@@ -1018,7 +1022,7 @@ static inline uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint
 
 /* The closest hit so far. */
 struct wide_hit {
-    float t;      /* t_hit, initially the ray's t_max */
+    float t; /* t_hit, initially the ray's t_max */
     float u;
     float v;
     uint32_t tri; /* wide triangle index, UINT32_MAX while none */
@@ -1118,8 +1122,8 @@ static ALWAYS_INLINE void wide_closest(const struct bvh *bvh, uint32_t root,
 
 /* Any hit below `root` for t in (t_min, t_max): children in any order, the first hit ends it
  * (nearest-first order measured no faster for shadow rays, docs/bvh.md). */
-static ALWAYS_INLINE bool wide_any(const struct bvh *bvh, uint32_t root,
-                                   const struct wide_ray *wr, float t_max, const bool fast)
+static ALWAYS_INLINE bool wide_any(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
+                                   float t_max, const bool fast)
 {
     struct wide_ray8 v;
     wide_ray8_box(bvh, wr, &v);
@@ -1181,8 +1185,8 @@ static bool wide_any_safe(const struct bvh *bvh, uint32_t root, const struct wid
     return wide_any(bvh, root, wr, t_max, false);
 }
 
-static inline void wide_closest_ray(const struct bvh *bvh, uint32_t root,
-                                    const struct wide_ray *wr, struct wide_hit *hit)
+static inline void wide_closest_ray(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
+                                    struct wide_hit *hit)
 {
     if (wr->fast)
         wide_closest_fast(bvh, root, wr, hit);
@@ -1199,8 +1203,8 @@ static inline bool wide_any_ray(const struct bvh *bvh, uint32_t root, const stru
 /* Most camera rays of a small object miss it altogether: a scalar test against the tree's box
  * (box_hit, the reference form) lets them return false before any SIMD setup.  Otherwise *wr
  * (which keeps a pointer to *rp) is ready for the traversal. */
-static inline bool wide_ray_begin(const struct bvh *bvh, const struct ray *ray,
-                                  struct ray_pre *rp, struct wide_ray *wr)
+static inline bool wide_ray_begin(const struct bvh *bvh, const struct ray *ray, struct ray_pre *rp,
+                                  struct wide_ray *wr)
 {
     if (bvh->n_wide == 0 || !ray_is_valid(ray))
         return false;
@@ -1254,7 +1258,7 @@ struct packet_pre {
     struct f8 o[3];
     struct f8 inv_d[3];
     struct f8 inv_d_far[3];
-    struct f8 c_near[3];  /* the fused slab constants of wide_ray_setup, per lane */
+    struct f8 c_near[3]; /* the fused slab constants of wide_ray_setup, per lane */
     struct f8 c_far[3];
     struct m8 is_neg[3];  /* near plane is max */
     struct m8 k_is[3][2]; /* k_is[j][m]: lane's k[j] == m (m = 0, 1; else 2) */
@@ -1262,12 +1266,13 @@ struct packet_pre {
     struct f8 sx;
     struct f8 sy;
     struct f8 sz;
+    struct f8 o_scale; /* ray_setup_woop's o_scale, per lane */
     struct f8 t_min;
     bool coherent;   /* every lane: same direction signs, fused constants finite */
     int near_row[3]; /* when coherent: bounds rows of the near and far planes */
     int far_row[3];
-    bool uniform_k;  /* every lane has the same (kx, ky, kz) */
-    int k[3];        /* when uniform_k */
+    bool uniform_k; /* every lane has the same (kx, ky, kz) */
+    int k[3];       /* when uniform_k */
 };
 
 /* m ? x : (n ? y : z) per lane */
@@ -1304,8 +1309,8 @@ static void packet_setup(const struct bvh_packet *p, uint32_t active, struct pac
         pp->is_neg[a] = f8_lt(pp->inv_d[a], zero);
         struct f8 o_inv = f8_mul(pp->o[a], pp->inv_d[a]);
         struct f8 o_inv_far = f8_mul(pp->o[a], pp->inv_d_far[a]);
-        pp->c_near[a] = f8_add(o_inv, f8_add(f8_mul(f8_set1(SLAB_BIAS), f8_abs(o_inv)),
-                                             f8_set1(FLT_MIN)));
+        pp->c_near[a] = f8_add(o_inv,
+                               f8_add(f8_mul(f8_set1(SLAB_BIAS), f8_abs(o_inv)), f8_set1(FLT_MIN)));
         pp->c_far[a] = f8_sub(o_inv_far, f8_add(f8_mul(f8_set1(SLAB_BIAS), f8_abs(o_inv_far)),
                                                 f8_set1(FLT_MIN)));
         magnitude = f8_add(magnitude, f8_add(f8_add(f8_abs(pp->inv_d[a]), f8_abs(pp->inv_d_far[a])),
@@ -1345,6 +1350,10 @@ static void packet_setup(const struct bvh_packet *p, uint32_t active, struct pac
     pp->sx = f8_div(d_k[0], d_k[2]);
     pp->sy = f8_div(d_k[1], d_k[2]);
     pp->sz = f8_div(f8_set1(1.0f), d_k[2]);
+    /* ray_setup_woop's o_scale, max |o_a| |sz| */
+    pp->o_scale = f8_mul(f8_max_num(f8_max_num(f8_abs(pp->o[0]), f8_abs(pp->o[1])),
+                                    f8_abs(pp->o[2])),
+                         f8_abs(pp->sz));
     uint32_t b0 = m8_bits(kz0);
     uint32_t b1 = m8_bits(kz1);
     uint32_t bs = m8_bits(swap);
@@ -1360,8 +1369,10 @@ static void packet_setup(const struct bvh_packet *p, uint32_t active, struct pac
 /* Lane `lane` of a packet as one ray (bvh_packet_set's inverse). */
 static struct ray packet_lane(const struct bvh_packet *p, int lane)
 {
-    return (struct ray){{p->o[0][lane], p->o[1][lane], p->o[2][lane]}, p->t_min[lane],
-                        {p->d[0][lane], p->d[1][lane], p->d[2][lane]}, p->t_max[lane]};
+    return (struct ray){{p->o[0][lane], p->o[1][lane], p->o[2][lane]},
+                        p->t_min[lane],
+                        {p->d[0][lane], p->d[1][lane], p->d[2][lane]},
+                        p->t_max[lane]};
 }
 
 /* The single-ray constants of lane `lane`, for the rays that leave the packet (*wr keeps a
@@ -1443,6 +1454,7 @@ static inline uint32_t packet_tri_hit(const struct bvh *bvh, const struct bvh_pa
     in.sx = pp->sx;
     in.sy = pp->sy;
     in.sz = pp->sz;
+    in.o_scale = pp->o_scale;
     in.t_min = pp->t_min;
     in.t_max = t_max;
     uint32_t hits = woop8(&in, mask, out);
@@ -1482,13 +1494,12 @@ struct packet_entry {
     uint32_t ref;  /* wide reference */
     uint32_t mask; /* rays that hit its box */
     float t_entry; /* smallest entry distance among them */
-}; /* 12 bytes */
+};                 /* 12 bytes */
 
 /* The closest-hit packet loop; `coherent` selects packet_box_hit's form (a constant at each
  * call, so there are two specialised copies). */
-static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh,
-                                             const struct bvh_packet *packet, uint32_t active,
-                                             struct packet_pre *pp, float t_hit[8],
+static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh, const struct bvh_packet *packet,
+                                             uint32_t active, struct packet_pre *pp, float t_hit[8],
                                              struct bvh_packet_hit *hit, const bool coherent)
 {
     float u_hit[8];
@@ -1526,8 +1537,8 @@ static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh,
             const uint32_t base = n_stack;
             for (uint32_t c = 0; c < node->n_children; c++) {
                 struct f8 t_entry;
-                uint32_t mask =
-                    packet_box_hit(node, (int)c, pp, t_hit8, &t_entry, coherent) & cur.mask;
+                uint32_t mask = packet_box_hit(node, (int)c, pp, t_hit8, &t_entry, coherent) &
+                                cur.mask;
                 if (!mask)
                     continue;
                 struct f8 t_in = f8_select(m8_from_bits(mask), t_entry, f8_set1(INFINITY));
@@ -1659,8 +1670,8 @@ static ALWAYS_INLINE uint32_t packet_any(const struct bvh *bvh, const struct bvh
             const struct wide_node *node = &bvh->wide[cur.ref];
             for (uint32_t c = 0; c < node->n_children; c++) {
                 struct f8 t_entry;
-                uint32_t mask =
-                    packet_box_hit(node, (int)c, pp, t_max8, &t_entry, coherent) & cur.mask;
+                uint32_t mask = packet_box_hit(node, (int)c, pp, t_max8, &t_entry, coherent) &
+                                cur.mask;
                 if (mask)
                     stack[n_stack++] = (struct packet_entry){node->child[c], mask, 0.0f};
             }

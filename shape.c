@@ -89,35 +89,42 @@ static vec3 round_point(struct dvec3 p_d, struct dvec3 err_d, double eta, vec3 *
 
 /* The point o + a e1 + b e2 of a plane through float point o, e1 and e2 differences of floats,
  * in double: each term carries at most 2 roundings (e, and the product) and the two sums 2
- * more, so |p_d - exact| <= gamma_d(4) (|o| + |a e1| + |b e2|); the exact point lies on the
- * plane for any a, b.  Then rounded to float (round_point). */
-static vec3 plane_point(vec3 o, struct dvec3 e1, struct dvec3 e2, double a, double b, double eta,
-                        vec3 *p_error)
+ * more, so |p_d - exact| <= gamma_d(4) (|o| + |a e1| + |b e2|) = *err; the exact point lies on
+ * the plane for any a, b. */
+static struct dvec3 plane_point_d(vec3 o, struct dvec3 e1, struct dvec3 e2, double a, double b,
+                                  struct dvec3 *err)
 {
     struct dvec3 a_e1 = d3_scale(e1, a);
     struct dvec3 b_e2 = d3_scale(e2, b);
-    struct dvec3 p = d3_add(d3_add(d3(o), a_e1), b_e2);
-    struct dvec3 err = d3_scale(d3_add(d3_add(d3_abs(d3(o)), d3_abs(a_e1)), d3_abs(b_e2)),
-                                gamma_d(4));
-    return round_point(p, err, eta, p_error);
+    *err = d3_scale(d3_add(d3_add(d3_abs(d3(o)), d3_abs(a_e1)), d3_abs(b_e2)), gamma_d(4));
+    return d3_add(d3_add(d3(o), a_e1), b_e2);
+}
+
+/* An upper bound on the sum of the three error bounds round_point will give p_d. */
+static double rounded_error_sum(struct dvec3 p_d, struct dvec3 err_d, double eta)
+{
+    double e = d3_sum(err_d) + 0x1p-24 * d3_sum(d3_abs(p_d)) + 3.0 * 0x1p-149;
+    return e * (1.0 + 12.0 * eta) * (1.0 + 0x1p-20);
 }
 
 /* The unit normal of the plane spanned by e1, e2 (differences of floats) in double, rounded to
- * float, and the bound eta on the error of each of its components: the cross product's
- * components are off by gamma_d(3) |e1| |e2| at most, which moves the direction by
- * gamma_d(3) sqrt(3) / sin(angle) and twice that after normalising; the rounding to float adds
- * 2^-24 per component.  A degenerate pair (angle 0) gives ng = 0 and eta = 1. */
-static vec3 plane_normal(struct dvec3 e1, struct dvec3 e2, double *eta)
+ * float, the length of e1 x e2 (*len, twice a triangle's area), and the bound eta on the error of
+ * each of the normal's components: the cross product's components are off by
+ * gamma_d(3) |e1| |e2| at most, which moves the direction by gamma_d(3) sqrt(3) / sin(angle)
+ * and twice that after normalising, with 1 / sin(angle) = |e1| |e2| / |e1 x e2| <=
+ * (|e1|^2 + |e2|^2) / (2 |e1 x e2|); the rounding to float adds 2^-24 per component.  A
+ * degenerate pair (angle 0) gives ng = 0, *len = 0 and eta = 1. */
+static vec3 plane_normal(struct dvec3 e1, struct dvec3 e2, double *len, double *eta)
 {
     struct dvec3 c = d3_cross(e1, e2);
-    double len = d3_length(c);
-    double sin_angle = len / (d3_length(e1) * d3_length(e2));
-    if (!(len > 0.0) || !(sin_angle > 0.0)) {
+    *len = d3_length(c);
+    if (!(*len > 0.0)) {
         *eta = 1.0;
         return v3_splat(0.0f);
     }
-    *eta = 0x1p-23 + 4.0 * gamma_d(3) / sin_angle;
-    return d3_to_float(d3_scale(c, 1.0 / len));
+    double inv_len = 1.0 / *len;
+    *eta = 0x1p-23 + 2.0 * gamma_d(3) * (d3_dot(e1, e1) + d3_dot(e2, e2)) * inv_len;
+    return d3_to_float(d3_scale(c, inv_len));
 }
 
 /* The ray parameter t (a double, whose sign is certain) as a float, when it is > 0 and in
@@ -178,7 +185,7 @@ static float pdf_by_area(double pdf_area, const struct surface *ref, const struc
 /* ---- sphere ---- */
 
 /* An interval [lo, hi] of doubles holding an exact value; each operation rounds its bounds
- * outward by one ulp, so the result holds the exact result of the exact operands (PBRT 4e,
+ * outward, so the result holds the exact result of the exact operands (PBRT 4e,
  * ch. 6, "Interval Arithmetic"). */
 struct interval {
     double lo;
@@ -186,9 +193,13 @@ struct interval {
 }; /* 16 bytes */
 
 static struct interval iv_exact(double x) { return (struct interval){x, x}; }
+/* [lo, hi] widened by two ulps at each end: x - |x| 2^-51 is at least 2 ulps below x and exact,
+ * and the least subnormal covers x == 0 (nextafter, a library call, made sphere tests 20 times
+ * slower) */
 static struct interval iv_out(double lo, double hi)
 {
-    return (struct interval){nextafter(lo, -INFINITY), nextafter(hi, INFINITY)};
+    return (struct interval){lo - (fabs(lo) * 0x1p-51 + DBL_TRUE_MIN),
+                             hi + (fabs(hi) * 0x1p-51 + DBL_TRUE_MIN)};
 }
 static struct interval iv_add(struct interval a, struct interval b)
 {
@@ -198,23 +209,34 @@ static struct interval iv_sub(struct interval a, struct interval b)
 {
     return iv_out(a.lo - b.hi, a.hi - b.lo);
 }
+/* the least and greatest of four finite values (comparisons, not fmin/fmax: library calls) */
+static double min4(const double v[4])
+{
+    double a = v[0] < v[1] ? v[0] : v[1];
+    double b = v[2] < v[3] ? v[2] : v[3];
+    return a < b ? a : b;
+}
+static double max4(const double v[4])
+{
+    double a = v[0] > v[1] ? v[0] : v[1];
+    double b = v[2] > v[3] ? v[2] : v[3];
+    return a > b ? a : b;
+}
 static struct interval iv_mul(struct interval a, struct interval b)
 {
     double p[4] = {a.lo * b.lo, a.lo * b.hi, a.hi * b.lo, a.hi * b.hi};
-    return iv_out(fmin(fmin(p[0], p[1]), fmin(p[2], p[3])),
-                  fmax(fmax(p[0], p[1]), fmax(p[2], p[3])));
+    return iv_out(min4(p), max4(p));
 }
 /* a / b for b not containing 0 (the caller checks) */
 static struct interval iv_div(struct interval a, struct interval b)
 {
     double q[4] = {a.lo / b.lo, a.lo / b.hi, a.hi / b.lo, a.hi / b.hi};
-    return iv_out(fmin(fmin(q[0], q[1]), fmin(q[2], q[3])),
-                  fmax(fmax(q[0], q[1]), fmax(q[2], q[3])));
+    return iv_out(min4(q), max4(q));
 }
 /* sqrt of the non-negative part */
 static struct interval iv_sqrt(struct interval a)
 {
-    return iv_out(sqrt(fmax(0.0, a.lo)), sqrt(fmax(0.0, a.hi)));
+    return iv_out(sqrt(a.lo > 0.0 ? a.lo : 0.0), sqrt(a.hi > 0.0 ? a.hi : 0.0));
 }
 static struct interval iv_neg(struct interval a) { return (struct interval){-a.hi, -a.lo}; }
 static bool iv_has_zero(struct interval a) { return a.lo <= 0.0 && a.hi >= 0.0; }
@@ -224,16 +246,16 @@ static struct interval iv_dot(const struct interval a[3], const struct interval 
     return iv_add(iv_add(iv_mul(a[0], b[0]), iv_mul(a[1], b[1])), iv_mul(a[2], b[2]));
 }
 
-bool shape_sphere_intersect(const struct sphere *s, const struct ray *ray, float *t_hit)
+/* |o + t d - c|^2 = r^2:  a t^2 + 2 b' t + c' = 0 with f = o - c, a = d.d, b' = f.d,
+ * c' = f.f - r^2.  Discriminant / 4 = a (r^2 - |f - (b'/a) d|^2)  (RTG ch. 7, eq. 10), which
+ * keeps its precision for rays far from the sphere; q = -(b' + sign(b') sqrt(disc)), roots
+ * q / a and c' / q (Numerical Recipes form).  Here every value is an interval in double, so
+ * each root is known with its error (PBRT 4e, ch. 6, "Bounding Intersection Point Error"): a
+ * root is taken only when its whole interval lies inside (t_min, t_max), and one whose interval
+ * reaches t_min is not taken (the origin may lie on the surface: a spawned ray, offset by its
+ * own error bound, never has such a root). */
+static bool sphere_hit_interval(const struct sphere *s, const struct ray *ray, float *t_hit)
 {
-    /* |o + t d - c|^2 = r^2:  a t^2 + 2 b' t + c' = 0 with f = o - c, a = d.d, b' = f.d,
-     * c' = f.f - r^2.  Discriminant / 4 = a (r^2 - |f - (b'/a) d|^2)  (RTG ch. 7, eq. 10),
-     * which keeps its precision for rays far from the sphere; q = -(b' + sign(b') sqrt(disc)),
-     * roots q / a and c' / q (Numerical Recipes form).  Every value is an interval in double,
-     * so each root is known with its error (PBRT 4e, ch. 6, "Bounding Intersection Point
-     * Error"): a root is taken only when its whole interval lies inside (t_min, t_max), and one
-     * whose interval reaches t_min is not taken (the origin may lie on the surface: a spawned
-     * ray, offset by its own error bound, never has such a root). */
     const float o[3] = {ray->o.x, ray->o.y, ray->o.z};
     const float d_f[3] = {ray->d.x, ray->d.y, ray->d.z};
     const float c_f[3] = {s->center.x, s->center.y, s->center.z};
@@ -277,8 +299,63 @@ bool shape_sphere_intersect(const struct sphere *s, const struct ray *ray, float
     return t_to_float(iv_mid(t), ray, t_hit);
 }
 
+/* The same quadratic in plain double first (intervals cost several times as much, and scenes
+ * with spheres test every sphere on every ray), with running error bounds: with u = 2^-53 and
+ * S2 = 2 (f.f + r^2) >= (|f| + r)^2, the errors of b', c' and disc are at most 4 u sum |f_i d_i|,
+ * 8 u S2 and 128 u a S2 (docs/theory.md, "Self-intersection"), so
+ *   dq = db + ddisc / sqrt(disc) + 2 u |q|,  dt0 = dq / a + 4 u |t0|,
+ *   dt1 = (dc + |t1| dq) / |q| + 4 u |t1|
+ * (the square root's error bound needs disc well above ddisc).  A root farther than twice its
+ * bound from t_min is on its side of it; a near-tangent ray, disc <= 2^-40 a S2, or a root
+ * closer to t_min is decided by the intervals. */
+bool shape_sphere_intersect(const struct sphere *s, const struct ray *ray, float *t_hit)
+{
+    const double u = 0x1p-53;
+    struct dvec3 f = d3_sub(d3(ray->o), d3(s->center));
+    struct dvec3 d = d3(ray->d);
+    double r = s->radius;
+    double a = d3_dot(d, d);
+    if (!(a > 0.0))
+        return false;
+    double inv_a = 1.0 / a;
+    double b = d3_dot(f, d);
+    double c = d3_dot(f, f) - r * r;
+    struct dvec3 l = d3_sub(f, d3_scale(d, b * inv_a));
+    double len_l = d3_length(l);
+    double disc = a * (r - len_l) * (r + len_l);
+    double scale2 = 2.0 * (d3_dot(f, f) + r * r);
+    double disc_err = 128.0 * u * a * scale2;
+    if (disc < -disc_err)
+        return false; /* certainly past the sphere */
+    if (!(disc > 0x1p-40 * a * scale2))
+        return sphere_hit_interval(s, ray, t_hit); /* near tangent */
+    double root = sqrt(disc);
+    double q = -(b + copysign(root, b));
+    double inv_q = 1.0 / q;
+    double q_err = 4.0 * u * d3_dot(d3_abs(f), d3_abs(d)) + disc_err / root + 2.0 * u * fabs(q);
+    double t0 = q * inv_a;
+    double t1 = c * inv_q;
+    double t0_err = q_err * inv_a + 4.0 * u * fabs(t0);
+    double t1_err = (8.0 * u * scale2 + fabs(t1) * q_err) * fabs(inv_q) + 4.0 * u * fabs(t1);
+    if (t0 > t1) {
+        double tmp = t0;
+        t0 = t1;
+        t1 = tmp;
+        tmp = t0_err;
+        t0_err = t1_err;
+        t1_err = tmp;
+    }
+    double t_lo = ray->t_min > 0.0f ? ray->t_min : 0.0;
+    if (fabs(t0 - t_lo) <= 2.0 * t0_err || fabs(t1 - t_lo) <= 2.0 * t1_err)
+        return sphere_hit_interval(s, ray, t_hit);
+    double t = t0 > t_lo ? t0 : t1;
+    if (!(t > t_lo && t < (double)ray->t_max))
+        return false;
+    return t_to_float(t, ray, t_hit);
+}
+
 /* The point at direction n (not exactly unit) from the centre, on the sphere: c + r n / |n| in
- * double, within gamma_d(8) (|c| + r) of the exact point; the unit normal n / |n| rounded to
+ * double, within gamma_d(8) (|c|_1 + r) of the exact point; the unit normal n / |n| rounded to
  * float, each component within 2^-23 of it. */
 static vec3 sphere_point(const struct sphere *s, struct dvec3 n, vec3 *ng, vec3 *p_error)
 {
@@ -286,7 +363,7 @@ static vec3 sphere_point(const struct sphere *s, struct dvec3 n, vec3 *ng, vec3 
     struct dvec3 u = len > 0.0 ? d3_scale(n, 1.0 / len) : (struct dvec3){0.0, 1.0, 0.0};
     struct dvec3 c = d3(s->center);
     struct dvec3 p = d3_add(c, d3_scale(u, s->radius));
-    double e = gamma_d(8) * (d3_length(c) + s->radius);
+    double e = gamma_d(8) * (d3_sum(d3_abs(c)) + s->radius);
     *ng = d3_to_float(u);
     return round_point(p, (struct dvec3){e, e, e}, 0x1p-23, p_error);
 }
@@ -428,11 +505,35 @@ bool shape_quad_intersect(const struct quad *q, const struct ray *ray, float *t_
     return t_to_float(t, ray, t_hit);
 }
 
+/* The quad's point corner + alpha e1 + beta e2 with its error bound and unit normal, pulled
+ * inside the quad as triangle_point pulls a triangle's: alpha, beta clamped to
+ * [eps, 1 - eps] with eps = 2 E / h, h the quad's width across the edges alpha = 0, 1 (or
+ * beta = 0, 1), so quads that close a box keep spawned origins off each other's planes. */
+static vec3 quad_point(const struct quad *q, double alpha, double beta, vec3 *ng, vec3 *p_error)
+{
+    struct dvec3 e1 = d3(q->e1);
+    struct dvec3 e2 = d3(q->e2);
+    double area, eta;
+    *ng = plane_normal(e1, e2, &area, &eta);
+    struct dvec3 err;
+    struct dvec3 p = plane_point_d(q->corner, e1, e2, alpha, beta, &err);
+    double E = rounded_error_sum(p, err, eta);
+    /* widths: area / |e2| across the alpha edges, area / |e1| across the beta edges */
+    double eps_alpha = area > 0.0 ? 2.0 * E * d3_length(e2) / area : 0.5;
+    double eps_beta = area > 0.0 ? 2.0 * E * d3_length(e1) / area : 0.5;
+    if (!(alpha >= eps_alpha && alpha <= 1.0 - eps_alpha && beta >= eps_beta &&
+          beta <= 1.0 - eps_beta)) {
+        alpha = eps_alpha < 0.5 ? fmin(1.0 - eps_alpha, fmax(eps_alpha, alpha)) : 0.5;
+        beta = eps_beta < 0.5 ? fmin(1.0 - eps_beta, fmax(eps_beta, beta)) : 0.5;
+        p = plane_point_d(q->corner, e1, e2, alpha, beta, &err);
+    }
+    return round_point(p, err, eta, p_error);
+}
+
 struct surface shape_quad_surface(const struct quad *q, const struct ray *ray, float t_hit)
 {
     struct surface sf;
-    /* the planar coordinates of o + t_hit d, clamped to the quad; the point is rebuilt on the
-     * plane from them */
+    /* the planar coordinates of o + t_hit d; the point is rebuilt on the plane from them */
     struct dvec3 e1 = d3(q->e1);
     struct dvec3 e2 = d3(q->e2);
     struct dvec3 n = d3_cross(e1, e2);
@@ -440,9 +541,7 @@ struct surface shape_quad_surface(const struct quad *q, const struct ray *ray, f
     double inv_nn = 1.0 / d3_dot(n, n);
     double alpha = fmin(1.0, fmax(0.0, d3_dot(d3_cross(pd, e2), n) * inv_nn));
     double beta = fmin(1.0, fmax(0.0, d3_dot(d3_cross(e1, pd), n) * inv_nn));
-    double eta;
-    sf.ng = plane_normal(e1, e2, &eta);
-    sf.p = plane_point(q->corner, e1, e2, alpha, beta, eta, &sf.p_error);
+    sf.p = quad_point(q, alpha, beta, &sf.ng, &sf.p_error);
     sf.ns = sf.ng;
     sf.uv = (vec2){(float)alpha, (float)beta};
     sf.mat_idx = q->mat_idx;
@@ -458,13 +557,9 @@ bool shape_quad_sample(const struct quad *q, const struct surface *ref, vec2 u,
                        struct shape_sample *ss)
 {
     /* uniform by area: p = corner + u0 e1 + u1 e2, pdf_area = 1 / |e1 x e2| */
-    struct dvec3 e1 = d3(q->e1);
-    struct dvec3 e2 = d3(q->e2);
-    double eta;
-    vec3 n = plane_normal(e1, e2, &eta);
-    vec3 p_error;
-    vec3 p = plane_point(q->corner, e1, e2, u.x, u.y, eta, &p_error);
-    return sample_by_area(p, p_error, n, 1.0 / d3_length(d3_cross(e1, e2)), ref, ss);
+    vec3 n, p_error;
+    vec3 p = quad_point(q, u.x, u.y, &n, &p_error);
+    return sample_by_area(p, p_error, n, 1.0 / d3_length(d3_cross(d3(q->e1), d3(q->e2))), ref, ss);
 }
 
 float shape_quad_pdf(const struct quad *q, const struct surface *ref, const struct surface *on,
@@ -511,42 +606,48 @@ struct surface shape_plane_surface(const struct plane *pl, const struct ray *ray
 /* ---- triangle (the BVH finds the hit) ---- */
 
 /* The triangle's point p0 + b1 e1 + b2 e2 (e1 = p1 - p0, e2 = p2 - p0 in double) with its
- * error bound and unit normal (plane_point, plane_normal), pulled inside the triangle: the
- * barycentrics are clamped to the triangle and shrunk towards its centre so that each b_i is at
- * least eps_i = 2 E / h_i, with E the sum of the point's error bounds and h_i the height over
- * edge i.  So the rounded point lies inside every edge by at least its error, as offset_ray_origin
- * puts it off the plane: at a concave edge a spawned ray then meets the neighbour in front of
- * its origin, not at t = 0.  A point more than eps outside (only from the ray's point of a huge
- * triangle, whose float inside test is off by u times its size) is left where it is. */
+ * error bound and unit normal (plane_point_d, plane_normal), pulled inside the triangle: where
+ * some b_i is below eps_i = 2 E / h_i, with E the sum of the point's error bounds and h_i the
+ * height over edge i, the barycentrics are clamped to the triangle and shrunk towards its centre,
+ * b_i' = eps_i + (1 - sum eps) b_i.  So the rounded point lies inside every edge by at least its
+ * error, as offset_ray_origin puts it off the plane: at a concave edge a spawned ray then meets
+ * the neighbour in front of its origin, not at t = 0.  A point more than eps outside (only from
+ * the ray's point of a huge triangle, whose float inside test is off by u times its size) is
+ * left where it is.  h_i = 2 area / |edge_i| >= 2 area / (sqrt(3) |edge_i|_max). */
 static vec3 triangle_point(const vec3 p[3], struct dvec3 e1, struct dvec3 e2, double b1, double b2,
                            vec3 *ng, vec3 *p_error)
 {
-    double eta;
-    *ng = plane_normal(e1, e2, &eta);
-    vec3 err0;
-    plane_point(p[0], e1, e2, b1, b2, eta, &err0);
-    double area2 = d3_length(d3_cross(e1, e2));
-    double E = (double)err0.x + (double)err0.y + (double)err0.z;
-    /* eps_i = 2 E / h_i = 2 E |edge_i| / (2 area) */
-    double eps[3] = {2.0 * E * d3_length(d3_sub(e2, e1)) / area2, 2.0 * E * d3_length(e2) / area2,
-                     2.0 * E * d3_length(e1) / area2};
-    double b[3] = {1.0 - b1 - b2, b1, b2};
-    double eps_sum = eps[0] + eps[1] + eps[2];
-    if (b[0] >= -eps[0] && b[1] >= -eps[1] && b[2] >= -eps[2] && area2 > 0.0) {
-        if (!(eps_sum < 1.0)) {
-            b1 = b2 = 1.0 / 3.0; /* smaller than its error: the centre */
-        } else {
-            double sum = 0.0;
-            for (int i = 0; i < 3; i++) {
-                b[i] = fmax(0.0, b[i]);
-                sum += b[i];
+    double area2, eta;
+    *ng = plane_normal(e1, e2, &area2, &eta);
+    struct dvec3 err;
+    struct dvec3 pd = plane_point_d(p[0], e1, e2, b1, b2, &err);
+    if (area2 > 0.0) {
+        double k = 2.0 * 1.7320508075688774 * rounded_error_sum(pd, err, eta) / area2;
+        struct dvec3 e3 = d3_abs(d3_sub(e2, e1));
+        struct dvec3 a1 = d3_abs(e1);
+        struct dvec3 a2 = d3_abs(e2);
+        double eps[3] = {k * fmax(e3.x, fmax(e3.y, e3.z)), k * fmax(a2.x, fmax(a2.y, a2.z)),
+                         k * fmax(a1.x, fmax(a1.y, a1.z))};
+        double b[3] = {1.0 - b1 - b2, b1, b2};
+        bool inside = b[0] >= eps[0] && b[1] >= eps[1] && b[2] >= eps[2];
+        bool near = b[0] >= -eps[0] && b[1] >= -eps[1] && b[2] >= -eps[2];
+        if (!inside && near) {
+            double eps_sum = eps[0] + eps[1] + eps[2];
+            if (!(eps_sum < 1.0)) {
+                b1 = b2 = 1.0 / 3.0; /* smaller than its error: the centre */
+            } else {
+                double sum = 0.0;
+                for (int i = 0; i < 3; i++) {
+                    b[i] = fmax(0.0, b[i]);
+                    sum += b[i];
+                }
+                b1 = eps[1] + (1.0 - eps_sum) * b[1] / sum;
+                b2 = eps[2] + (1.0 - eps_sum) * b[2] / sum;
             }
-            /* clamped and normalised, then shrunk: b_i' = eps_i + (1 - sum eps) b_i */
-            b1 = eps[1] + (1.0 - eps_sum) * b[1] / sum;
-            b2 = eps[2] + (1.0 - eps_sum) * b[2] / sum;
+            pd = plane_point_d(p[0], e1, e2, b1, b2, &err);
         }
     }
-    return plane_point(p[0], e1, e2, b1, b2, eta, p_error);
+    return round_point(pd, err, eta, p_error);
 }
 
 struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec2 *uv,
@@ -557,11 +658,16 @@ struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec
     struct dvec3 e2 = d3_sub(d3(p[2]), d3(p[0]));
     double b1_d = b1;
     double b2_d = b2;
-    /* float barycentrics place the point to 2^-24 of the triangle's size, the ray's t to 2^-24
-     * of the hit distance: for a triangle larger than that distance (a huge floor seen from
+    /* float barycentrics place the point to about 2^-24 of the triangle's size, the ray's t to
+     * 2^-24 of the hit distance when the BVH decided it in double, which it does where the
+     * triangle is large beside both the distance and the point's magnitude (bvh.c, "the hit's
+     * own precision"): for a triangle 2^8 times larger than t |d| + |o| (a huge floor seen from
      * nearby) the barycentrics of o + t d, in double, are the more precise */
-    if (ray && fmax(d3_length(e1), d3_length(e2)) > (double)t_hit * d3_length(d3(ray->d))) {
-        struct dvec3 q = d3_sub(d3_add(d3(ray->o), d3_scale(d3(ray->d), t_hit)), d3(p[0]));
+    struct dvec3 d = ray ? d3(ray->d) : (struct dvec3){0.0, 0.0, 0.0};
+    double o_max = ray ? fmax(fabs(ray->o.x), fmax(fabs(ray->o.y), fabs(ray->o.z))) : 0.0;
+    double near = 0x1p8 * ((double)t_hit * sqrt(d3_dot(d, d)) + o_max);
+    if (ray && fmax(d3_dot(e1, e1), d3_dot(e2, e2)) > near * near) {
+        struct dvec3 q = d3_sub(d3_add(d3(ray->o), d3_scale(d, t_hit)), d3(p[0]));
         struct dvec3 n = d3_cross(e1, e2);
         double nn = d3_dot(n, n);
         if (nn > 0.0) {
@@ -600,8 +706,8 @@ static double triangle_area2(const vec3 p[3])
 float shape_triangle_area(const vec3 p[3], vec3 *ng)
 {
     if (ng) {
-        double eta;
-        *ng = plane_normal(d3_sub(d3(p[1]), d3(p[0])), d3_sub(d3(p[2]), d3(p[0])), &eta);
+        double len, eta;
+        *ng = plane_normal(d3_sub(d3(p[1]), d3(p[0])), d3_sub(d3(p[2]), d3(p[0])), &len, &eta);
     }
     return (float)(0.5 * triangle_area2(p));
 }

@@ -145,6 +145,59 @@ Test(extremes, smallpt_radius_1e5_walls, .timeout = 120)
     assert_same_scenes(DIR "smallpt-planes.txt", DIR "smallpt-spheres.txt");
 }
 
+/* Issue 12: the Cornell box at scales 1e-15, 1e-6, 1e6 and 1e15 (camera scaled too) renders the
+ * image of scale 1, one statistic per scale: the image's mean luminance against scale 1's
+ * (independent seeds), within N_SE combined standard errors.  Ray offsets are the hit points'
+ * rounding errors, areas and pdfs are formed in double, and what float cannot decide is decided
+ * in double (docs/theory.md, "Self-intersection"). */
+static struct estimate image_luminance(const struct film *f)
+{
+    double sum = 0.0, var = 0.0;
+    size_t n = (size_t)f->width * (size_t)f->height;
+    for (size_t i = 0; i < n; i++) {
+        const struct film_pixel *p = &f->pixels[i];
+        double m = film_sum_lum(p) / p->n;
+        double s2 = (p->sum_lum_sq - film_sum_lum(p) * m) / (p->n - 1);
+        sum += m;
+        var += fmax(0.0, s2) / p->n;
+    }
+    return (struct estimate){sum / (double)n, var / ((double)n * (double)n)};
+}
+
+Test(extremes, cornell_scale_1e_minus_15_to_1e15, .timeout = 180)
+{
+    const char *scales[] = {"1e-15", "1e-6", "1e6", "1e15"};
+    struct film f1;
+    struct trace_result r1;
+    render_file(DIR "cornell-1.txt", 1, &f1, &r1);
+    struct estimate e1 = image_luminance(&f1);
+    for (int k = 0; k < 4; k++) {
+        char path[128];
+        snprintf(path, sizeof path, DIR "cornell-%s.txt", scales[k]);
+        struct film f;
+        struct trace_result r;
+        render_file(path, (uint64_t)(2 + k), &f, &r);
+        cr_assert_eq(r.n_nonfinite, 0, "%s", path);
+        struct estimate e = image_luminance(&f);
+        double se = sqrt(e.var + e1.var);
+        cr_log_info("scale %s: mean luminance %.6f, scale 1: %.6f, %.2f SE", scales[k], e.mean,
+                    e1.mean, (e.mean - e1.mean) / se);
+        cr_assert(fabs(e.mean - e1.mean) <= N_SE * se, "scale %s: %.6f vs %.6f (%.1f SE)",
+                  scales[k], e.mean, e1.mean, (e.mean - e1.mean) / se);
+        film_free(&f);
+    }
+    film_free(&f1);
+}
+
+/* Issue 12: a floor of two triangles of size 1e6 or 1e7 renders as the same floor given as a
+ * plane: their hit points are as precise as the plane's (the ray's, where a triangle is larger
+ * than the hit distance) and their error bounds as small. */
+Test(extremes, huge_triangle_floor_is_the_plane, .timeout = 120)
+{
+    assert_same_scenes(DIR "floor-plane.txt", DIR "floor-1e6.txt");
+    assert_same_scenes(DIR "floor-plane.txt", DIR "floor-1e7.txt");
+}
+
 /* ---- triangles: slivers, tiny, duplicated, coplanar, closed ---- */
 
 /* A floor of 400 slivers renders as the same floor of 2 triangles. */
@@ -172,6 +225,102 @@ Test(extremes, duplicated_and_coplanar_faces, .timeout = 120)
 
 /* A camera inside a closed black mesh under a white sky sees exactly 0 everywhere. */
 Test(extremes, camera_inside_closed_mesh_sees_no_sky) { assert_black(DIR "inside-mesh.txt"); }
+
+/* Issue 12: the camera inside a closed cube of 12 triangles (diffuse, albedo 0.5) under a white
+ * sky, wound outward and inward: every pixel is exactly 0.  A ray leaving a wall near a concave
+ * edge meets the next wall at t ~ 1e-5, which the float test cannot place; it is decided in
+ * double, never thrown away. */
+Test(extremes, closed_cube_sees_no_sky, .timeout = 120)
+{
+    assert_black(DIR "cube-outward.txt");
+    assert_black(DIR "cube-inward.txt");
+}
+
+/* The same cube with each face cut into n strips of two triangles (slivers of aspect n), wound
+ * outward or inward, written into dir; the scene's path goes to scene_path.  The strips of
+ * neighbouring faces meet in T-junctions whose vertices lie exactly on the other face's edge
+ * (the cube is axis-aligned, every coordinate k/n exact in float), so the mesh is closed. */
+static void write_strip_cube(const char *dir, int n, bool inward, char *scene_path, size_t bytes)
+{
+    char obj_path[300];
+    snprintf(obj_path, sizeof obj_path, "%s/cube-%d-%s.obj", dir, n, inward ? "in" : "out");
+    FILE *f = fopen(obj_path, "w");
+    cr_assert_not_null(f);
+    int n_v = 0;
+    for (int axis = 0; axis < 3; axis++)
+        for (int sign = -1; sign <= 1; sign += 2) {
+            int u = (axis + 1) % 3, w = (axis + 2) % 3;
+            for (int i = 0; i <= n; i++)
+                for (int j = 0; j < 2; j++) {
+                    float p[3];
+                    p[axis] = (float)sign;
+                    p[u] = -1.0f + 2.0f * (float)i / (float)n;
+                    p[w] = (float)(2 * j - 1);
+                    fprintf(f, "v %.9g %.9g %.9g\n", p[0], p[1], p[2]);
+                }
+            /* (u, w) x-ordered: u x w = axis, so (a, b, c) faces +axis */
+            bool flip = (sign > 0) == inward;
+            for (int i = 0; i < n; i++) {
+                int a = n_v + 2 * i + 1, b = a + 2, c = a + 3, d = a + 1;
+                if (flip)
+                    fprintf(f, "f %d %d %d\nf %d %d %d\n", a, c, b, a, d, c);
+                else
+                    fprintf(f, "f %d %d %d\nf %d %d %d\n", a, b, c, a, c, d);
+            }
+            n_v += 2 * (n + 1);
+        }
+    fclose(f);
+    snprintf(scene_path, bytes, "%s/cube-%d-%s.txt", dir, n, inward ? "in" : "out");
+    f = fopen(scene_path, "w");
+    cr_assert_not_null(f);
+    fprintf(f,
+            "camera eye=0.1,0.05,0.02 look-at=0.5,0.3,-1 up=0,1,0 fov=100\n"
+            "film width=48 height=48\nrender spp=64 sampler=independent\n"
+            "material name=m type=diffuse albedo=0.5,0.5,0.5\n"
+            "mesh file=%s material=m\nsky type=constant radiance=1,1,1\n",
+            obj_path);
+    fclose(f);
+}
+
+/* Issue 12: the cube of 100 and 1000 strips per face (triangles of aspect 100 and 1000), wound
+ * outward and inward, camera inside: every pixel is exactly 0. */
+Test(extremes, strip_cubes_see_no_sky, .timeout = 240)
+{
+    char dir[64], scene_path[400];
+    test_make_dir(dir, sizeof dir, "strips");
+    const int strips[] = {100, 1000};
+    for (int k = 0; k < 2; k++)
+        for (int inward = 0; inward < 2; inward++) {
+            write_strip_cube(dir, strips[k], inward, scene_path, sizeof scene_path);
+            assert_black(scene_path);
+        }
+    test_remove_dir(dir);
+}
+
+/* Issue 12: parallelograms whose edges meet at 10, 3, 1, 0.3 and 0.1 degrees in a general
+ * orientation, and the issue's own 1 degree quad, albedo 0.8 under a constant sky of 2: the
+ * estimator has zero variance, light sample and BSDF sample each add 0.8 with MIS weight 1/2,
+ * so every pixel is 1.6 up to float rounding (1e-5); a spawned ray hitting the quad again
+ * takes 0.8 from a sample.  The quad's plane is decided in double (shape.c). */
+Test(extremes, sheared_quads_render_exactly, .timeout = 120)
+{
+    const char *paths[] = {DIR "quad-shear-10deg.txt",  DIR "quad-shear-3deg.txt",
+                           DIR "quad-shear-1deg.txt",   DIR "quad-shear-0.3deg.txt",
+                           DIR "quad-shear-0.1deg.txt", DIR "quad-shear-issue12.txt"};
+    for (int k = 0; k < 6; k++) {
+        struct film f;
+        struct trace_result r;
+        render_file(paths[k], 1, &f, &r);
+        cr_assert_eq(r.n_nonfinite, 0, "%s", paths[k]);
+        for (size_t i = 0; i < (size_t)f.width * (size_t)f.height; i++)
+            for (int c = 0; c < 3; c++) {
+                double m = film_mean(&f.pixels[i], c);
+                cr_assert(fabs(m - 1.6) <= 1e-5, "%s: pixel %zu channel %d: %.9f", paths[k], i, c,
+                          m);
+            }
+        film_free(&f);
+    }
+}
 
 /* Rays aimed exactly at the vertices and at points along every edge of a mesh hit it: from the
  * centre of the closed icosphere (every edge shared by two faces), and from above the sliver fan
@@ -572,4 +721,29 @@ Test(nonfinite, nan_material_dropped_and_counted)
     film_free(&f);
     trace_free(ts);
     scene_free(&scene);
+}
+
+/* ---- no scene aborts ---- */
+
+/* Issue 12: scenes that once reached an assertion or invite one: the Cornell box at 1e-12 (a
+ * normal that underflowed made a NaN ray, which passed every slab test and looped through the
+ * wide nodes' empty lanes until the stack assertion), the BVH at its depth cap, zero-area faces
+ * only, coordinates from 1e-30 to 1e18 in one mesh.  Each renders through the binary and exits
+ * 0: no signal, no assertion; the traversal stacks are sized by the build's depth cap. */
+Test(extremes, no_scene_aborts, .timeout = 240)
+{
+    const char *scenes[] = {DIR "cornell-1e-12.txt", DIR "depth-cap.txt", DIR "degenerate-only.txt",
+                            DIR "extreme-coordinates.txt", DIR "nan-invitations.txt"};
+    char out[] = "/tmp/mcpt_abort_XXXXXX.exr", err[4096];
+    int fd = mkstemps(out, 4);
+    cr_assert(fd >= 0);
+    close(fd);
+    for (int k = 0; k < 5; k++) {
+        int rc = run_mcpt(scenes[k], out, err, sizeof err);
+        cr_assert_eq(rc, 0, "%s: exit status %d: %s", scenes[k], rc, err);
+    }
+    char cmd[400];
+    snprintf(cmd, sizeof cmd, "rm -f '%s' '%.*s.png' '%s.stderr'", out, (int)strlen(out) - 4, out,
+             out);
+    cr_assert_eq(system(cmd), 0);
 }
