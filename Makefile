@@ -31,7 +31,8 @@ LDLIBS_ALL = $(EXR_LIBS) $(PNG_LIBS) -lpthread -lm
 
 BUILD ?= build
 LIB_SRCS := $(filter-out main.c,$(wildcard *.c))
-TEST_SRCS := $(wildcard tests/*_test.c)
+# tests/report.c: the list of skipped tests, with their reasons, at the end of the run
+TEST_SRCS := $(wildcard tests/*_test.c) tests/report.c
 LIB_OBJS := $(LIB_SRCS:%.c=$(BUILD)/%.o)
 TEST_OBJS := $(TEST_SRCS:%.c=$(BUILD)/%.o)
 
@@ -144,15 +145,32 @@ gallery: mcpt
 	    scripts/gallery.sh
 
 # `make install PREFIX=/opt/mcpt` (DESTDIR for staged installs): the binary to PREFIX/bin, the
-# man page (docs/mcpt.1) to PREFIX/share/man/man1.
+# man page to PREFIX/share/man/man1 (its FILES section rewritten to PREFIX), the README and
+# docs (with their pictures) to PREFIX/share/doc/mcpt, and the example scenes with their
+# models to PREFIX/share/mcpt/scenes, where they render as they do here:
+#   mcpt PREFIX/share/mcpt/scenes/cornell-box.txt
+# `make uninstall` (same PREFIX and DESTDIR) removes all of it.  INSTALL_BIN names another
+# binary to install (the test of this target passes the one it tests, without building).
 PREFIX ?= /usr/local
-install: mcpt
-	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/man/man1
-	install -m 755 mcpt $(DESTDIR)$(PREFIX)/bin/mcpt
-	install -m 644 docs/mcpt.1 $(DESTDIR)$(PREFIX)/share/man/man1/mcpt.1
+DOCDIR = $(PREFIX)/share/doc/mcpt
+SCENEDIR = $(PREFIX)/share/mcpt/scenes
+INSTALL_BIN ?= mcpt
+install: $(INSTALL_BIN)
+	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/man/man1 \
+	    $(DESTDIR)$(DOCDIR)/gallery $(DESTDIR)$(DOCDIR)/convergence $(DESTDIR)$(SCENEDIR)/models
+	install -m 755 $(INSTALL_BIN) $(DESTDIR)$(PREFIX)/bin/mcpt
+	sed 's|/usr/local/|$(PREFIX)/|g' docs/mcpt.1 > $(DESTDIR)$(PREFIX)/share/man/man1/mcpt.1
+	chmod 644 $(DESTDIR)$(PREFIX)/share/man/man1/mcpt.1
+	install -m 644 README.md docs/*.md $(DESTDIR)$(DOCDIR)
+	install -m 644 docs/gallery/* $(DESTDIR)$(DOCDIR)/gallery
+	install -m 644 docs/convergence/* $(DESTDIR)$(DOCDIR)/convergence
+	install -m 644 scenes/*.txt $(DESTDIR)$(SCENEDIR)
+	install -m 644 scenes/models/* $(DESTDIR)$(SCENEDIR)/models
 
 uninstall:
 	rm -f $(DESTDIR)$(PREFIX)/bin/mcpt $(DESTDIR)$(PREFIX)/share/man/man1/mcpt.1
+	rm -rf $(DESTDIR)$(DOCDIR) $(DESTDIR)$(SCENEDIR)
+	-rmdir $(DESTDIR)$(PREFIX)/share/mcpt 2>/dev/null
 
 # Ray-throughput benchmark (issue 3, docs/bvh.md): bench/raybench builds the BVH of each model
 # and traces the standard ray sets of ../shared/BENCHMARKS.md, written once into $(BUILD)/bench/

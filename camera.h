@@ -10,9 +10,9 @@ struct camera_params {
     vec3 eye;
     vec3 look_at;
     vec3 up;
-    float fov_deg;        /* vertical field of view, (0, 180) */
-    float aperture;       /* lens radius, scene units; 0 = pinhole */
-    float focus_dist;     /* distance to the plane in focus; 0 = |look_at - eye| */
+    float fov_deg;    /* vertical field of view, (0, 180) */
+    float aperture;   /* lens radius, scene units; 0 = pinhole */
+    float focus_dist; /* distance to the plane in focus; 0 = |look_at - eye| */
 };
 
 /* Precomputed camera frame for a film of width x height pixels. */
@@ -29,8 +29,26 @@ struct camera {
     int height;
 };
 
-/* Builds the camera; false (and *err filled, without file/line) when eye == look_at or up is
- * parallel to the view direction. */
+/* Why camera_frame cannot build a frame. */
+enum camera_fault {
+    CAMERA_OK,
+    CAMERA_NOT_FINITE,  /* eye, look_at or up not finite, or look_at - eye or its length
+                           beyond float range */
+    CAMERA_SAME_POINT,  /* look_at == eye: no view direction */
+    CAMERA_UP_ZERO,     /* up is the zero vector */
+    CAMERA_UP_PARALLEL, /* |sin| of the angle between up and the view direction <= 1e-6 */
+};
+
+/* The camera's orthonormal frame from p: forward (unit, towards look_at), right and up (unit),
+ * and |look_at - eye| in *view_len.  Vectors are scaled by a power of two before they are
+ * normalised, which is exact, so a tiny (1e-30) or huge (3e38) but finite vector gives its
+ * true direction, and any other gives the bits plain float arithmetic gives.  Returns
+ * CAMERA_OK, or the fault with the outputs untouched.  scene.c checks a scene's camera with
+ * it, so camera_init never fails on a loaded scene. */
+enum camera_fault camera_frame(const struct camera_params *p, vec3 *forward, vec3 *right, vec3 *up,
+                               float *view_len);
+
+/* Builds the camera; false (and *err filled, without file/line) when camera_frame refuses p. */
 bool camera_init(struct camera *cam, const struct camera_params *p, int width, int height,
                  struct mcpt_error *err);
 

@@ -32,6 +32,20 @@ static uint64_t fnv1a(uint64_t h, const void *data, size_t n_bytes)
     return h;
 }
 
+bool checkpoint_hash_stream(FILE *f, const char *name, uint64_t *hash, struct mcpt_error *err)
+{
+    uint64_t h = FNV_OFFSET;
+    unsigned char buf[65536];
+    size_t n;
+    while ((n = fread(buf, 1, sizeof buf, f)) > 0)
+        h = fnv1a(h, buf, n);
+    bool ok = !ferror(f);
+    if (!ok)
+        mcpt_error_runtime(err, name, "expected a readable file, got a read error");
+    *hash = h;
+    return ok;
+}
+
 bool checkpoint_hash_file(const char *path, uint64_t *hash, struct mcpt_error *err)
 {
     FILE *f = fopen(path, "rb");
@@ -39,16 +53,8 @@ bool checkpoint_hash_file(const char *path, uint64_t *hash, struct mcpt_error *e
         mcpt_error_set(err, path, 0, 0, "expected a readable file, got '%s'", strerror(errno));
         return false;
     }
-    uint64_t h = FNV_OFFSET;
-    unsigned char buf[65536];
-    size_t n;
-    while ((n = fread(buf, 1, sizeof buf, f)) > 0)
-        h = fnv1a(h, buf, n);
-    bool ok = !ferror(f);
+    bool ok = checkpoint_hash_stream(f, path, hash, err);
     fclose(f);
-    if (!ok)
-        mcpt_error_runtime(err, path, "expected a readable file, got a read error");
-    *hash = h;
     return ok;
 }
 

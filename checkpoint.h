@@ -30,6 +30,10 @@ struct checkpoint_info {
  * when it cannot be opened, a runtime error on a read error. */
 bool checkpoint_hash_file(const char *path, uint64_t *hash, struct mcpt_error *err);
 
+/* The same hash of what is left of the open stream f, read to its end (not closed); a read
+ * error is a runtime error naming name. */
+bool checkpoint_hash_stream(FILE *f, const char *name, uint64_t *hash, struct mcpt_error *err);
+
 /* Writes film and info to path atomically (file.h), so a reader sees the old file or the new
  * one, never a mix.  Layout: magic "MCPTCKPT", version, byte-order mark, pixel record size,
  * film size, info, the raw pixel records, then an FNV-1a 64 checksum of everything before it.

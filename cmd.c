@@ -2,6 +2,8 @@
  *   mcpt compare A.exr REF.exr   error metrics of A against REF (stats.c), a heat map (plot.c)
  *   mcpt integrate FUNCTION      the sampler laboratory: MSE of known integrals (stats.c)
  *   mcpt merge PART.exr... -o    partial renders into one image (partial.c)
+ *   mcpt convert IN.exr OUT.png  an EXR to an sRGB PNG with an exposure and a tone curve
+ *                                (image.c), as pbrt-v4's "imgtool convert"
  * and the helpers main.c shares with them: usage errors, strict numbers, and cmd_fail, where an
  * error becomes one printed line and the exit status its kind names (2 bad input, 1 runtime).
  * See docs/convergence.md (compare, integrate) and docs/distributed.md (merge). */
@@ -10,6 +12,7 @@
 #include <errno.h>
 #include <getopt.h>
 #include <stdlib.h>
+#include <strings.h>
 
 #include "image.h"
 #include "output.h"
@@ -304,45 +307,68 @@ static int run_integrate(int argc, char **argv)
 /* ---- mcpt merge PART.exr... -o OUT.exr ---- */
 
 static const char MERGE_USAGE[] =
-    "usage: mcpt merge PART.exr... -o OUT.exr [--exposure E] [--quiet]\n"
+    "usage: mcpt merge PART.exr... -o OUT.exr [--partial] [--no-preview] [--exposure E]\n"
+    "                  [--tonemap T] [--quiet]\n"
     "Merges partial renders (mcpt SCENE --sample-range A:B) of one scene and one set of render\n"
     "settings over disjoint sample ranges into OUT.exr and OUT.png: per pixel the sums, sums\n"
     "of squares and counts add, so parts covering 0:N give the N-spp render to within float\n"
-    "rounding (docs/distributed.md).  OUT.exr is itself a partial render and can be merged.\n"
-    "  -o, --output OUT.exr  the merged image (required)\n"
-    "      --exposure E      PNG preview exposure in stops (default 0)\n"
+    "rounding (docs/distributed.md).  When the parts make the whole render, OUT.exr is a plain\n"
+    "image (R, G, B, variance.R/G/B, samples); otherwise it is itself a partial render, to be\n"
+    "merged with the missing ranges later.\n"
+    "  -o, --output OUT      the merged image: OUT.exr (and its preview OUT.png), or OUT.png\n"
+    "                        alone (required)\n"
+    "      --partial         keep the partial-render channels (sums as hi/lo float pairs) even\n"
+    "                        when the parts make the whole render, to merge again later\n"
+    "      --no-preview      write no OUT.png beside OUT.exr\n"
+    "      --exposure E      PNG exposure in stops (default 0)\n"
+    "      --tonemap T       PNG tone curve: clamp (default), reinhard or aces\n"
     "      --quiet           print errors only\n";
 
-/* The summary line of a merge: parts, size, ranges, and whether they make the whole render. */
+/* The options the PNG-writing subcommands share: --exposure E and --tonemap T. */
+static bool parse_look(int c, const char *arg, struct image_look *look, struct mcpt_error *err)
+{
+    if (c == 'e')
+        return cmd_parse_float(arg, -64.0f, 64.0f, &look->exposure) ||
+               cmd_usage_error(err, "expected --exposure to be a number in -64..64, got '%s'", arg);
+    return image_tonemap_parse(arg, &look->tonemap) ||
+           cmd_usage_error(err, "expected --tonemap to be clamp, reinhard or aces, got '%s'", arg);
+}
+
+/* The summary line of a merge: parts, size, ranges, whether they make the whole render, and
+ * what was written. */
 static void print_merge(int n_parts, const struct film *film, const struct partial_info *info,
-                        const char *out)
+                        const struct output_paths *paths, bool is_plain)
 {
     char ranges[PARTIAL_RENDER_BYTES];
     partial_format_ranges(info, ranges, sizeof ranges);
-    const char *spp_word = strstr(info->render, " spp=");
-    unsigned spp_total = 0;
-    bool is_complete = spp_word && sscanf(spp_word, " spp=%u", &spp_total) == 1 &&
-                       info->n_ranges == 1 && info->ranges[0].begin == 0 &&
-                       info->ranges[0].end == spp_total;
-    printf("mcpt merge: %d part%s, %dx%d, sample ranges %s (%llu spp%s); wrote %s\n", n_parts,
+    bool is_whole = partial_is_whole(info);
+    printf("mcpt merge: %d part%s, %dx%d, sample ranges %s (%llu spp%s); wrote ", n_parts,
            n_parts == 1 ? "" : "s", film->width, film->height, ranges,
            (unsigned long long)partial_n_samples(info),
-           is_complete ? ", the whole render" : ", not yet the whole render", out);
+           is_whole ? ", the whole render" : ", not yet the whole render");
+    if (paths->exr[0])
+        printf("%s (%s)%s", paths->exr,
+               is_plain ? "R, G, B, variance, samples" : "a partial render, mergeable",
+               paths->png[0] ? " and " : "");
+    printf("%s\n", paths->png);
 }
 
 static int run_merge(int argc, char **argv)
 {
-    enum { OPT_EXPOSURE = 256, OPT_QUIET };
+    enum { OPT_PARTIAL = 256, OPT_NO_PREVIEW, OPT_QUIET };
     static const struct option long_opts[] = {
         {"output", required_argument, NULL, 'o'},
-        {"exposure", required_argument, NULL, OPT_EXPOSURE},
+        {"partial", no_argument, NULL, OPT_PARTIAL},
+        {"no-preview", no_argument, NULL, OPT_NO_PREVIEW},
+        {"exposure", required_argument, NULL, 'e'},
+        {"tonemap", required_argument, NULL, 't'},
         {"quiet", no_argument, NULL, OPT_QUIET},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
     const char *out = NULL;
-    float exposure = 0.0f;
-    bool quiet = false;
+    struct image_look look = {0};
+    bool quiet = false, keep_partial = false, has_preview = true;
     struct mcpt_error err = {0};
     opterr = 0;
     optind = 0;
@@ -353,10 +379,15 @@ static int run_merge(int argc, char **argv)
             out = optarg;
             ok = *optarg || cmd_usage_error(&err, "expected a file name after -o, got ''");
             break;
-        case OPT_EXPOSURE:
-            ok = cmd_parse_float(optarg, -64.0f, 64.0f, &exposure) ||
-                 cmd_usage_error(&err, "expected --exposure to be a number in -64..64, got '%s'",
-                                 optarg);
+        case 'e':
+        case 't':
+            ok = parse_look(c, optarg, &look, &err);
+            break;
+        case OPT_PARTIAL:
+            keep_partial = true;
+            break;
+        case OPT_NO_PREVIEW:
+            has_preview = false;
             break;
         case OPT_QUIET:
             quiet = true;
@@ -370,21 +401,122 @@ static int run_merge(int argc, char **argv)
         if (!ok)
             return cmd_fail(&err);
     }
-    if (!out)
-        cmd_usage_error(&err, "expected -o OUT.exr for mcpt merge, got none");
-    else if (optind >= argc)
-        cmd_usage_error(&err, "expected partial renders to merge, got none");
     struct output_paths paths;
+    bool ok = true;
+    if (!out)
+        ok = cmd_usage_error(&err, "expected -o OUT.exr for mcpt merge, got none");
+    else if (optind >= argc)
+        ok = cmd_usage_error(&err, "expected partial renders to merge, got none");
+    else if (!output_paths_init(&paths, NULL, out, NULL, NULL, false, has_preview, &err))
+        ok = false;
+    else if (!paths.exr[0] && (keep_partial || !has_preview))
+        ok = cmd_usage_error(&err, "expected -o OUT.exr with %s, got '%s'",
+                             keep_partial ? "--partial" : "--no-preview", out);
     struct film film = {0};
     struct partial_info info;
-    bool ok = out && optind < argc &&
-              output_paths_init(&paths, NULL, out, NULL, NULL, false, &err) &&
-              partial_merge_files((const char *const *)argv + optind, argc - optind, &film, &info,
-                                  &err) &&
-              output_write_image(&paths, &film, &info, exposure, &err);
+    ok = ok &&
+         partial_merge_files((const char *const *)argv + optind, argc - optind, &film, &info, &err);
+    /* the whole render is an ordinary image, unless asked to stay mergeable */
+    bool is_plain = ok && partial_is_whole(&info) && !keep_partial;
+    char ranges[PARTIAL_RENDER_BYTES];
+    if (ok) {
+        partial_format_ranges(&info, ranges, sizeof ranges);
+        struct output_meta meta = {.render_s = -1.0, .render = info.render, .ranges = ranges};
+        ok = output_write_image(&paths, &film, is_plain ? NULL : &info, &meta, &look, &err);
+    }
     if (ok && !quiet)
-        print_merge(argc - optind, &film, &info, out);
+        print_merge(argc - optind, &film, &info, &paths, is_plain);
     film_free(&film);
+    return ok ? CMD_EXIT_OK : cmd_fail(&err);
+}
+
+/* ---- mcpt convert IN.exr OUT.png [--exposure E] [--tonemap T] ---- */
+
+static const char CONVERT_USAGE[] =
+    "usage: mcpt convert IN.exr OUT.png [--exposure E] [--tonemap T] [--quiet]\n"
+    "Writes the R, G, B channels of IN.exr (linear Rec. 709, as mcpt writes them) to OUT.png,\n"
+    "8-bit sRGB: times 2^E, then the tone curve T, then the sRGB encoding.  Changes the look\n"
+    "of a render without rendering it again (pbrt-v4: imgtool convert).\n"
+    "      --exposure E   exposure in stops (default 0)\n"
+    "      --tonemap T    clamp (default: values above 1 clip), reinhard (Reinhard et al.\n"
+    "                     2002, eq. 3, on luminance) or aces (Narkowicz 2016's ACES fit)\n"
+    "      --quiet        print errors only\n";
+
+/* Parses mcpt convert's argv; false with *err on bad usage, *is_help after --help. */
+static bool parse_convert(int argc, char **argv, const char **in, const char **out,
+                          struct image_look *look, bool *quiet, bool *is_help,
+                          struct mcpt_error *err)
+{
+    static const struct option long_opts[] = {
+        {"exposure", required_argument, NULL, 'e'},
+        {"tonemap", required_argument, NULL, 't'},
+        {"quiet", no_argument, NULL, 'q'},
+        {"help", no_argument, NULL, 'h'},
+        {NULL, 0, NULL, 0},
+    };
+    opterr = 0;
+    optind = 0;
+    for (int c; (c = getopt_long(argc, argv, ":h", long_opts, NULL)) != -1;) {
+        if (c == 'h') {
+            fputs(CONVERT_USAGE, stdout);
+            *is_help = true;
+            return true;
+        }
+        if (c == 'q')
+            *quiet = true;
+        else if (c == 'e' || c == 't') {
+            if (!parse_look(c, optarg, look, err))
+                return false;
+        } else
+            return option_error("convert", c, argv[optind - 1], err);
+    }
+    if (argc - optind != 2)
+        return cmd_usage_error(err, "expected two files, IN.exr and OUT.png, got %d",
+                               argc - optind);
+    *in = argv[optind];
+    *out = argv[optind + 1];
+    size_t n = strlen(*out);
+    if (n < 4 || strcasecmp(*out + n - 4, ".png") != 0)
+        return cmd_usage_error(err, "expected OUT to end in .png, got '%s'", *out);
+    return true;
+}
+
+static int run_convert(int argc, char **argv)
+{
+    const char *in = NULL, *out = NULL;
+    struct image_look look = {0};
+    bool quiet = false, is_help = false;
+    struct mcpt_error err = {0};
+    if (!parse_convert(argc, argv, &in, &out, &look, &quiet, &is_help, &err))
+        return cmd_fail(&err);
+    if (is_help)
+        return CMD_EXIT_OK;
+    struct image img;
+    if (!image_read_exr(in, &img, &err))
+        return cmd_fail(&err);
+    int rgb_idx[3] = {image_find_channel(&img, "R"), image_find_channel(&img, "G"),
+                      image_find_channel(&img, "B")};
+    size_t n_pixels = (size_t)img.width * (size_t)img.height;
+    float *rgb = NULL;
+    bool ok = rgb_idx[0] >= 0 && rgb_idx[1] >= 0 && rgb_idx[2] >= 0;
+    if (!ok)
+        mcpt_error_set(&err, in, 0, 0, "expected channels R, G and B, got an image without %s",
+                       rgb_idx[0] < 0   ? "R"
+                       : rgb_idx[1] < 0 ? "G"
+                                        : "B");
+    else if (!(rgb = malloc(sizeof(float) * 3 * n_pixels))) {
+        mcpt_error_runtime(&err, in, "out of memory");
+        ok = false;
+    }
+    for (size_t i = 0; ok && i < n_pixels; i++)
+        for (int c = 0; c < 3; c++)
+            rgb[3 * i + c] = img.data[rgb_idx[c]][i];
+    ok = ok && image_write_png_srgb(out, img.width, img.height, rgb, &look, &err);
+    if (ok && !quiet)
+        printf("mcpt convert: %dx%d, exposure %g, tonemap %s; wrote %s\n", img.width, img.height,
+               (double)look.exposure, image_tonemap_name(look.tonemap), out);
+    free(rgb);
+    image_free(&img);
     return ok ? CMD_EXIT_OK : cmd_fail(&err);
 }
 
@@ -393,7 +525,7 @@ static int run_merge(int argc, char **argv)
 bool cmd_is_subcommand(const char *name)
 {
     return strcmp(name, "compare") == 0 || strcmp(name, "integrate") == 0 ||
-           strcmp(name, "merge") == 0;
+           strcmp(name, "merge") == 0 || strcmp(name, "convert") == 0;
 }
 
 int cmd_run(int argc, char **argv)
@@ -402,5 +534,7 @@ int cmd_run(int argc, char **argv)
         return run_compare(argc, argv);
     if (strcmp(argv[0], "integrate") == 0)
         return run_integrate(argc, argv);
+    if (strcmp(argv[0], "convert") == 0)
+        return run_convert(argc, argv);
     return run_merge(argc, argv);
 }

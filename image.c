@@ -3,7 +3,9 @@
  * and read chunk by chunk with the encode/decode pipelines; layout per "OpenEXR File Layout"
  * (openexr.com).  Reading accepts scanline and tiled parts with half, float or uint channels.
  * PNG: 8-bit RGB; the preview encodes linear values with the sRGB transfer function of
- * IEC 61966-2-1:1999.
+ * IEC 61966-2-1:1999, after an exposure and a tone curve (clamp; Reinhard et al. 2002,
+ * "Photographic Tone Reproduction for Digital Images", eq. 3; Narkowicz 2016, "ACES Filmic
+ * Tone Mapping Curve").
  * Every write goes through file.h: a temporary beside the destination, fsync'd, then renamed
  * over it, so a reader sees the old image or the new one, never a truncated one. */
 #define _POSIX_C_SOURCE 200809L
@@ -219,6 +221,13 @@ static bool exr_encode(int fd, const char *path, const struct image *img, struct
                              EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1);
     for (int a = 0; a < img->n_attrs && rv == EXR_ERR_SUCCESS; a++)
         rv = exr_attr_set_string(ctxt, part_idx, img->attr_names[a], img->attr_values[a]);
+    /* the standard attribute that says which RGB the values are in ("OpenEXR Standard
+     * Attributes": chromaticities); without it a reader must assume Rec. 709 anyway */
+    static const float REC709[8] = IMAGE_REC709_CHROMATICITIES;
+    const exr_attr_chromaticities_t chroma = {REC709[0], REC709[1], REC709[2], REC709[3],
+                                              REC709[4], REC709[5], REC709[6], REC709[7]};
+    if (rv == EXR_ERR_SUCCESS)
+        rv = exr_attr_set_chromaticities(ctxt, part_idx, "chromaticities", &chroma);
     if (rv == EXR_ERR_SUCCESS)
         rv = exr_write_header(ctxt);
     if (rv == EXR_ERR_SUCCESS)
@@ -484,6 +493,13 @@ bool image_read_exr(const char *path, struct image *img, struct mcpt_error *err)
     if (!image_alloc_from_header(path, storage, &dw, chlist, img, err))
         goto fail;
     read_string_attrs(ctxt, img);
+    exr_attr_chromaticities_t chroma;
+    if (exr_attr_get_chromaticities(ctxt, 0, "chromaticities", &chroma) == EXR_ERR_SUCCESS) {
+        const float xy[8] = {chroma.red_x,  chroma.red_y,  chroma.green_x, chroma.green_y,
+                             chroma.blue_x, chroma.blue_y, chroma.white_x, chroma.white_y};
+        memcpy(img->chromaticities, xy, sizeof xy);
+        img->has_chromaticities = true;
+    }
     rv = decode_part(ctxt, storage, &dw, img);
     if (rv != EXR_ERR_SUCCESS) {
         exr_error_set(err, path, "cannot read OpenEXR pixels", &s, rv);
@@ -662,22 +678,84 @@ uint8_t image_srgb8(const struct image_srgb *s, double v)
     return (uint8_t)k;
 }
 
-bool image_write_png_srgb(const char *path, int width, int height, const float *rgb, float exposure,
-                          struct mcpt_error *err)
+/* ---- tone curves ---- */
+
+static const char *const TONEMAP_NAMES[] = {"clamp", "reinhard", "aces"};
+
+bool image_tonemap_parse(const char *name, enum image_tonemap *out)
+{
+    for (int t = 0; t < (int)(sizeof TONEMAP_NAMES / sizeof TONEMAP_NAMES[0]); t++)
+        if (strcmp(name, TONEMAP_NAMES[t]) == 0) {
+            *out = (enum image_tonemap)t;
+            return true;
+        }
+    return false;
+}
+
+const char *image_tonemap_name(enum image_tonemap t)
+{
+    return (unsigned)t < sizeof TONEMAP_NAMES / sizeof TONEMAP_NAMES[0] ? TONEMAP_NAMES[t] : "?";
+}
+
+void image_tonemap_rgb(enum image_tonemap t, const double rgb[3], double out[3])
+{
+    switch (t) {
+    case IMAGE_TONEMAP_REINHARD: {
+        /* Reinhard et al. 2002, eq. 3: L_d = L / (1 + L), on the luminance Y of linear
+         * Rec. 709 (ITU-R BT.709 weights), each channel scaled by L_d / L = 1 / (1 + Y) so the
+         * colour is kept.  The key scaling of their eq. 2 is left to the exposure. */
+        double Y = 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2];
+        double s = 1.0 / (1.0 + (Y > 0.0 ? Y : 0.0));
+        for (int c = 0; c < 3; c++)
+            out[c] = rgb[c] * s;
+        return;
+    }
+    case IMAGE_TONEMAP_ACES:
+        /* Narkowicz 2016, "ACES Filmic Tone Mapping Curve" (knarkowicz.wordpress.com,
+         * 2016-01-06): a rational fit of the ACES reference rendering + Rec. 709 output
+         * transforms, pre-exposed so that 1 maps to about 0.8, applied per channel and
+         * clamped ("saturate") to [0, 1] */
+        for (int c = 0; c < 3; c++) {
+            double x = rgb[c];
+            if (isnan(x) || x <= 0.0 || isinf(x)) {
+                out[c] = isnan(x) ? x : x > 0.0; /* NaN stays NaN; -inf..0 -> 0; inf -> 1 */
+                continue;
+            }
+            double y = x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14);
+            out[c] = y < 1.0 ? y : 1.0;
+        }
+        return;
+    case IMAGE_TONEMAP_CLAMP:
+    default:
+        for (int c = 0; c < 3; c++)
+            out[c] = rgb[c];
+        return;
+    }
+}
+
+bool image_write_png_srgb(const char *path, int width, int height, const float *rgb,
+                          const struct image_look *look, struct mcpt_error *err)
 {
     if (!png_size_is_valid(path, width, height, err))
         return false;
-    size_t n_values = (size_t)width * (size_t)height * 3;
-    uint8_t *rgb8 = malloc(n_values);
+    size_t n_pixels = (size_t)width * (size_t)height;
+    uint8_t *rgb8 = malloc(n_pixels * 3);
     if (!rgb8) {
         mcpt_error_runtime(err, path, "cannot write: %s", strerror(ENOMEM));
         return false;
     }
     struct image_srgb srgb;
     image_srgb_init(&srgb);
-    const float scale = exp2f(exposure); /* exposure in stops */
-    for (size_t i = 0; i < n_values; i++)
-        rgb8[i] = image_srgb8(&srgb, rgb[i] * scale);
+    const float scale = exp2f(look ? look->exposure : 0.0f); /* exposure in stops */
+    const enum image_tonemap curve = look ? look->tonemap : IMAGE_TONEMAP_CLAMP;
+    for (size_t i = 0; i < n_pixels; i++) {
+        double v[3], d[3];
+        for (int c = 0; c < 3; c++)
+            v[c] = rgb[3 * i + c] * scale; /* float product, as before tone curves existed */
+        image_tonemap_rgb(curve, v, d);
+        for (int c = 0; c < 3; c++)
+            rgb8[3 * i + c] = image_srgb8(&srgb, d[c]);
+    }
     bool ok = png_write_atomic(path, width, height, rgb8, true, err);
     free(rgb8);
     return ok;

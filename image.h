@@ -9,7 +9,7 @@
 #include "vec.h"
 
 #define IMAGE_MAX_CHANNELS 32 /* mcpt's partial renders (partial.h) write 24 */
-#define IMAGE_MAX_ATTRS 8     /* string attributes kept per image */
+#define IMAGE_MAX_ATTRS 16    /* string attributes kept per image */
 #define IMAGE_ATTR_BYTES 256  /* longest attribute value kept, including the NUL */
 
 /* A planar float image: channel c of pixel (x, y) is data[c][y * width + x]. */
@@ -23,18 +23,31 @@ struct image {
     int n_attrs;
     char attr_names[IMAGE_MAX_ATTRS][32];
     char attr_values[IMAGE_MAX_ATTRS][IMAGE_ATTR_BYTES];
+    /* the standard "chromaticities" attribute as read (CIE xy of red, green, blue, white);
+     * every image mcpt writes carries IMAGE_REC709_CHROMATICITIES */
+    bool has_chromaticities;
+    float chromaticities[8];
 };
 
+/* Linear Rec. ITU-R BT.709 (sRGB) primaries and the D65 white point, CIE 1931 xy: red, green,
+ * blue, white (ITU-R BT.709-6, table "Derivation of luminance signal"; pbrt-v4 writes the same
+ * for its sRGB films). */
+#define IMAGE_REC709_CHROMATICITIES                                                                \
+    {                                                                                              \
+        0.64f, 0.33f, 0.30f, 0.60f, 0.15f, 0.06f, 0.3127f, 0.3290f                                 \
+    }
+
 /* Writes img as a scanline EXR, 32-bit float channels, ZIP compression, channels in the given
- * order (the EXR file stores them sorted by name, as the format requires), and img's string
- * attributes in the header.  Returns false and fills *err (file only, line 0) on an I/O
- * failure. */
+ * order (the EXR file stores them sorted by name, as the format requires), img's string
+ * attributes and the chromaticities of linear Rec. 709 (IMAGE_REC709_CHROMATICITIES: mcpt
+ * renders in those primaries) in the header.  Returns false and fills *err (file only, line
+ * 0) on an I/O failure. */
 bool image_write_exr(const char *path, const struct image *img, struct mcpt_error *err);
 
 /* Reads every channel of a scanline or tiled EXR (half, float or uint channels are converted
- * to float) and the first IMAGE_MAX_ATTRS string attributes of its header that fit (name of
+ * to float), the first IMAGE_MAX_ATTRS string attributes of its header that fit (name of
  * at most 31 bytes, value of at most IMAGE_ATTR_BYTES - 1; others are skipped, and so are the
- * structural "type" and "name").  On success
+ * structural "type" and "name") and the chromaticities when present.  On success
  * *img owns its data (free with image_free). */
 bool image_read_exr(const char *path, struct image *img, struct mcpt_error *err);
 
@@ -53,10 +66,37 @@ struct image_srgb {
 void image_srgb_init(struct image_srgb *s);
 uint8_t image_srgb8(const struct image_srgb *s, double v);
 
-/* Writes an 8-bit sRGB PNG of linear rgb (interleaved, 3 floats a pixel), multiplied by
- * 2^exposure, then encoded by image_srgb8. */
-bool image_write_png_srgb(const char *path, int width, int height, const float *rgb, float exposure,
-                          struct mcpt_error *err);
+/* How linear radiance becomes a displayed value: times 2^exposure, then a tone curve, then the
+ * sRGB encoding.  The curves (image_tonemap), each mapping [0, inf) into [0, 1]:
+ *   clamp     v                                      (values above 1 clip: the default)
+ *   reinhard  rgb / (1 + Y), Y = 0.2126 R + 0.7152 G + 0.0722 B, the luminance of linear
+ *             Rec. 709: Reinhard et al. 2002, eq. 3 applied to Y with the colour kept
+ *   aces      x (2.51 x + 0.03) / (x (2.43 x + 0.59) + 0.14) per channel, clamped to [0, 1]:
+ *             Narkowicz 2016's fit of the ACES RRT + ODT (1 maps to 0.80) */
+enum image_tonemap {
+    IMAGE_TONEMAP_CLAMP,
+    IMAGE_TONEMAP_REINHARD,
+    IMAGE_TONEMAP_ACES,
+};
+
+struct image_look {
+    float exposure;             /* stops: values are multiplied by 2^exposure first */
+    enum image_tonemap tonemap; /* then this curve */
+};                              /* 8 bytes */
+
+/* "clamp", "reinhard" or "aces" to the curve; false for any other name. */
+bool image_tonemap_parse(const char *name, enum image_tonemap *out);
+const char *image_tonemap_name(enum image_tonemap t);
+
+/* The curve t on one pixel of linear rgb (already exposed): display-linear out, each in [0, 1]
+ * for finite non-negative input (clamp: as given; the sRGB encoding clips).  NaN stays NaN. */
+void image_tonemap_rgb(enum image_tonemap t, const double rgb[3], double out[3]);
+
+/* Writes an 8-bit sRGB PNG of linear rgb (interleaved, 3 floats a pixel) as look says: times
+ * 2^exposure, through the tone curve, then encoded by image_srgb8.  look NULL: exposure 0,
+ * clamp. */
+bool image_write_png_srgb(const char *path, int width, int height, const float *rgb,
+                          const struct image_look *look, struct mcpt_error *err);
 
 /* Writes an 8-bit PNG of rgb8 (interleaved, 3 bytes a pixel) as is. */
 bool image_write_png_rgb8(const char *path, int width, int height, const uint8_t *rgb8,

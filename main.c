@@ -7,9 +7,11 @@
  * written by output.c; an interrupted render's checkpoint is checkpoint.c's.  This file holds
  * the run's options and state, the render passes (snapshots, curves, previews), the progress
  * line and the signal handler, and is the only one that may exit. */
+#include <errno.h>
 #include <getopt.h>
 #include <signal.h>
 #include <stdlib.h>
+#include <sys/ioctl.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -23,15 +25,19 @@
 #include "stats.h"
 #include "trace.h"
 
+#define STDIN_NAME "<stdin>" /* the scene "-" in messages and in the EXR header */
+
 static const char USAGE[] =
-    "usage: mcpt SCENE [options]\n"
+    "usage: mcpt SCENE [options]         (SCENE -: read it from standard input)\n"
     "       mcpt compare A.exr REF.exr [--heatmap ERR.png] [--json]   (mcpt compare --help)\n"
     "       mcpt integrate FUNCTION [--sampler S] [--spp N] [--seeds K]  (mcpt integrate --help)\n"
     "       mcpt merge PART.exr... -o OUT.exr   (mcpt merge --help)\n"
+    "       mcpt convert IN.exr OUT.png [--exposure E] [--tonemap T]  (mcpt convert --help)\n"
     "Render SCENE (see docs/scene-format.md) to OUT.exr (linear float RGB, with per-pixel\n"
     "variance of the mean and sample count) and OUT.png (sRGB preview).\n"
     "\n"
-    "  -o, --output OUT.exr   output image (default: the scene's name with .exr, here)\n"
+    "  -o, --output OUT       OUT.exr: the float image and its preview OUT.png; OUT.png: an\n"
+    "                         8-bit sRGB image only (default: the scene's name with .exr)\n"
     "      --spp N            samples per pixel (default: the scene's render spp, else 64)\n"
     "      --max-depth D      most bounces per path; 0 = emission only, 1 = direct light,\n"
     "                         inf = until Russian roulette ends it (default: scene, else inf)\n"
@@ -57,9 +63,13 @@ static const char USAGE[] =
     "      --max-spp N        adaptive: most samples per pixel (default: the spp)\n"
     "      --heatmap PNG      write a false-colour map of the samples per pixel with a legend\n"
     "                         (adaptive default: OUT.samples.png)\n"
-    "      --width W          film width in pixels (default: the scene's film)\n"
-    "      --height H         film height in pixels (default: the scene's film)\n"
-    "      --exposure E       PNG preview exposure in stops (default 0)\n"
+    "      --width W          film width in pixels (default: the scene's film); alone, the\n"
+    "                         height keeps the film's aspect ratio\n"
+    "      --height H         film height in pixels (likewise)\n"
+    "      --scale F          both sides times F, in (0, 64]: the same framing\n"
+    "      --exposure E       PNG exposure in stops (default 0)\n"
+    "      --tonemap T        PNG tone curve: clamp (default), reinhard or aces\n"
+    "      --no-preview       no PNG beside OUT.exr\n"
     "      --quiet            print errors only\n";
 /* the help is two strings: C11 compilers need only accept 4095 bytes in one */
 static const char USAGE_MORE[] =
@@ -109,6 +119,9 @@ struct options {
     int width;                /* 0: from the scene */
     int height;               /* 0: from the scene */
     float exposure;
+    enum image_tonemap tonemap; /* --tonemap: the PNG's tone curve */
+    float scale;                /* --scale F: film size times F; 0: none */
+    bool no_preview;            /* --no-preview: no PNG beside the EXR */
     bool quiet;
     const char *checkpoint_path; /* NULL: OUT.exr.ckpt */
     bool snapshots;              /* --snapshots pow2 */
@@ -140,6 +153,7 @@ struct progress {
     bool quiet;
     double t_start;
     int quarters_printed;
+    bool is_finished;   /* the 100% line is out: later reports of it print nothing */
     uint64_t base;      /* render passes: samples of the passes before this one */
     uint64_t total_all; /* render passes: samples of all of them; 0: one trace_render call */
 };
@@ -175,6 +189,19 @@ struct run {
     double t_render_s;
     int signal; /* SIGINT or SIGTERM, when it stopped the render */
 };
+
+/* The parsers' warnings (file:line:col: warning: ...), one line each, unless --quiet. */
+static void print_scene_warnings(const struct scene *scene, bool quiet)
+{
+    if (quiet)
+        return;
+    uint32_t n_kept = scene->n_warnings < SCENE_MAX_WARNINGS ? scene->n_warnings
+                                                             : SCENE_MAX_WARNINGS;
+    for (uint32_t i = 0; i < n_kept; i++)
+        fprintf(stderr, "%s\n", scene->warnings[i]);
+    if (scene->n_warnings > n_kept)
+        fprintf(stderr, "mcpt: warning: %u more warnings not shown\n", scene->n_warnings - n_kept);
+}
 
 static bool parse(int argc, char **argv, struct run *run, struct mcpt_error *err);
 static bool load(struct run *run, struct mcpt_error *err);
@@ -233,6 +260,9 @@ enum {
     OPT_RR,
     OPT_RR_DEPTH,
     OPT_SAMPLE_RANGE = 1280,
+    OPT_TONEMAP = 1536,
+    OPT_SCALE,
+    OPT_NO_PREVIEW,
 };
 
 static const struct option LONG_OPTS[] = {
@@ -269,6 +299,9 @@ static const struct option LONG_OPTS[] = {
     {"target-rmse", required_argument, NULL, OPT_TARGET_RMSE},
     {"preview-every", required_argument, NULL, OPT_PREVIEW_EVERY},
     {"sample-range", required_argument, NULL, OPT_SAMPLE_RANGE},
+    {"tonemap", required_argument, NULL, OPT_TONEMAP},
+    {"scale", required_argument, NULL, OPT_SCALE},
+    {"no-preview", no_argument, NULL, OPT_NO_PREVIEW},
     {NULL, 0, NULL, 0},
 };
 
@@ -415,6 +448,16 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
     case OPT_QUIET:
         o->quiet = true;
         return true;
+    case OPT_TONEMAP:
+        return image_tonemap_parse(optarg, &o->tonemap) ||
+               cmd_usage_error(err, "expected --tonemap to be clamp, reinhard or aces, got '%s'",
+                               optarg);
+    case OPT_SCALE:
+        return (cmd_parse_float(optarg, 0.0f, 64.0f, &o->scale) && o->scale > 0.0f) ||
+               cmd_usage_error(err, "expected --scale to be a number in (0, 64], got '%s'", optarg);
+    case OPT_NO_PREVIEW:
+        o->no_preview = true;
+        return true;
     case OPT_CHECKPOINT:
     case OPT_RESUME:
         *(c == OPT_RESUME ? &o->resume_path : &o->checkpoint_path) = optarg;
@@ -551,6 +594,70 @@ static bool load_reference(const char *path, const struct film *film, struct con
     return true;
 }
 
+/* The scene and the FNV-1a hash of its bytes (a checkpoint or a partial render records it).
+ * The scene "-" is standard input, copied once to a temporary file so that it can be both
+ * hashed and parsed; it is named <stdin> in messages, and its meshes are found relative to the
+ * working directory. */
+static bool load_scene(struct run *run, struct mcpt_error *err)
+{
+    const char *path = run->o.scene_path;
+    if (strcmp(path, "-") != 0) {
+        run->has_scene = scene_load(path, &run->scene, err);
+        return run->has_scene && checkpoint_hash_file(path, &run->scene_hash, err);
+    }
+    FILE *tmp = tmpfile();
+    if (!tmp) {
+        mcpt_error_runtime(err, STDIN_NAME, "cannot make a temporary copy: %s", strerror(errno));
+        return false;
+    }
+    char buf[65536];
+    size_t n;
+    bool ok = true;
+    while (ok && (n = fread(buf, 1, sizeof buf, stdin)) > 0)
+        ok = fwrite(buf, 1, n, tmp) == n;
+    if (ferror(stdin) || !ok || fflush(tmp) != 0) {
+        mcpt_error_runtime(err, STDIN_NAME, "cannot %s: %s", ok ? "read" : "copy", strerror(errno));
+        ok = false;
+    }
+    rewind(tmp);
+    ok = ok && checkpoint_hash_stream(tmp, STDIN_NAME, &run->scene_hash, err);
+    rewind(tmp);
+    run->has_scene = ok && scene_load_stream(tmp, STDIN_NAME, &run->scene, err);
+    fclose(tmp);
+    return run->has_scene;
+}
+
+/* The film size: --width and --height as given; one of them alone keeps the scene film's
+ * aspect ratio (the other side rounded), as renderers do when given one side; then --scale F
+ * multiplies both sides (rounded), keeping the framing.  Each side at least 1; bad usage
+ * when one passes 65535. */
+static bool film_size(const struct options *o, struct scene *sc, struct mcpt_error *err)
+{
+    double w = sc->width, h = sc->height; /* the scene's film, >= 1 each */
+    if (o->width && o->height) {
+        w = o->width;
+        h = o->height;
+    } else if (o->width) {
+        h = round(o->width * h / w);
+        w = o->width;
+    } else if (o->height) {
+        w = round(o->height * w / h);
+        h = o->height;
+    }
+    if (o->scale > 0.0f) {
+        w = round(w * o->scale);
+        h = round(h * o->scale);
+    }
+    w = w < 1.0 ? 1.0 : w;
+    h = h < 1.0 ? 1.0 : h;
+    if (w > 65535.0 || h > 65535.0)
+        return cmd_usage_error(err, "expected a film of at most 65535x65535 pixels, got %.0fx%.0f",
+                               w, h);
+    sc->width = (int)w;
+    sc->height = (int)h;
+    return true;
+}
+
 /* load: the scene (with the film size the command line asks for) and its hash, the names of
  * the outputs, the film (a resumed run has the checkpoint's), and the reference of a measured
  * run. */
@@ -558,18 +665,18 @@ static bool load(struct run *run, struct mcpt_error *err)
 {
     const struct options *o = &run->o;
     struct convergence *cv = &run->cv;
-    if (!scene_load(o->scene_path, &run->scene, err))
+    if (!load_scene(run, err))
         return false;
-    run->has_scene = true;
-    if (!checkpoint_hash_file(o->scene_path, &run->scene_hash, err))
+    print_scene_warnings(&run->scene, o->quiet);
+    bool is_stdin = strcmp(o->scene_path, "-") == 0; /* outputs named stdin.exr, ... */
+    if (!film_size(o, &run->scene, err) ||
+        !output_paths_init(&run->out, is_stdin ? "stdin" : o->scene_path, o->output,
+                           o->checkpoint_path, o->heatmap_path,
+                           o->adaptive || run->scene.render.adaptive, !o->no_preview, err))
         return false;
-    if (o->width)
-        run->scene.width = o->width;
-    if (o->height)
-        run->scene.height = o->height;
-    if (!output_paths_init(&run->out, o->scene_path, o->output, o->checkpoint_path, o->heatmap_path,
-                           o->adaptive || run->scene.render.adaptive, err))
-        return false;
+    if (!run->out.exr[0] && (o->has_range || o->no_preview)) /* they are about the EXR */
+        return cmd_usage_error(err, "expected -o OUT.exr with %s, got '%s'",
+                               o->has_range ? "--sample-range" : "--no-preview", o->output);
     if (!o->resume_path && !film_init(&run->film, run->scene.width, run->scene.height, err)) {
         snprintf(err->file, sizeof err->file, "%s", o->scene_path); /* its film statement */
         return false;
@@ -733,6 +840,93 @@ static bool render_options(struct run *run, struct mcpt_error *err)
 
 /* ---- render: progress, signals, passes ---- */
 
+/* A duration as m:ss, or h:mm:ss from an hour on; "--:--" when unknown. */
+static void format_duration(double seconds, char *out, size_t out_bytes)
+{
+    if (!(seconds >= 0.0) || seconds > 3.6e7) { /* NaN, negative, or past 10000 hours */
+        snprintf(out, out_bytes, "--:--");
+        return;
+    }
+    unsigned long s = (unsigned long)(seconds + 0.5);
+    if (s < 3600)
+        snprintf(out, out_bytes, "%lu:%02lu", s / 60, s % 60);
+    else
+        snprintf(out, out_bytes, "%lu:%02lu:%02lu", s / 3600, s / 60 % 60, s % 60);
+}
+
+/* The terminal's width in columns: TIOCGWINSZ on stderr, else $COLUMNS, else 80. */
+static int terminal_columns(void)
+{
+    struct winsize ws;
+    if (ioctl(STDERR_FILENO, TIOCGWINSZ, &ws) == 0 && ws.ws_col > 0)
+        return ws.ws_col;
+    uint64_t v;
+    const char *env = getenv("COLUMNS");
+    return env && cmd_parse_u64(env, 1, 10000, &v) ? (int)v : 80;
+}
+
+#define PROGRESS_BAR_MAX 30 /* characters of the bar between its brackets, at most */
+#define PROGRESS_BAR_MIN 10 /* and at least, or no bar */
+
+/* The progress bar's line for a terminal `columns` wide, padded with spaces to columns - 1
+ * characters: the last column is never written, so no terminal wraps it.  Its fields, most
+ * important first: percent, ETA, elapsed time, the bar, speed, sample counts; the least
+ * important are dropped until the rest fits, then the bar takes the room left. */
+static void format_progress(char *out, size_t out_bytes, int columns, double frac, uint64_t done,
+                            uint64_t total, double rate, double elapsed, double eta)
+{
+    enum { F_ETA, F_ELAPSED, F_BAR, F_RATE, F_COUNT, N_FIELDS };
+    char eta_s[24], elapsed_s[24], field[N_FIELDS][64];
+    format_duration(eta, eta_s, sizeof eta_s);
+    format_duration(elapsed, elapsed_s, sizeof elapsed_s);
+    snprintf(field[F_ETA], sizeof field[0], "ETA %s", eta_s);
+    snprintf(field[F_ELAPSED], sizeof field[0], "elapsed %s", elapsed_s);
+    field[F_BAR][0] = '\0';
+    snprintf(field[F_RATE], sizeof field[0], "%.2f Msamples/s", rate * 1e-6);
+    snprintf(field[F_COUNT], sizeof field[0], "%.3g/%.3g Msamples", (double)done * 1e-6,
+             (double)total * 1e-6);
+    int room = columns - 1 < (int)out_bytes - 1 ? columns - 1 : (int)out_bytes - 1;
+    if (room < 1) {
+        out[0] = '\0';
+        return;
+    }
+    char pct[16];
+    int len = snprintf(pct, sizeof pct, "%5.1f%%", 100.0 * frac);
+    int n_fields = N_FIELDS; /* keep fields 0 .. n_fields-1, the bar as PROGRESS_BAR_MIN */
+    for (; n_fields > 0; n_fields--) {
+        int need = len;
+        for (int k = 0; k < n_fields; k++)
+            need += 2 + (k == F_BAR ? PROGRESS_BAR_MIN + 2 : (int)strlen(field[k]));
+        if (need <= room)
+            break;
+    }
+    int bar_w = 0;
+    if (n_fields > F_BAR) { /* the bar grows into what is left, up to its most */
+        int used = len;
+        for (int k = 0; k < n_fields; k++)
+            used += 2 + (k == F_BAR ? 2 : (int)strlen(field[k]));
+        bar_w = room - used < PROGRESS_BAR_MAX ? room - used : PROGRESS_BAR_MAX;
+    }
+    /* shown: the bar, percent, elapsed time, ETA, speed, sample counts */
+    int n = 0;
+    if (bar_w > 0) {
+        int filled = (int)(frac * bar_w);
+        out[n++] = '[';
+        for (int i = 0; i < bar_w; i++)
+            out[n++] = i < filled ? '#' : '.';
+        out[n++] = ']';
+        out[n++] = ' ';
+    }
+    n += snprintf(out + n, out_bytes - (size_t)n, "%.*s", room - n, pct);
+    static const int SHOWN[N_FIELDS] = {F_ELAPSED, F_ETA, F_RATE, F_COUNT}; /* reading order */
+    for (int i = 0; i < N_FIELDS - 1; i++)
+        if (SHOWN[i] < n_fields)
+            n += snprintf(out + n, out_bytes - (size_t)n, "  %s", field[SHOWN[i]]);
+    while (n < room)
+        out[n++] = ' ';
+    out[n] = '\0';
+}
+
 static void report_progress(void *user, uint64_t done, uint64_t total)
 {
     struct progress *p = user;
@@ -740,28 +934,29 @@ static void report_progress(void *user, uint64_t done, uint64_t total)
         done += p->base;
         total = p->total_all > done ? p->total_all : done;
     }
-    if (p->quiet || total == 0)
+    if (p->quiet || total == 0 || p->is_finished)
         return;
+    p->is_finished = done == total;
     double frac = (double)done / (double)total;
     double elapsed = now_seconds() - p->t_start;
     double rate = elapsed > 0.0 ? (double)done / elapsed : 0.0;
-    double eta = rate > 0.0 ? (double)(total - done) / rate : 0.0;
+    double eta = rate > 0.0 ? (double)(total - done) / rate : NAN;
     if (p->is_tty) {
-        char bar[31];
-        int filled = (int)(frac * 30.0);
-        for (int i = 0; i < 30; i++)
-            bar[i] = i < filled ? '#' : '.';
-        bar[30] = '\0';
-        fprintf(stderr, "\r[%s] %5.1f%%  %.3g/%.3g Msamples  %.2f Msamples/s  ETA %4.0f s ", bar,
-                100.0 * frac, (double)done * 1e-6, (double)total * 1e-6, rate * 1e-6, eta);
+        char line[512];
+        format_progress(line, sizeof line, terminal_columns(), frac, done, total, rate, elapsed,
+                        eta);
+        fprintf(stderr, "\r%s", line);
         if (done == total)
             fputc('\n', stderr);
     } else {
         int quarter = (int)(frac * 4.0);
         if (quarter > p->quarters_printed) {
+            char eta_s[24], elapsed_s[24];
+            format_duration(eta, eta_s, sizeof eta_s);
+            format_duration(elapsed, elapsed_s, sizeof elapsed_s);
             p->quarters_printed = quarter;
-            fprintf(stderr, "progress: %3.0f%%  %.2f Msamples/s  ETA %.0f s\n", 100.0 * frac,
-                    rate * 1e-6, eta);
+            fprintf(stderr, "progress: %3.0f%%  elapsed %s  ETA %s  %.2f Msamples/s\n",
+                    100.0 * frac, elapsed_s, eta_s, rate * 1e-6);
         }
     }
 }
@@ -800,6 +995,25 @@ static void integrator_name(const struct trace_options *topt, char *out, size_t 
         snprintf(out + n, out_bytes - (size_t)n, "-ls%u", topt->light_samples);
 }
 
+/* What the PNGs show: --exposure, --tonemap. */
+static struct image_look look_of(const struct options *o)
+{
+    return (struct image_look){.exposure = o->exposure, .tonemap = o->tonemap};
+}
+
+/* What an EXR's header records of this run (output.h), seconds into the render; the render
+ * time is left out where SOURCE_DATE_EPOCH is set, the reproducible-builds convention, so that
+ * two runs write the same bytes. */
+static struct output_meta meta_of(const struct run *run, double seconds)
+{
+    const char *path = run->o.scene_path;
+    return (struct output_meta){.scene = strcmp(path, "-") == 0 ? STDIN_NAME : path,
+                                .sampler = sample_sampler_name(run->topt.sampler),
+                                .seed = run->topt.seed,
+                                .max_depth = run->topt.max_depth,
+                                .render_s = getenv("SOURCE_DATE_EPOCH") ? -1.0 : seconds};
+}
+
 /* A point of the convergence curve for film f at spp; for the first seed of a run with
  * --snapshots also a thumbnail for the contact sheet and the snapshot OUT-sppN.exr/.png. */
 static bool measure(struct run *run, const struct film *f, uint64_t seed, uint32_t spp,
@@ -813,8 +1027,10 @@ static bool measure(struct run *run, const struct film *f, uint64_t seed, uint32
     if (!run->o.snapshots || !is_first_seed)
         return true;
     const struct stats_point *p = &cv->curve.points[cv->curve.n_points - 1];
-    return plot_sheet_add(&cv->sheet, &img, spp, p->psnr_db, p->source, run->o.exposure, err) &&
-           output_write_snapshot(&run->out, f, spp, run->topt.spp, run->o.exposure, err);
+    struct image_look look = look_of(&run->o);
+    struct output_meta meta = meta_of(run, seconds);
+    return plot_sheet_add(&cv->sheet, &img, spp, p->psnr_db, p->source, &look, err) &&
+           output_write_snapshot(&run->out, f, spp, run->topt.spp, &meta, &look, err);
 }
 
 /* Renders seed number k of the run (seed topt.seed + k) into f, in passes: each trace_render
@@ -855,7 +1071,8 @@ static bool render_seed(struct run *run, struct film *f, uint32_t k, struct mcpt
             !measure(run, f, pass.seed, done_spp, seconds, k == 0, err))
             return false;
         if (is_previewed && done_spp < spp_final && now_seconds() - t_preview >= o->preview_every) {
-            if (!output_write_preview(&run->out, f, o->exposure, err))
+            struct image_look look = look_of(o);
+            if (!output_write_preview(&run->out, f, &look, err))
                 return false;
             t_preview = now_seconds();
         }
@@ -904,6 +1121,8 @@ static bool render(struct run *run, struct mcpt_error *err)
     const struct options *o = &run->o;
     if (!render_options(run, err))
         return false;
+    run->cv.sheet.seed = run->topt.seed; /* the contact sheet shows the first seed's images */
+    run->cv.sheet.n_seeds = o->n_seeds;
     run->prog = (struct progress){.is_tty = isatty(STDERR_FILENO),
                                   .quiet = o->quiet,
                                   .t_start = now_seconds()};
@@ -949,7 +1168,9 @@ static bool write_outputs(struct run *run, struct mcpt_error *err)
         if (!checkpoint_save(run->out.checkpoint, &run->film, &info, err))
             return false;
     }
-    if (!output_write_image(&run->out, &run->film, o->has_range ? &run->part : NULL, o->exposure,
+    struct image_look look = look_of(o);
+    struct output_meta meta = meta_of(run, run->t_render_s);
+    if (!output_write_image(&run->out, &run->film, o->has_range ? &run->part : NULL, &meta, &look,
                             err))
         return false;
     if (o->resume_path && !is_cancelled)
@@ -1014,18 +1235,22 @@ static int report(const struct run *run)
                 "mcpt: interrupted by %s: wrote the partial %s (its 'samples' channel "
                 "counts each pixel's samples) and the checkpoint %s; continue with: mcpt %s "
                 "--resume %s\n",
-                signal_name, run->out.exr, run->out.checkpoint, o->scene_path, run->out.checkpoint);
+                signal_name, output_image_path(&run->out), run->out.checkpoint, o->scene_path,
+                run->out.checkpoint);
         return 128 + run->signal;
     }
     if (o->quiet)
         return CMD_EXIT_OK;
     struct bvh_stats bs = trace_bvh_stats(run->ts);
     double t = run->t_render_s;
+    const struct output_paths *out = &run->out;
     printf("mcpt: %dx%d, %u spp, %d threads: render %.2f s, %.3f Msamples/s, %.2f Mrays/s; BVH "
-           "%u tris in %.1f ms; wrote %s\n",
+           "%u tris in %.1f ms; wrote %s%s%s\n",
            run->film.width, run->film.height, run->topt.spp, o->n_threads, t,
            (double)res->n_samples / t * 1e-6, (double)res->n_rays / t * 1e-6, bs.n_tris,
-           run->t_build_s * 1e3, run->out.exr);
+           run->t_build_s * 1e3, out->exr[0] ? out->exr : out->png,
+           out->exr[0] && out->png[0] ? " and " : "",
+           !out->exr[0] ? " (8-bit sRGB only: -o OUT.exr keeps the float image)" : out->png);
     if (run->cv.measuring)
         stats_print_summary(stdout, &run->cv.curve, &run->cv.summary);
     if (run->topt.adaptive)

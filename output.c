@@ -5,8 +5,7 @@
 #include "output.h"
 
 #include <stdlib.h>
-
-#include "image.h"
+#include <strings.h>
 
 /* Copies src to out (out_bytes); false with *err (bad input) when it does not fit. */
 static bool copy_path(char *out, size_t out_bytes, const char *src, struct mcpt_error *err)
@@ -33,12 +32,32 @@ static bool with_suffix(const char *path, const char *suffix, char *out, size_t 
     return copy_path(out, out_bytes, name, err);
 }
 
+/* Whether path's extension (after the last dot of its last component, not a leading one) is
+ * ext, in any case. */
+static bool has_extension(const char *path, const char *ext)
+{
+    const char *slash = strrchr(path, '/');
+    const char *base = slash ? slash + 1 : path;
+    const char *dot = strrchr(base, '.');
+    return dot && dot > base && strcasecmp(dot + 1, ext) == 0;
+}
+
 bool output_paths_init(struct output_paths *p, const char *scene_path, const char *output,
                        const char *checkpoint_path, const char *heatmap_path, bool is_adaptive,
-                       struct mcpt_error *err)
+                       bool has_preview, struct mcpt_error *err)
 {
     memset(p, 0, sizeof *p);
-    if (output) {
+    if (output && has_extension(output, "png")) {
+        if (!copy_path(p->png, sizeof p->png, output, err))
+            return false;
+    } else if (output) {
+        if (!has_extension(output, "exr")) {
+            mcpt_error_set(err, "mcpt", 0, 0,
+                           "expected an output name ending in .exr (float image and PNG "
+                           "preview) or .png (8-bit sRGB only), got '%.200s'",
+                           output);
+            return false;
+        }
         if (!copy_path(p->exr, sizeof p->exr, output, err))
             return false;
     } else { /* "dir/name.txt" -> "name.exr", here */
@@ -48,20 +67,23 @@ bool output_paths_init(struct output_paths *p, const char *scene_path, const cha
         int len = dot && dot != base ? (int)(dot - base) : (int)strlen(base);
         snprintf(p->exr, sizeof p->exr, "%.*s.exr", len, base);
     }
-    if (!with_suffix(p->exr, ".png", p->png, sizeof p->png, err))
+    if (p->exr[0] && has_preview && !with_suffix(p->exr, ".png", p->png, sizeof p->png, err))
         return false;
+    const char *image = output_image_path(p);
     char name[FILE_PATH_BYTES + 8];
-    snprintf(name, sizeof name, "%s.ckpt", p->exr);
+    snprintf(name, sizeof name, "%s.ckpt", image);
     if (!copy_path(p->checkpoint, sizeof p->checkpoint, checkpoint_path ? checkpoint_path : name,
                    err))
         return false;
     if (heatmap_path)
         return copy_path(p->heatmap, sizeof p->heatmap, heatmap_path, err);
-    return !is_adaptive || with_suffix(p->exr, ".samples.png", p->heatmap, sizeof p->heatmap, err);
+    return !is_adaptive || with_suffix(image, ".samples.png", p->heatmap, sizeof p->heatmap, err);
 }
 
-/* The preview of film at png_path: its means, 2^exposure, sRGB. */
-static bool write_png(const struct film *film, const char *png_path, float exposure,
+const char *output_image_path(const struct output_paths *p) { return p->exr[0] ? p->exr : p->png; }
+
+/* The PNG of film at png_path: its means as look says. */
+static bool write_png(const struct film *film, const char *png_path, const struct image_look *look,
                       struct mcpt_error *err)
 {
     size_t n_pixels = (size_t)film->width * (size_t)film->height;
@@ -73,13 +95,57 @@ static bool write_png(const struct film *film, const char *png_path, float expos
     for (size_t i = 0; i < n_pixels; i++)
         for (int c = 0; c < 3; c++)
             rgb[3 * i + c] = (float)film_mean(&film->pixels[i], c);
-    bool ok = image_write_png_srgb(png_path, film->width, film->height, rgb, exposure, err);
+    bool ok = image_write_png_srgb(png_path, film->width, film->height, rgb, look, err);
     free(rgb);
     return ok;
 }
 
-/* The EXR of every render: R, G, B, variance of the mean per channel, sample count. */
-static bool write_exr(const struct film *film, const char *exr_path, struct mcpt_error *err)
+/* Adds the string attribute name = printf(fmt, ...) to img. */
+static void add_attr(struct image *img, const char *name, const char *fmt, ...)
+{
+    if (img->n_attrs >= IMAGE_MAX_ATTRS)
+        return;
+    va_list ap;
+    va_start(ap, fmt);
+    snprintf(img->attr_names[img->n_attrs], sizeof img->attr_names[0], "%s", name);
+    vsnprintf(img->attr_values[img->n_attrs], sizeof img->attr_values[0], fmt, ap);
+    va_end(ap);
+    img->n_attrs++;
+}
+
+/* The header attributes of output.h's struct output_meta; samples is the count plane. */
+static void add_meta(struct image *img, const struct output_meta *meta, const float *samples)
+{
+    size_t n_pixels = (size_t)img->width * (size_t)img->height;
+    double total = 0.0;
+    for (size_t i = 0; i < n_pixels; i++)
+        total += samples[i];
+    add_attr(img, "mcpt.version", "%s", MCPT_VERSION);
+    add_attr(img, "mcpt.spp", "%.6g", total / (double)n_pixels);
+    if (!meta)
+        return;
+    if (meta->scene)
+        add_attr(img, "mcpt.scene", "%s", meta->scene);
+    if (meta->sampler) {
+        add_attr(img, "mcpt.sampler", "%s", meta->sampler);
+        add_attr(img, "mcpt.seed", "%llu", (unsigned long long)meta->seed);
+        if (meta->max_depth == UINT32_MAX)
+            add_attr(img, "mcpt.max-depth", "inf");
+        else
+            add_attr(img, "mcpt.max-depth", "%u", meta->max_depth);
+    }
+    if (meta->render_s >= 0.0)
+        add_attr(img, "mcpt.render-seconds", "%.3f", meta->render_s);
+    if (meta->render)
+        add_attr(img, PARTIAL_ATTR_RENDER, "%s", meta->render);
+    if (meta->ranges)
+        add_attr(img, PARTIAL_ATTR_RANGES, "%s", meta->ranges);
+}
+
+/* The EXR of every render: R, G, B, variance of the mean per channel, sample count, and the
+ * attributes of meta. */
+static bool write_exr(const struct film *film, const char *exr_path, const struct output_meta *meta,
+                      struct mcpt_error *err)
 {
     static const char *names[7] = {"R",          "G",          "B",      "variance.R",
                                    "variance.G", "variance.B", "samples"};
@@ -95,34 +161,38 @@ static bool write_exr(const struct film *film, const char *exr_path, struct mcpt
         img.data[c] = planes + (size_t)c * n_pixels;
     }
     film_resolve(film, img.data, img.data + 3, img.data[6]);
+    add_meta(&img, meta, img.data[6]);
     bool ok = image_write_exr(exr_path, &img, err);
     free(planes);
     return ok;
 }
 
 bool output_write_image(const struct output_paths *p, const struct film *film,
-                        const struct partial_info *part, float exposure, struct mcpt_error *err)
+                        const struct partial_info *part, const struct output_meta *meta,
+                        const struct image_look *look, struct mcpt_error *err)
 {
-    bool ok = part ? partial_write_exr(p->exr, film, part, err) : write_exr(film, p->exr, err);
-    return ok && write_png(film, p->png, exposure, err);
+    bool ok = !p->exr[0] || (part ? partial_write_exr(p->exr, film, part, err)
+                                  : write_exr(film, p->exr, meta, err));
+    return ok && (!p->png[0] || write_png(film, p->png, look, err));
 }
 
-bool output_write_preview(const struct output_paths *p, const struct film *film, float exposure,
-                          struct mcpt_error *err)
+bool output_write_preview(const struct output_paths *p, const struct film *film,
+                          const struct image_look *look, struct mcpt_error *err)
 {
-    return write_png(film, p->png, exposure, err);
+    return !p->png[0] || write_png(film, p->png, look, err);
 }
 
 bool output_write_snapshot(const struct output_paths *p, const struct film *film, uint32_t spp,
-                           uint32_t spp_final, float exposure, struct mcpt_error *err)
+                           uint32_t spp_final, const struct output_meta *meta,
+                           const struct image_look *look, struct mcpt_error *err)
 {
     char suffix[64], exr_path[FILE_PATH_BYTES], png_path[FILE_PATH_BYTES];
     int digits = snprintf(NULL, 0, "%u", spp_final);
     snprintf(suffix, sizeof suffix, "-spp%0*u.exr", digits, spp);
-    if (!with_suffix(p->exr, suffix, exr_path, sizeof exr_path, err) ||
+    if (!with_suffix(output_image_path(p), suffix, exr_path, sizeof exr_path, err) ||
         !with_suffix(exr_path, ".png", png_path, sizeof png_path, err))
         return false;
-    return write_exr(film, exr_path, err) && write_png(film, png_path, exposure, err);
+    return write_exr(film, exr_path, meta, err) && write_png(film, png_path, look, err);
 }
 
 bool output_write_heatmap(const struct output_paths *p, const struct film *film,
@@ -146,6 +216,6 @@ bool output_write_convergence(const struct output_paths *p, const char *curve_pa
     }
     if (!sheet->n_thumbs)
         return true;
-    return with_suffix(p->exr, "-contact.png", path, sizeof path, err) &&
+    return with_suffix(output_image_path(p), "-contact.png", path, sizeof path, err) &&
            plot_write_contact_sheet(path, sheet, err);
 }

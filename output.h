@@ -1,49 +1,76 @@
-/* output.h - the files a render writes, and their names.  From the image's path OUT.exr (-o, or
- * the scene's name) follow the PNG preview OUT.png, the snapshots OUT-sppN.exr/.png, the contact
- * sheet OUT-contact.png, the sample-count map OUT.samples.png and the checkpoint OUT.exr.ckpt;
- * from --curve CSV its .json and .svg.  Every file is written atomically (file.h).  All the
- * names are fixed here before a render starts, so that they can be checked before it. */
+/* output.h - the files a render writes, and their names.  The image's path (-o, or the scene's
+ * name with .exr) says its format: OUT.exr is the float image, with its PNG preview OUT.png
+ * beside it (unless --no-preview); OUT.png is an 8-bit sRGB image and nothing else, as in
+ * pbrt-v4 and Mitsuba 3.  From OUT follow the snapshots OUT-sppN.exr/.png, the contact sheet
+ * OUT-contact.png, the sample-count map OUT.samples.png and the checkpoint OUT.exr.ckpt (or
+ * OUT.png.ckpt); from --curve CSV its .json and .svg.  Every file is written atomically
+ * (file.h).  All the names are fixed here before a render starts, so that they can be checked
+ * before it. */
 #ifndef MCPT_OUTPUT_H
 #define MCPT_OUTPUT_H
 
 #include "file.h"
 #include "film.h"
+#include "image.h"
 #include "partial.h"
 #include "plot.h"
 #include "stats.h"
 
 /* The names of a render's files; "" where there is none. */
 struct output_paths {
-    char exr[FILE_PATH_BYTES];        /* the image: R, G, B, variance.R/G/B, samples */
-    char png[FILE_PATH_BYTES];        /* its sRGB preview */
+    char exr[FILE_PATH_BYTES];        /* the image: R, G, B, variance.R/G/B, samples; "" when
+                                         -o names a PNG */
+    char png[FILE_PATH_BYTES];        /* its sRGB preview, or the image itself when exr is "";
+                                         "" with --no-preview */
     char checkpoint[FILE_PATH_BYTES]; /* where an interrupted render saves its state */
     char heatmap[FILE_PATH_BYTES];    /* the sample-count map, or "" */
 };
 
-/* Names the files: exr = output, else the scene's base name with .exr in the current folder
- * ("dir/name.txt" -> "name.exr"); png = exr with its extension replaced by .png (appended when
- * it has none); checkpoint = checkpoint_path, else exr + ".ckpt"; heatmap = heatmap_path, else
- * OUT.samples.png for an adaptive render, else none.  False with *err (bad input, file =
- * the path) when a name would not fit in FILE_PATH_BYTES. */
+/* What an image's EXR header records besides its pixels: the standard chromaticities
+ * (image.h) and these as string attributes mcpt.NAME, each left out where NULL or negative. */
+struct output_meta {
+    const char *scene;   /* mcpt.scene: the scene file as named, "<stdin>" for standard input */
+    const char *sampler; /* mcpt.sampler; with it mcpt.seed and mcpt.max-depth */
+    uint64_t seed;
+    uint32_t max_depth; /* bounces; UINT32_MAX (TRACE_DEPTH_INFINITE) is written "inf" */
+    double render_s;    /* mcpt.render-seconds: the render's wall-clock time; < 0: left out */
+    const char *render; /* a merge: its parts' settings line (mcpt.render, partial.h) */
+    const char *ranges; /* a merge: their sample ranges (mcpt.sample-ranges) */
+};
+/* Always written too: mcpt.version, and mcpt.spp, the mean over pixels of the samples channel
+ * (the spp of a plain render; the mean of an adaptive or interrupted one). */
+
+/* Names the files: the image is output, else the scene's base name with .exr in the current
+ * folder ("dir/name.txt" -> "name.exr").  An image named *.exr (any case) sets exr, and png =
+ * exr with its extension replaced by .png unless has_preview is false; one named *.png sets
+ * png only.  checkpoint = checkpoint_path, else the image + ".ckpt"; heatmap = heatmap_path,
+ * else OUT.samples.png for an adaptive render, else none.  False with *err (bad input) when
+ * the image's name ends in neither .exr nor .png (file "mcpt"), or when a name would not fit
+ * in FILE_PATH_BYTES (file = the path). */
 bool output_paths_init(struct output_paths *p, const char *scene_path, const char *output,
                        const char *checkpoint_path, const char *heatmap_path, bool is_adaptive,
-                       struct mcpt_error *err);
+                       bool has_preview, struct mcpt_error *err);
 
-/* Writes the film as p->exr and p->png: with part NULL the EXR of every render (R, G, B,
- * variance of the mean per channel, sample count), else the partial render's EXR with its
- * sums and ranges (partial_write_exr); the PNG is the preview at exposure (stops).  False with
- * *err (runtime) on failure. */
+/* The name the image was given: p->exr, or p->png when the image is a PNG. */
+const char *output_image_path(const struct output_paths *p);
+
+/* Writes the film as p->exr and p->png (each where named): with part NULL the EXR of every
+ * render (R, G, B, variance of the mean per channel, sample count, and meta's attributes),
+ * else the partial render's EXR with its sums and ranges (partial_write_exr; p->exr must be
+ * named); the PNG at look (exposure, tone curve).  False with *err (runtime) on failure. */
 bool output_write_image(const struct output_paths *p, const struct film *film,
-                        const struct partial_info *part, float exposure, struct mcpt_error *err);
+                        const struct partial_info *part, const struct output_meta *meta,
+                        const struct image_look *look, struct mcpt_error *err);
 
-/* Rewrites only the preview p->png from the film as it stands. */
-bool output_write_preview(const struct output_paths *p, const struct film *film, float exposure,
-                          struct mcpt_error *err);
+/* Rewrites only the PNG p->png from the film as it stands (true when there is none). */
+bool output_write_preview(const struct output_paths *p, const struct film *film,
+                          const struct image_look *look, struct mcpt_error *err);
 
-/* Writes the snapshot of a render at spp of spp_final samples per pixel: OUT-sppN.exr and
- * OUT-sppN.png, N zero-padded to the digits of spp_final. */
+/* Writes the snapshot of a render at spp of spp_final samples per pixel: OUT-sppN.exr (with
+ * meta) and OUT-sppN.png, N zero-padded to the digits of spp_final. */
 bool output_write_snapshot(const struct output_paths *p, const struct film *film, uint32_t spp,
-                           uint32_t spp_final, float exposure, struct mcpt_error *err);
+                           uint32_t spp_final, const struct output_meta *meta,
+                           const struct image_look *look, struct mcpt_error *err);
 
 /* Writes the sample-count map p->heatmap (plot_write_count_heatmap); true when there is none. */
 bool output_write_heatmap(const struct output_paths *p, const struct film *film,

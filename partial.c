@@ -104,6 +104,14 @@ uint64_t partial_n_samples(const struct partial_info *info)
     return n;
 }
 
+bool partial_is_whole(const struct partial_info *info)
+{
+    const char *spp_word = strstr(info->render, " spp=");
+    unsigned spp_total = 0;
+    return spp_word && sscanf(spp_word, " spp=%u", &spp_total) == 1 && info->n_ranges == 1 &&
+           info->ranges[0].begin == 0 && info->ranges[0].end == spp_total;
+}
+
 void partial_format_ranges(const struct partial_info *info, char *out, size_t out_bytes)
 {
     size_t used = 0;

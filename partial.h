@@ -33,6 +33,9 @@ bool partial_parse_range(const char *s, struct partial_range *r);
 /* Samples per pixel the info's ranges hold together. */
 uint64_t partial_n_samples(const struct partial_info *info);
 
+/* Whether the info's ranges are the whole render: one range 0:N, N the spp of its settings. */
+bool partial_is_whole(const struct partial_info *info);
+
 /* Writes film as an EXR: the channels of every mcpt render (R, G, B, variance.R/G/B, samples)
  * plus each double of every pixel's film_pixel split into two float channels, hi = (float)x
  * and lo = (float)(x - hi) (sum.R/G/B and sum_lo.R/G/B, sum_sq.*, sum_sq_lo.*, sum_lum_sq.Y,

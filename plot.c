@@ -145,6 +145,8 @@ static void svg_ideal(FILE *f, const struct panel *p, const double *lx, const do
     svg_series(f, p, ends_x, ends_y, 2, "#666", "2,4", 0.0);
 }
 
+#define UNCORRECTED_DASH "5,3" /* SVG stroke-dasharray of the uncorrected RMSE curve */
+
 /* The summary's rows as drawn, in log10 units: one value per row in each array (NAN where a
  * value cannot be drawn), and the ranges they cover. */
 struct svg_data {
@@ -271,7 +273,6 @@ static void svg_panel_spp(FILE *f, const struct stats_summary *s, const struct s
     svg_axes(f, p1, ticks.at, ticks.n, ticks.label_ptrs, "samples per pixel", "RMSE");
     svg_ideal(f, p1, d->lspp, d->lrmse, n, -0.5);
     if (d->corrected) {
-        svg_series(f, p1, d->lspp, d->lraw, n, "#ff7f0e", NULL, 2.5);
         double fx[2] = {p1->xlo, p1->xhi};
         double fy[2] = {log10(d->floor_rmse), log10(d->floor_rmse)};
         if (isfinite(d->floor_rmse))
@@ -286,6 +287,10 @@ static void svg_panel_spp(FILE *f, const struct stats_summary *s, const struct s
                     panel_x(p1, d->lspp[r]), panel_y(p1, d->llo[r]), panel_x(p1, d->lspp[r]),
                     panel_y(p1, d->lhi[r]));
     svg_series(f, p1, d->lspp, d->lrmse, n, "#1f77b4", NULL, 3.0);
+    /* the uncorrected curve often lies on the corrected one (where the reference's noise is
+     * small): drawn dashed, on top, with smaller markers, so both stay visible */
+    if (d->corrected)
+        svg_series(f, p1, d->lspp, d->lraw, n, "#ff7f0e", UNCORRECTED_DASH, 1.8);
     char line[160];
     int row = 0;
     double lx = p1->x0 - 40, ly = p1->y1 + 62; /* legends below the panels */
@@ -307,7 +312,7 @@ static void svg_panel_spp(FILE *f, const struct stats_summary *s, const struct s
     }
     svg_legend(f, lx, ly, row++, "#666", "2,4", "ideal N^-1/2 through the points");
     if (d->corrected) {
-        svg_legend(f, lx, ly, row++, "#ff7f0e", NULL, "uncorrected RMSE vs reference");
+        svg_legend(f, lx, ly, row++, "#ff7f0e", UNCORRECTED_DASH, "uncorrected RMSE vs reference");
         svg_legend(f, lx, ly, row++, "#d62728", "8,4", "reference noise floor");
     }
 }
@@ -527,7 +532,8 @@ static const uint8_t BACKGROUND[3] = {32, 32, 32};
 
 /* An sRGB thumbnail of img: box-filtered down by a whole factor when larger than THUMB_SIZE,
  * else repeated up by a whole factor. */
-static bool make_thumb(const struct stats_image *img, float exposure, struct plot_thumb *t)
+static bool make_thumb(const struct stats_image *img, const struct image_look *look,
+                       struct plot_thumb *t)
 {
     int longer = img->width > img->height ? img->width : img->height;
     int down = longer > THUMB_SIZE ? (longer + THUMB_SIZE - 1) / THUMB_SIZE : 1;
@@ -542,24 +548,27 @@ static bool make_thumb(const struct stats_image *img, float exposure, struct plo
     t->height = h;
     struct image_srgb srgb;
     image_srgb_init(&srgb);
-    double scale = exp2((double)exposure);
+    double scale = exp2((double)look->exposure);
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
             int x0 = x / up * down, y0 = y / up * down; /* source block of down x down pixels */
+            double v[3], d[3];
             for (int c = 0; c < 3; c++) {
                 double sum = 0.0;
                 for (int dy = 0; dy < down; dy++)
                     for (int dx = 0; dx < down; dx++)
                         sum += img->rgb[c][(size_t)(y0 + dy) * (size_t)img->width + x0 + dx];
-                t->rgb8[((size_t)y * w + x) * 3 + c] = image_srgb8(&srgb,
-                                                                   sum / (down * down) * scale);
+                v[c] = sum / (down * down) * scale;
             }
+            image_tonemap_rgb(look->tonemap, v, d);
+            for (int c = 0; c < 3; c++)
+                t->rgb8[((size_t)y * w + x) * 3 + c] = image_srgb8(&srgb, d[c]);
         }
     return true;
 }
 
 bool plot_sheet_add(struct plot_sheet *sheet, const struct stats_image *img, uint32_t spp,
-                    double psnr_db, enum stats_error_source source, float exposure,
+                    double psnr_db, enum stats_error_source source, const struct image_look *look,
                     struct mcpt_error *err)
 {
     if (sheet->n_thumbs == sheet->cap_thumbs) {
@@ -572,7 +581,7 @@ bool plot_sheet_add(struct plot_sheet *sheet, const struct stats_image *img, uin
     }
     struct plot_thumb *t = &sheet->thumbs[sheet->n_thumbs];
     *t = (struct plot_thumb){.spp = spp, .psnr_db = psnr_db, .source = source};
-    if (!make_thumb(img, exposure, t))
+    if (!make_thumb(img, look, t))
         goto oom;
     sheet->n_thumbs++;
     return true;
@@ -595,7 +604,7 @@ bool plot_write_contact_sheet(const char *path, const struct plot_sheet *c, stru
         mcpt_error_runtime(err, path, "expected snapshots for the contact sheet, got none");
         return false;
     }
-    const int scale = 2, margin = 8, label_h = 2 * (PLOT_FONT_H + 3) * scale;
+    const int scale = 2, margin = 8, label_h = 3 * (PLOT_FONT_H + 3) * scale;
     int tile_w = 0, tile_h = 0;
     for (size_t i = 0; i < c->n_thumbs; i++) {
         tile_w = c->thumbs[i].width > tile_w ? c->thumbs[i].width : tile_w;
@@ -634,6 +643,11 @@ bool plot_write_contact_sheet(const char *path, const struct plot_sheet *c, stru
             snprintf(text, sizeof text, "%.1f dB%s", t->psnr_db,
                      t->source == STATS_ERR_OWN_VARIANCE ? " est" : "");
         plot_draw_text(rgb8, width, height, x0, ty + (PLOT_FONT_H + 3) * scale, scale, text, WHITE);
+        /* the PSNR is this one seed's, while the summary's table averages over the seeds */
+        snprintf(text, sizeof text, "seed %llu%s", (unsigned long long)c->seed,
+                 c->n_seeds > 1 ? " only" : "");
+        plot_draw_text(rgb8, width, height, x0, ty + 2 * (PLOT_FONT_H + 3) * scale, scale, text,
+                       WHITE);
     }
     bool ok = image_write_png_rgb8(path, width, height, rgb8, err);
     free(rgb8);

@@ -6,6 +6,7 @@
 #define MCPT_PLOT_H
 
 #include "film.h"
+#include "image.h"
 #include "stats.h"
 
 /* ---- the convergence plot ---- */
@@ -32,13 +33,16 @@ struct plot_sheet {
     struct plot_thumb *thumbs;
     size_t n_thumbs;
     size_t cap_thumbs;
+    uint64_t seed;    /* the one seed whose snapshots these are (each tile says "seed S") */
+    uint32_t n_seeds; /* seeds of the run: > 1 labels the PSNR "seed S only", since the
+                         summary table gives the mean over all of them */
 };
 
-/* Adds a thumbnail of img (its rgb planes times 2^exposure, box-filtered down or repeated up
- * by a whole factor to about 160 pixels on its longer side) labelled with spp, psnr_db and
- * source.  False with *err (runtime) when out of memory. */
+/* Adds a thumbnail of img (its rgb planes box-filtered down or repeated up by a whole factor to
+ * about 160 pixels on its longer side, shown as look says: exposure, tone curve, sRGB)
+ * labelled with spp, psnr_db and source.  False with *err (runtime) when out of memory. */
 bool plot_sheet_add(struct plot_sheet *sheet, const struct stats_image *img, uint32_t spp,
-                    double psnr_db, enum stats_error_source source, float exposure,
+                    double psnr_db, enum stats_error_source source, const struct image_look *look,
                     struct mcpt_error *err);
 void plot_sheet_free(struct plot_sheet *sheet);
 

@@ -11,7 +11,9 @@
 
 #include <assert.h>
 #include <errno.h>
+#include <float.h>
 #include <stdlib.h>
+#include <unistd.h>
 
 /* A small scene in the grammar this file reads:
  *
@@ -31,9 +33,20 @@
  */
 
 #define SCENE_MAX_LINE_BYTES 4096 /* longest accepted line, bytes, without its line ending */
+#define SCENE_READ_BYTES 65536    /* bytes read from the file at a time */
 #define MAX_PARAMS 20             /* most distinct parameters any statement accepts */
 #define SHOW_BYTES 40             /* longest piece of user text quoted in a message, bytes */
-#define PARALLEL_SIN 1e-6         /* |sin angle| below which two directions count as parallel */
+#define SHOW_OUT_BYTES (4 * SHOW_BYTES + 4) /* show()'s output: every byte as \xNN, "..." */
+#define PARALLEL_SIN 1e-6 /* |sin angle| below which two directions count as parallel */
+/* Largest |coordinate| of any point of the scene (scene units).  Two such points differ by at
+ * most 2e18 per component, so a squared distance, or the area two such differences span, is at
+ * most 1.2e37: finite in single precision (largest 3.4e38), with room for the products of the
+ * ray-triangle test.  The Cornell box scaled by 1e15 reaches 4e15. */
+#define SCENE_MAX_COORD 1e18
+#define COORD_WHY "squared distances and areas must stay finite in single precision"
+#define UNDERFLOW_WHY                                                                              \
+    " (it rounds to 0 in single precision, whose smallest positive number is "                     \
+    "1.4e-45)"
 
 /* ---- the statement table ---------------------------------------------------------------- */
 
@@ -62,13 +75,15 @@ enum value_range {
     RANGE_NONNEG,   /* every component >= 0 */
     RANGE_UNIT,     /* every component in [0, 1] */
     RANGE_NONZERO,  /* VAL_VEC3: not the zero vector; VAL_SCALE: no zero component */
+    RANGE_POINT,    /* VAL_VEC3: a point, every |component| <= SCENE_MAX_COORD */
     RANGE_FOV,      /* (0, 180) degrees */
     RANGE_FILM,     /* 1..65535 pixels */
     RANGE_SPP,      /* 1..4294967295 */
     RANGE_1K,       /* 1..1024 */
 };
 
-#define ALL_TYPES 0xffu /* allowed_mask / required_mask bit t stands for type t; bit 0 when the
+#define ALL_TYPES                                                                                  \
+    0xffu /* allowed_mask / required_mask bit t stands for type t; bit 0 when the
                            statement has no 'type' parameter */
 
 struct param_spec {
@@ -95,9 +110,9 @@ enum stmt_kind {
 
 struct stmt_spec {
     const char *keyword;
-    bool is_once;                          /* may appear at most once */
-    const char *types[8];                  /* words of the 'type' parameter; none: no 'type' */
-    struct param_spec params[MAX_PARAMS];  /* in the order the reference lists them */
+    bool is_once;                         /* may appear at most once */
+    const char *types[8];                 /* words of the 'type' parameter; none: no 'type' */
+    struct param_spec params[MAX_PARAMS]; /* in the order the reference lists them */
 };
 
 /* type bits: material */
@@ -114,92 +129,123 @@ struct stmt_spec {
 #define T_GRADIENT 2u
 
 static const struct stmt_spec stmt_specs[STMT_COUNT] = {
-    [STMT_CAMERA] = {"camera", true, {NULL}, {
-        {"eye", VAL_VEC3, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"look-at", VAL_VEC3, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"up", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
-        {"fov", VAL_NUMBER, RANGE_FOV, ALL_TYPES, ALL_TYPES},
-        {"aperture", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
-        {"focus-dist", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
-    }},
-    [STMT_FILM] = {"film", true, {NULL}, {
-        {"width", VAL_INT, RANGE_FILM, ALL_TYPES, ALL_TYPES},
-        {"height", VAL_INT, RANGE_FILM, ALL_TYPES, ALL_TYPES},
-    }},
-    [STMT_RENDER] = {"render", true, {NULL}, {
-        {"spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
-        {"max-depth", VAL_DEPTH, RANGE_ANY, ALL_TYPES, 0},
-        {"sampler", VAL_SAMPLER, RANGE_ANY, ALL_TYPES, 0},
-        {"adaptive", VAL_BOOL, RANGE_ANY, ALL_TYPES, 0},
-        {"tolerance", VAL_NUMBER, RANGE_POSITIVE, ALL_TYPES, 0},
-        {"adaptive-floor", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
-        {"batch", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
-        {"min-spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
-        {"max-spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
-        {"direct", VAL_DIRECT, RANGE_ANY, ALL_TYPES, 0},
-        {"light-samples", VAL_INT, RANGE_1K, ALL_TYPES, 0},
-        {"split", VAL_SPLIT, RANGE_ANY, ALL_TYPES, 0},
-        {"rr", VAL_RR, RANGE_ANY, ALL_TYPES, 0},
-        {"rr-depth", VAL_INT, RANGE_1K, ALL_TYPES, 0},
-    }},
-    [STMT_MATERIAL] = {"material", false, {"diffuse", "mirror", "dielectric", "diffuse-uniform",
-                                           "conductor", "plastic", "unity", NULL}, {
-        {"name", VAL_NAME, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"type", VAL_TYPE, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"albedo", VAL_VEC3, RANGE_UNIT, T_ALBEDO, T_ALBEDO},
-        {"specular", VAL_VEC3, RANGE_UNIT, T_MIRROR | T_DIELECTRIC | T_CONDUCTOR | T_UNITY, 0},
-        {"ior", VAL_NUMBER, RANGE_POSITIVE, T_DIELECTRIC | T_UNITY, 0},
-        {"emission", VAL_VEC3, RANGE_NONNEG, ALL_TYPES, 0},
-        {"two-sided", VAL_BOOL, RANGE_ANY, ALL_TYPES, 0},
-        {"roughness", VAL_NUMBER, RANGE_UNIT, T_CONDUCTOR | T_PLASTIC, 0},
-        {"metallic", VAL_NUMBER, RANGE_UNIT, T_PLASTIC, 0},
-        {"reflectance", VAL_NUMBER, RANGE_UNIT, T_PLASTIC, 0},
-        {"smoothness", VAL_NUMBER, RANGE_UNIT, T_UNITY, 0},
-        {"specular-prob", VAL_NUMBER, RANGE_UNIT, T_UNITY, 0},
-        {"glass", VAL_BOOL, RANGE_ANY, T_UNITY, 0},
-        {"checker", VAL_CHECKER, RANGE_UNIT, T_ALBEDO, 0},
-        {"checker-scale", VAL_NUMBER, RANGE_POSITIVE, T_ALBEDO, 0},
-        {"checker-uv", VAL_BOOL, RANGE_ANY, T_ALBEDO, 0},
-    }},
-    [STMT_MESH] = {"mesh", false, {NULL}, {
-        {"file", VAL_PATH, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, 0},
-        {"translate", VAL_VEC3, RANGE_ANY, ALL_TYPES, 0},
-        {"rotate", VAL_ROTATION, RANGE_ANY, ALL_TYPES, 0},
-        {"scale", VAL_SCALE, RANGE_NONZERO, ALL_TYPES, 0},
-    }},
-    [STMT_SPHERE] = {"sphere", false, {NULL}, {
-        {"center", VAL_VEC3, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"radius", VAL_NUMBER, RANGE_POSITIVE, ALL_TYPES, ALL_TYPES},
-        {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"translate", VAL_VEC3, RANGE_ANY, ALL_TYPES, 0},
-        {"scale", VAL_SCALE, RANGE_NONZERO, ALL_TYPES, 0},
-    }},
-    [STMT_QUAD] = {"quad", false, {NULL}, {
-        {"corner", VAL_VEC3, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"edge1", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
-        {"edge2", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
-        {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"translate", VAL_VEC3, RANGE_ANY, ALL_TYPES, 0},
-        {"rotate", VAL_ROTATION, RANGE_ANY, ALL_TYPES, 0},
-        {"scale", VAL_SCALE, RANGE_NONZERO, ALL_TYPES, 0},
-    }},
-    [STMT_PLANE] = {"plane", false, {NULL}, {
-        {"point", VAL_VEC3, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"normal", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
-        {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-    }},
-    [STMT_LIGHT] = {"light", false, {"point", NULL}, {
-        {"type", VAL_TYPE, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"position", VAL_VEC3, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"intensity", VAL_VEC3, RANGE_NONNEG, ALL_TYPES, ALL_TYPES},
-    }},
-    [STMT_SKY] = {"sky", true, {"constant", "gradient", NULL}, {
-        {"type", VAL_TYPE, RANGE_ANY, ALL_TYPES, ALL_TYPES},
-        {"radiance", VAL_VEC3, RANGE_NONNEG, T_CONSTANT, T_CONSTANT},
-        {"horizon", VAL_VEC3, RANGE_NONNEG, T_GRADIENT, T_GRADIENT},
-        {"zenith", VAL_VEC3, RANGE_NONNEG, T_GRADIENT, T_GRADIENT},
-    }},
+    [STMT_CAMERA] = {"camera",
+                     true,
+                     {NULL},
+                     {
+                         {"eye", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
+                         {"look-at", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
+                         {"up", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
+                         {"fov", VAL_NUMBER, RANGE_FOV, ALL_TYPES, ALL_TYPES},
+                         {"aperture", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
+                         {"focus-dist", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
+                     }},
+    [STMT_FILM] = {"film",
+                   true,
+                   {NULL},
+                   {
+                       {"width", VAL_INT, RANGE_FILM, ALL_TYPES, ALL_TYPES},
+                       {"height", VAL_INT, RANGE_FILM, ALL_TYPES, ALL_TYPES},
+                   }},
+    [STMT_RENDER] = {"render",
+                     true,
+                     {NULL},
+                     {
+                         {"spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
+                         {"max-depth", VAL_DEPTH, RANGE_ANY, ALL_TYPES, 0},
+                         {"sampler", VAL_SAMPLER, RANGE_ANY, ALL_TYPES, 0},
+                         {"adaptive", VAL_BOOL, RANGE_ANY, ALL_TYPES, 0},
+                         {"tolerance", VAL_NUMBER, RANGE_POSITIVE, ALL_TYPES, 0},
+                         {"adaptive-floor", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
+                         {"batch", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
+                         {"min-spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
+                         {"max-spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
+                         {"direct", VAL_DIRECT, RANGE_ANY, ALL_TYPES, 0},
+                         {"light-samples", VAL_INT, RANGE_1K, ALL_TYPES, 0},
+                         {"split", VAL_SPLIT, RANGE_ANY, ALL_TYPES, 0},
+                         {"rr", VAL_RR, RANGE_ANY, ALL_TYPES, 0},
+                         {"rr-depth", VAL_INT, RANGE_1K, ALL_TYPES, 0},
+                     }},
+    [STMT_MATERIAL] = {"material",
+                       false,
+                       {"diffuse", "mirror", "dielectric", "diffuse-uniform", "conductor",
+                        "plastic", "unity", NULL},
+                       {
+                           {"name", VAL_NAME, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+                           {"type", VAL_TYPE, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+                           {"albedo", VAL_VEC3, RANGE_UNIT, T_ALBEDO, T_ALBEDO},
+                           {"specular", VAL_VEC3, RANGE_UNIT,
+                            T_MIRROR | T_DIELECTRIC | T_CONDUCTOR | T_UNITY, 0},
+                           {"ior", VAL_NUMBER, RANGE_POSITIVE, T_DIELECTRIC | T_UNITY, 0},
+                           {"emission", VAL_VEC3, RANGE_NONNEG, ALL_TYPES, 0},
+                           {"two-sided", VAL_BOOL, RANGE_ANY, ALL_TYPES, 0},
+                           {"roughness", VAL_NUMBER, RANGE_UNIT, T_CONDUCTOR | T_PLASTIC, 0},
+                           {"metallic", VAL_NUMBER, RANGE_UNIT, T_PLASTIC, 0},
+                           {"reflectance", VAL_NUMBER, RANGE_UNIT, T_PLASTIC, 0},
+                           {"smoothness", VAL_NUMBER, RANGE_UNIT, T_UNITY, 0},
+                           {"specular-prob", VAL_NUMBER, RANGE_UNIT, T_UNITY, 0},
+                           {"glass", VAL_BOOL, RANGE_ANY, T_UNITY, 0},
+                           {"checker", VAL_CHECKER, RANGE_UNIT, T_ALBEDO, 0},
+                           {"checker-scale", VAL_NUMBER, RANGE_POSITIVE, T_ALBEDO, 0},
+                           {"checker-uv", VAL_BOOL, RANGE_ANY, T_ALBEDO, 0},
+                       }},
+    [STMT_MESH] = {"mesh",
+                   false,
+                   {NULL},
+                   {
+                       {"file", VAL_PATH, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+                       {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, 0},
+                       {"translate", VAL_VEC3, RANGE_ANY, ALL_TYPES, 0},
+                       {"rotate", VAL_ROTATION, RANGE_ANY, ALL_TYPES, 0},
+                       {"scale", VAL_SCALE, RANGE_NONZERO, ALL_TYPES, 0},
+                   }},
+    [STMT_SPHERE] = {"sphere",
+                     false,
+                     {NULL},
+                     {
+                         {"center", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
+                         {"radius", VAL_NUMBER, RANGE_POSITIVE, ALL_TYPES, ALL_TYPES},
+                         {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+                         {"translate", VAL_VEC3, RANGE_ANY, ALL_TYPES, 0},
+                         {"scale", VAL_SCALE, RANGE_NONZERO, ALL_TYPES, 0},
+                     }},
+    [STMT_QUAD] = {"quad",
+                   false,
+                   {NULL},
+                   {
+                       {"corner", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
+                       {"edge1", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
+                       {"edge2", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
+                       {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+                       {"translate", VAL_VEC3, RANGE_ANY, ALL_TYPES, 0},
+                       {"rotate", VAL_ROTATION, RANGE_ANY, ALL_TYPES, 0},
+                       {"scale", VAL_SCALE, RANGE_NONZERO, ALL_TYPES, 0},
+                   }},
+    [STMT_PLANE] = {"plane",
+                    false,
+                    {NULL},
+                    {
+                        {"point", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
+                        {"normal", VAL_VEC3, RANGE_NONZERO, ALL_TYPES, ALL_TYPES},
+                        {"material", VAL_MATERIAL, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+                    }},
+    [STMT_LIGHT] = {"light",
+                    false,
+                    {"point", NULL},
+                    {
+                        {"type", VAL_TYPE, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+                        {"position", VAL_VEC3, RANGE_POINT, ALL_TYPES, ALL_TYPES},
+                        {"intensity", VAL_VEC3, RANGE_NONNEG, ALL_TYPES, ALL_TYPES},
+                    }},
+    [STMT_SKY] = {"sky",
+                  true,
+                  {"constant", "gradient", NULL},
+                  {
+                      {"type", VAL_TYPE, RANGE_ANY, ALL_TYPES, ALL_TYPES},
+                      {"radiance", VAL_VEC3, RANGE_NONNEG, T_CONSTANT, T_CONSTANT},
+                      {"horizon", VAL_VEC3, RANGE_NONNEG, T_GRADIENT, T_GRADIENT},
+                      {"zenith", VAL_VEC3, RANGE_NONNEG, T_GRADIENT, T_GRADIENT},
+                  }},
 };
 
 /* One parameter of the statement being read; key == NULL when the line does not give it. */
@@ -208,30 +254,38 @@ struct param {
     const char *text; /* the value as written */
     int key_col;      /* 1-based byte columns */
     int val_col;
-    float f[4];       /* the numbers of VAL_NUMBER, VAL_VEC3, VAL_ROTATION, VAL_SCALE */
-    int n_f;          /* how many numbers were written */
-    uint32_t u;       /* VAL_INT, VAL_DEPTH; type index; material index of VAL_MATERIAL */
-    bool b;           /* VAL_BOOL */
+    float f[4];        /* the numbers of VAL_NUMBER, VAL_VEC3, VAL_ROTATION, VAL_SCALE */
+    int n_f;           /* how many numbers were written */
+    bool is_underflow; /* a number written nonzero was read as 0 (below 1.4e-45) */
+    uint32_t u;        /* VAL_INT, VAL_DEPTH; type index; material index of VAL_MATERIAL */
+    bool b;            /* VAL_BOOL */
 };
 
 struct stmt {
     enum stmt_kind kind;
     const struct stmt_spec *spec;
     int kw_col;
-    uint32_t type_idx;               /* index into spec->types; 0 without types */
-    struct param p[MAX_PARAMS];      /* parallel to spec->params */
+    uint32_t type_idx;          /* index into spec->types; 0 without types */
+    struct param p[MAX_PARAMS]; /* parallel to spec->params */
 };
 
 struct parser {
-    const char *path;  /* the scene path as given, for messages */
-    char *dir;         /* the scene file's folder with its trailing '/', or "" */
+    const char *path; /* the scene path as given, for messages */
+    char *dir;        /* the scene file's folder with its trailing '/', or "" */
     struct scene *scene;
     struct mcpt_error *err;
-    int line;          /* 1-based line being read */
-    int seen_line[STMT_COUNT];      /* line of the first statement of each kind, 0 = none */
+    int line; /* 1-based line being read */
+    int fd;   /* the scene file */
+    char *in; /* SCENE_READ_BYTES read from it; in_pos..in_len not yet used */
+    size_t in_pos, in_len;
+    bool at_eof;
+    int pending[3]; /* bytes read ahead and given back (a BOM that was not one) */
+    int n_pending;
+    int seen_line[STMT_COUNT]; /* line of the first statement of each kind, 0 = none */
     int *mat_def_line; /* per material: the scene-file line defining it, 0 = not referable */
-    int64_t default_mat_idx;        /* the meshes' "default" material, -1 until needed */
-    struct light *points;           /* point lights, in file order */
+    struct obj_names mat_names; /* referable material name -> index into materials */
+    int64_t default_mat_idx;    /* the meshes' "default" material, -1 until needed */
+    struct light *points;       /* point lights, in file order */
     uint32_t n_points;
     uint32_t cap_materials, cap_def_lines, cap_positions, cap_normals, cap_uvs, cap_tris;
     uint32_t cap_spheres, cap_quads, cap_planes, cap_points;
@@ -251,21 +305,69 @@ static bool fail(struct parser *ps, int col, const char *fmt, ...)
     return false;
 }
 
-/* User text for a message, cut to SHOW_BYTES with "..." so a long word cannot crowd out the
- * rest of the message.  out must hold SHOW_BYTES + 4 bytes. */
+/* Length of the valid UTF-8 sequence at s (1 to 4 bytes) that is not a control character,
+ * or 0 (Unicode 15, table 3-7, "Well-Formed UTF-8 Byte Sequences"). */
+static size_t utf8_char_bytes(const unsigned char *s)
+{
+    if (s[0] >= 0x20 && s[0] < 0x7f)
+        return 1;
+    unsigned char lo = 0x80, hi = 0xbf;
+    size_t n;
+    if (s[0] == 0xc2)
+        lo = 0xa0, n = 2; /* C2 80..9F are the C1 controls */
+    else if (s[0] > 0xc2 && s[0] <= 0xdf)
+        n = 2;
+    else if (s[0] >= 0xe0 && s[0] <= 0xef)
+        n = 3, lo = s[0] == 0xe0 ? 0xa0 : 0x80, hi = s[0] == 0xed ? 0x9f : 0xbf;
+    else if (s[0] >= 0xf0 && s[0] <= 0xf4)
+        n = 4, lo = s[0] == 0xf0 ? 0x90 : 0x80, hi = s[0] == 0xf4 ? 0x8f : 0xbf;
+    else
+        return 0;
+    if (s[1] < lo || s[1] > hi)
+        return 0;
+    for (size_t i = 2; i < n; i++)
+        if (s[i] < 0x80 || s[i] > 0xbf)
+            return 0;
+    return n;
+}
+
+/* Out of memory: a runtime error (exit status 1), reported at the current line. */
+static bool fail_oom(struct parser *ps, int col)
+{
+    fail(ps, col, "out of memory");
+    ps->err->kind = MCPT_ERROR_RUNTIME;
+    return false;
+}
+
+/* User text for a message: valid UTF-8 as it is, any other byte as \xNN (so a message is
+ * always valid UTF-8 without control bytes), cut after SHOW_BYTES input bytes with "..." so a
+ * long word cannot crowd out the rest of the message.  out must hold SHOW_OUT_BYTES. */
 static const char *show(const char *s, char *out)
 {
-    size_t n = strlen(s);
-    if (n <= SHOW_BYTES)
-        return s;
-    memcpy(out, s, SHOW_BYTES);
-    memcpy(out + SHOW_BYTES, "...", 4);
+    const unsigned char *u = (const unsigned char *)s;
+    size_t n = 0, i = 0;
+    while (u[i]) {
+        size_t k = utf8_char_bytes(u + i);
+        if (i + (k ? k : 1) > SHOW_BYTES) {
+            memcpy(out + n, "...", 3);
+            n += 3;
+            break;
+        }
+        if (k) {
+            memcpy(out + n, u + i, k);
+            n += k;
+            i += k;
+        } else {
+            snprintf(out + n, 5, "\\x%02x", u[i++]);
+            n += 4;
+        }
+    }
+    out[n] = '\0';
     return out;
 }
 
 /* "a, b, c": the statement keywords, or the parameters a statement of type bit type_bit takes. */
-static void list_words(char *out, size_t out_bytes, const struct stmt_spec *spec,
-                       unsigned type_bit)
+static void list_words(char *out, size_t out_bytes, const struct stmt_spec *spec, unsigned type_bit)
 {
     size_t used = 0;
     out[0] = '\0';
@@ -283,6 +385,16 @@ static void list_words(char *out, size_t out_bytes, const struct stmt_spec *spec
             return;
         used += (size_t)n;
     }
+}
+
+/* Keeps a warning line for main to print (NULL: counts one that was not kept). */
+static void add_warning(struct parser *ps, const char *line)
+{
+    struct scene *sc = ps->scene;
+    if (line && sc->n_warnings < SCENE_MAX_WARNINGS)
+        snprintf(sc->warnings[sc->n_warnings], sizeof sc->warnings[0], "%s", line);
+    if (sc->n_warnings < UINT32_MAX)
+        sc->n_warnings++;
 }
 
 /* ---- memory ------------------------------------------------------------------------------- */
@@ -305,8 +417,7 @@ static void *grow(struct parser *ps, void *arr, uint32_t *cap, uint64_t need, si
         fail(ps, 0, "expected at most %u elements of %zu bytes, got %llu", UINT32_MAX, elem_bytes,
              (unsigned long long)need);
     else if (!(p = realloc(arr, (size_t)new_cap * elem_bytes)))
-        fail(ps, 0, "expected %llu bytes of memory, got an allocation failure",
-             (unsigned long long)new_cap * elem_bytes);
+        fail_oom(ps, 0);
     if (!p) {
         free(arr);
         *cap = 0;
@@ -317,7 +428,7 @@ static void *grow(struct parser *ps, void *arr, uint32_t *cap, uint64_t need, si
 }
 
 /* Grows the array arr (an lvalue) of capacity cap; false (array freed, error filled) on failure. */
-#define RESERVE(ps, arr, cap, need)                                                              \
+#define RESERVE(ps, arr, cap, need)                                                                \
     (((arr) = grow((ps), (arr), &(cap), (need), sizeof *(arr))) != NULL)
 
 /* Appends m to the material table; def_line > 0 makes it referable by name. */
@@ -328,6 +439,8 @@ static bool add_material(struct parser *ps, const struct material *m, int def_li
     if (!RESERVE(ps, sc->materials, ps->cap_materials, need) ||
         !RESERVE(ps, ps->mat_def_line, ps->cap_def_lines, need))
         return false;
+    if (def_line > 0 && !obj_names_add(&ps->mat_names, m->name, strlen(m->name), sc->n_materials))
+        return fail_oom(ps, 0);
     ps->mat_def_line[sc->n_materials] = def_line;
     sc->materials[sc->n_materials++] = *m;
     return true;
@@ -416,15 +529,17 @@ static bool parse_integer(const char *s, uint64_t *magnitude, bool *is_negative)
  * materials can never be written in a scene file. */
 static bool parse_name(struct parser *ps, const struct param *p)
 {
-    char buf[SHOW_BYTES + 4];
+    char buf[SHOW_OUT_BYTES];
     size_t n = strlen(p->text);
     for (size_t i = 0; i < n; i++) {
         char c = p->text[i];
         bool ok = is_digit(c) || (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || c == '_' ||
                   c == '-' || c == '.';
         if (!ok)
-            return fail(ps, p->val_col, "expected a material name of letters, digits, '_', '-' "
-                                        "and '.', got '%s'", show(p->text, buf));
+            return fail(ps, p->val_col,
+                        "expected a material name of letters, digits, '_', '-' "
+                        "and '.', got '%s'",
+                        show(p->text, buf));
     }
     if (n >= sizeof ps->scene->materials[0].name)
         return fail(ps, p->val_col, "expected a material name of at most %zu bytes, got %zu",
@@ -432,19 +547,17 @@ static bool parse_name(struct parser *ps, const struct param *p)
     return true;
 }
 
-/* The referable material named name, or -1. */
-static int64_t find_material(const struct parser *ps, const char *name)
+/* The referable material named name, or -1: a hash lookup, so n materials and n references
+ * cost O(n), not O(n^2). */
+static int64_t find_material(struct parser *ps, const char *name)
 {
-    for (uint32_t i = 0; i < ps->scene->n_materials; i++)
-        if (ps->mat_def_line[i] && strcmp(ps->scene->materials[i].name, name) == 0)
-            return i;
-    return -1;
+    return obj_names_find(&ps->mat_names, name, strlen(name));
 }
 
 /* Checks the numbers of p against its range. */
 static bool check_range(struct parser *ps, const struct param_spec *sp, const struct param *p)
 {
-    char buf[SHOW_BYTES + 4];
+    char buf[SHOW_OUT_BYTES];
     const char *v = show(p->text, buf);
     bool all_nonneg = true, all_unit = true, any_zero = false, all_zero = true;
     for (int i = 0; i < p->n_f; i++) {
@@ -454,10 +567,11 @@ static bool check_range(struct parser *ps, const struct param_spec *sp, const st
         all_zero &= p->f[i] == 0.0f;
     }
     bool is_vector = sp->kind != VAL_NUMBER;
+    const char *why_zero = p->is_underflow ? UNDERFLOW_WHY : "";
     switch (sp->range) {
     case RANGE_POSITIVE:
         if (!(p->f[0] > 0.0f))
-            return fail(ps, p->val_col, "expected '%s' > 0, got %s", sp->key, v);
+            return fail(ps, p->val_col, "expected '%s' > 0, got %s%s", sp->key, v, why_zero);
         break;
     case RANGE_NONNEG:
         if (!all_nonneg)
@@ -471,9 +585,17 @@ static bool check_range(struct parser *ps, const struct param_spec *sp, const st
         break;
     case RANGE_NONZERO:
         if (sp->kind == VAL_SCALE && any_zero)
-            return fail(ps, p->val_col, "expected nonzero '%s' components, got %s", sp->key, v);
+            return fail(ps, p->val_col, "expected nonzero '%s' components, got %s%s", sp->key, v,
+                        why_zero);
         if (sp->kind == VAL_VEC3 && all_zero)
-            return fail(ps, p->val_col, "expected a nonzero '%s', got %s", sp->key, v);
+            return fail(ps, p->val_col, "expected a nonzero '%s', got %s%s", sp->key, v, why_zero);
+        break;
+    case RANGE_POINT:
+        for (int i = 0; i < 3; i++)
+            if (!(fabsf(p->f[i]) <= SCENE_MAX_COORD))
+                return fail(ps, p->val_col,
+                            "expected '%s' components in [-1e18, 1e18] (" COORD_WHY "), got %s",
+                            sp->key, v);
         break;
     case RANGE_FOV:
         if (!(p->f[0] > 0.0f && p->f[0] < 180.0f))
@@ -488,7 +610,7 @@ static bool check_range(struct parser *ps, const struct param_spec *sp, const st
 /* Reads p->text as the numbers of a VAL_NUMBER, VAL_VEC3, VAL_ROTATION or VAL_SCALE. */
 static bool parse_numbers(struct parser *ps, const struct param_spec *sp, struct param *p)
 {
-    char buf[SHOW_BYTES + 4];
+    char buf[SHOW_OUT_BYTES];
     const char *v = show(p->text, buf);
     const char *what = sp->kind == VAL_NUMBER     ? "a number"
                        : sp->kind == VAL_VEC3     ? "3 comma-separated numbers"
@@ -510,6 +632,9 @@ static bool parse_numbers(struct parser *ps, const struct param_spec *sp, struct
         const char *end = strchr(s, ',');
         size_t len = end ? (size_t)(end - s) : strlen(s);
         enum number_status st = parse_number(s, len, &p->f[i]);
+        if (st == NUMBER_OK && p->f[i] == 0.0f) /* a nonzero digit before any exponent? */
+            for (size_t k = 0; k < len && s[k] != 'e' && s[k] != 'E'; k++)
+                p->is_underflow |= s[k] >= '1' && s[k] <= '9';
         if (st == NUMBER_SYNTAX)
             return fail(ps, p->val_col, "expected %s for '%s', got '%s'", what, sp->key, v);
         if (st == NUMBER_NONFINITE)
@@ -521,14 +646,15 @@ static bool parse_numbers(struct parser *ps, const struct param_spec *sp, struct
     if (sp->kind == VAL_SCALE && n == 1)
         p->f[1] = p->f[2] = p->f[0];
     if (sp->kind == VAL_ROTATION && p->f[0] == 0.0f && p->f[1] == 0.0f && p->f[2] == 0.0f)
-        return fail(ps, p->val_col, "expected a nonzero axis for '%s', got %s", sp->key, v);
+        return fail(ps, p->val_col, "expected a nonzero axis for '%s', got %s%s", sp->key, v,
+                    p->is_underflow ? UNDERFLOW_WHY : "");
     return check_range(ps, sp, p);
 }
 
 /* Reads and checks the value of parameter p (anything but the type, read earlier). */
 static bool parse_value(struct parser *ps, const struct param_spec *sp, struct param *p)
 {
-    char buf[SHOW_BYTES + 4];
+    char buf[SHOW_OUT_BYTES];
     const char *v = show(p->text, buf);
     uint64_t u;
     bool is_negative;
@@ -554,8 +680,8 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
             return true;
         }
         if (!parse_integer(p->text, &u, &is_negative))
-            return fail(ps, p->val_col, "expected an integer or 'inf' for '%s', got '%s'",
-                        sp->key, v);
+            return fail(ps, p->val_col, "expected an integer or 'inf' for '%s', got '%s'", sp->key,
+                        v);
         if (is_negative || u > UINT32_MAX)
             return fail(ps, p->val_col, "expected '%s' in 0..%u or 'inf', got %s", sp->key,
                         UINT32_MAX, v);
@@ -571,8 +697,10 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
             return false;
         int64_t idx = find_material(ps, p->text);
         if (idx >= 0)
-            return fail(ps, p->val_col, "expected a new material name, got '%s' (defined on "
-                                        "line %d)", v, ps->mat_def_line[idx]);
+            return fail(ps, p->val_col,
+                        "expected a new material name, got '%s' (defined on "
+                        "line %d)",
+                        v, ps->mat_def_line[idx]);
         return true;
     }
     case VAL_MATERIAL: {
@@ -580,24 +708,30 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
             return false;
         int64_t idx = find_material(ps, p->text);
         if (idx < 0)
-            return fail(ps, p->val_col, "expected a material defined on an earlier line, got "
-                                        "'%s'", v);
+            return fail(ps, p->val_col,
+                        "expected a material defined on an earlier line, got "
+                        "'%s'",
+                        v);
         p->u = (uint32_t)idx;
         return true;
     }
     case VAL_SAMPLER: {
         enum sampler_kind kind;
         if (!sample_sampler_parse(p->text, &kind))
-            return fail(ps, p->val_col, "expected independent, stratified or sobol for '%s', "
-                                        "got '%s'", sp->key, v);
+            return fail(ps, p->val_col,
+                        "expected independent, stratified or sobol for '%s', "
+                        "got '%s'",
+                        sp->key, v);
         p->u = (uint32_t)kind;
         return true;
     }
     case VAL_DIRECT: {
         enum render_direct direct;
         if (!scene_direct_parse(p->text, &direct))
-            return fail(ps, p->val_col, "expected mis, light, bsdf, cosine or hemisphere for "
-                                        "'%s', got '%s'", sp->key, v);
+            return fail(ps, p->val_col,
+                        "expected mis, light, bsdf, cosine or hemisphere for "
+                        "'%s', got '%s'",
+                        sp->key, v);
         p->u = (uint32_t)direct;
         return true;
     }
@@ -614,8 +748,10 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
         if (strcmp(p->text, "throughput") != 0 &&
             (parse_number(p->text, strlen(p->text), &prob) != NUMBER_OK ||
              !(prob > 0.0f && prob <= 1.0f)))
-            return fail(ps, p->val_col, "expected 'throughput' or a probability in (0, 1] for "
-                                        "'%s', got '%s'", sp->key, v);
+            return fail(ps, p->val_col,
+                        "expected 'throughput' or a probability in (0, 1] for "
+                        "'%s', got '%s'",
+                        sp->key, v);
         p->f[0] = prob;
         p->n_f = 1;
         return true;
@@ -630,8 +766,10 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
         for (const char *c = p->text; *c; c++)
             n_commas += *c == ',';
         if (n_commas != 2)
-            return fail(ps, p->val_col, "expected true, false or 3 comma-separated numbers for "
-                                        "'%s', got '%s'", sp->key, v);
+            return fail(ps, p->val_col,
+                        "expected true, false or 3 comma-separated numbers for "
+                        "'%s', got '%s'",
+                        sp->key, v);
         struct param_spec colour = *sp;
         colour.kind = VAL_VEC3;
         p->b = true;
@@ -646,19 +784,75 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
 
 /* ---- the line reader and tokenizer ---------------------------------------------------------- */
 
+/* The next byte of the scene file, -1 at its end, or -2 after a read error (error filled). */
+static int next_byte(struct parser *ps)
+{
+    if (ps->n_pending > 0)
+        return ps->pending[--ps->n_pending];
+    if (ps->in_pos == ps->in_len) {
+        if (ps->at_eof)
+            return -1;
+        ssize_t got;
+        do
+            got = read(ps->fd, ps->in, SCENE_READ_BYTES);
+        while (got < 0 && errno == EINTR);
+        if (got < 0) {
+            mcpt_error_runtime(ps->err, ps->path, "cannot read: %s", strerror(errno));
+            return -2;
+        }
+        if (got == 0) {
+            ps->at_eof = true;
+            return -1;
+        }
+        ps->in_pos = 0;
+        ps->in_len = (size_t)got;
+    }
+    return (unsigned char)ps->in[ps->in_pos++];
+}
+
+/* Gives byte c back to next_byte (at most 3, last in first out). */
+static void unread_byte(struct parser *ps, int c)
+{
+    assert(ps->n_pending < 3);
+    ps->pending[ps->n_pending++] = c;
+}
+
+/* At the start of the file: skips a UTF-8 byte order mark (EF BB BF, which editors on Windows
+ * write) and refuses UTF-16 (FF FE or FE FF).  Returns false with the error filled. */
+static bool skip_byte_order_mark(struct parser *ps)
+{
+    int b[3];
+    int n = 0;
+    while (n < 3 && (b[n] = next_byte(ps)) >= 0)
+        n++;
+    if (n < 3 && b[n] == -2)
+        return false;
+    if (n == 3 && b[0] == 0xef && b[1] == 0xbb && b[2] == 0xbf)
+        return true;
+    if (n >= 2 && ((b[0] == 0xff && b[1] == 0xfe) || (b[0] == 0xfe && b[1] == 0xff)))
+        return fail(ps, 1, "expected UTF-8 text, got UTF-16 (byte order mark 0x%02x 0x%02x)",
+                    (unsigned)b[0], (unsigned)b[1]);
+    while (n > 0)
+        unread_byte(ps, b[--n]);
+    return true;
+}
+
 /* Reads one line into buf (SCENE_MAX_LINE_BYTES + 1 bytes), without its "\n" or "\r\n", and
  * NUL-terminates it.  Returns 1 for a line, 0 at the end of the file, -1 on an error. */
-static int read_line(struct parser *ps, FILE *f, char *buf)
+static int read_line(struct parser *ps, char *buf)
 {
     size_t len = 0;
     bool got_any = false;
     int c;
-    while ((c = getc(f)) != EOF && c != '\n') {
+    while ((c = next_byte(ps)) >= 0 && c != '\n') {
         got_any = true;
         if (c == '\r') { /* CRLF (or a CR at the end of the file) ends the line */
-            int next = getc(f);
-            if (next == '\n' || next == EOF)
+            int next = next_byte(ps);
+            if (next == '\n' || next == -1)
                 break;
+            if (next == -2)
+                return -1;
+            unread_byte(ps, next);
         }
         bool is_text = c >= 0x20 ? c != 0x7f : c == '\t';
         if (!is_text) {
@@ -666,18 +860,17 @@ static int read_line(struct parser *ps, FILE *f, char *buf)
             return -1;
         }
         if (len == SCENE_MAX_LINE_BYTES) {
-            fail(ps, SCENE_MAX_LINE_BYTES + 1, "expected a line of at most %d bytes, got a "
-                                               "longer one", SCENE_MAX_LINE_BYTES);
+            fail(ps, SCENE_MAX_LINE_BYTES + 1,
+                 "expected a line of at most %d bytes, got a "
+                 "longer one",
+                 SCENE_MAX_LINE_BYTES);
             return -1;
         }
         buf[len++] = (char)c;
     }
-    if (ferror(f)) {
-        mcpt_error_set(ps->err, ps->path, 0, 0, "expected a readable file, got '%s'",
-                       strerror(errno));
+    if (c == -2)
         return -1;
-    }
-    if (c == EOF && !got_any)
+    if (c == -1 && !got_any)
         return 0;
     buf[len] = '\0';
     return 1;
@@ -763,16 +956,43 @@ static void xform_from(struct xform *xf, const struct stmt *st, int i_translate,
     xf->is_mirror = ((sc[0] < 0) ^ (sc[1] < 0) ^ (sc[2] < 0)) != 0; /* det L = sx sy sz */
 }
 
+/* r = M v + t (t may be NULL), in double. */
+static void mat3_apply_d(const double M[3][3], const double *t, vec3 v, double r[3])
+{
+    for (int i = 0; i < 3; i++)
+        r[i] = M[i][0] * v.x + M[i][1] * v.y + M[i][2] * v.z + (t ? t[i] : 0.0);
+}
+
+/* M v + t rounded once to float; a component beyond float range becomes +-infinity. */
 static vec3 mat3_apply(const double M[3][3], const double *t, vec3 v)
 {
     double r[3];
+    mat3_apply_d(M, t, v, r);
     for (int i = 0; i < 3; i++)
-        r[i] = M[i][0] * v.x + M[i][1] * v.y + M[i][2] * v.z + (t ? t[i] : 0.0);
+        if (!(fabs(r[i]) <= FLT_MAX))
+            r[i] = copysign(INFINITY, r[i]);
     return v3((float)r[0], (float)r[1], (float)r[2]);
 }
 
 static vec3 xform_point(const struct xform *xf, vec3 p) { return mat3_apply(xf->L, xf->t, p); }
 static vec3 xform_vector(const struct xform *xf, vec3 v) { return mat3_apply(xf->L, NULL, v); }
+
+/* xform_point and xform_vector before the rounding to float */
+static void xform_point_d(const struct xform *xf, vec3 p, double r[3])
+{
+    mat3_apply_d(xf->L, xf->t, p, r);
+}
+static void xform_vector_d(const struct xform *xf, vec3 v, double r[3])
+{
+    mat3_apply_d(xf->L, NULL, v, r);
+}
+
+/* Is every |component| of v, in double, at most SCENE_MAX_COORD? */
+static bool in_scene_range_d(const double v[3])
+{
+    return fabs(v[0]) <= SCENE_MAX_COORD && fabs(v[1]) <= SCENE_MAX_COORD &&
+           fabs(v[2]) <= SCENE_MAX_COORD;
+}
 
 /* Unit transformed normal; the zero vector when n is zero (or too small to normalise). */
 static vec3 xform_normal(const struct xform *xf, vec3 n)
@@ -829,9 +1049,12 @@ static bool is_parallel(const double a[3], const double b[3])
 
 static bool is_emissive(const struct material *m) { return v3_max_comp(m->Le) > 0.0f; }
 
+/* camera: the frame camera_init will build (camera_frame: the same function, so a loaded
+ * scene's camera always builds), a lens inside the scene, and a plane of focus the lens can
+ * tell apart from itself. */
 static bool do_camera(struct parser *ps, const struct stmt *st)
 {
-    char buf[SHOW_BYTES + 4];
+    char buf[SHOW_OUT_BYTES];
     struct camera_params *c = &ps->scene->camera;
     c->eye = get_vec3(st, "eye", v3_splat(0));
     c->look_at = get_vec3(st, "look-at", v3_splat(0));
@@ -839,17 +1062,61 @@ static bool do_camera(struct parser *ps, const struct stmt *st)
     c->fov_deg = get_number(st, "fov", 0);
     c->aperture = get_number(st, "aperture", 0.0f);
     c->focus_dist = get_number(st, "focus-dist", 0.0f);
+    const struct param *eye = get(st, "eye");
     const struct param *look_at = get(st, "look-at");
     const struct param *up = get(st, "up");
-    if (c->eye.x == c->look_at.x && c->eye.y == c->look_at.y && c->eye.z == c->look_at.z)
-        return fail(ps, look_at->val_col, "expected 'look-at' different from 'eye', got %s for "
-                                          "both", show(look_at->text, buf));
-    double dir[3] = {(double)c->look_at.x - c->eye.x, (double)c->look_at.y - c->eye.y,
-                     (double)c->look_at.z - c->eye.z};
-    double up_d[3] = {c->up.x, c->up.y, c->up.z};
-    if (is_parallel(dir, up_d))
+    const struct param *aperture = get(st, "aperture");
+    const struct param *focus = get(st, "focus-dist");
+    vec3 forward, right, up_unit;
+    float view_len = 0.0f;
+    switch (camera_frame(c, &forward, &right, &up_unit, &view_len)) {
+    case CAMERA_OK:
+        break;
+    case CAMERA_SAME_POINT:
+        return fail(ps, look_at->val_col,
+                    "expected 'look-at' different from 'eye', got %s for "
+                    "both%s",
+                    show(look_at->text, buf),
+                    strcmp(eye->text, look_at->text) != 0 ? " (the same point in single precision)"
+                                                          : "");
+    case CAMERA_UP_PARALLEL:
         return fail(ps, up->val_col, "expected 'up' not parallel to the view direction, got %s",
                     show(up->text, buf));
+    default: /* eye and look-at lie within SCENE_MAX_COORD and up is nonzero: unreachable */
+        return fail(ps, st->kw_col, "expected a camera frame, got none");
+    }
+    /* the lens and the plane of focus are places in the scene */
+    if (aperture->key && !(c->aperture <= SCENE_MAX_COORD))
+        return fail(ps, aperture->val_col,
+                    "expected 'aperture' <= 1e18 (the lens lies in the "
+                    "scene: " COORD_WHY "), got %s",
+                    show(aperture->text, buf));
+    if (focus->key && !(c->focus_dist <= SCENE_MAX_COORD))
+        return fail(ps, focus->val_col,
+                    "expected 'focus-dist' <= 1e18 (the plane of focus lies "
+                    "in the scene: " COORD_WHY "), got %s",
+                    show(focus->text, buf));
+    if (c->aperture > 0.0f) {
+        /* a lens ray aims at eye + focus_dist d from a lens point; both are rounded to a few
+         * ulps of the eye's coordinates and the aperture (2^-23 relative), so focus_dist must
+         * exceed those, with margin, or the aim point can round onto the lens point */
+        double m = fmax(fmax(fabs((double)c->eye.x), fabs((double)c->eye.y)),
+                        fmax(fabs((double)c->eye.z), (double)c->aperture));
+        double fd_min = ldexp(m, -20);
+        double fd = c->focus_dist > 0.0f ? c->focus_dist : view_len;
+        if (fd < fd_min && c->focus_dist > 0.0f)
+            return fail(ps, focus->val_col,
+                        "expected 'focus-dist' >= %g (2^-20 of the largest "
+                        "'eye' component or 'aperture': a plane of focus nearer the lens rounds "
+                        "onto it in single precision), got %s",
+                        fd_min, show(focus->text, buf));
+        if (fd < fd_min)
+            return fail(ps, look_at->val_col,
+                        "expected 'look-at' at least %g from 'eye' (the "
+                        "plane of focus when 'aperture' > 0 and no 'focus-dist' is given: 2^-20 "
+                        "of the largest 'eye' component or 'aperture'), got %g",
+                        fd_min, fd);
+    }
     return true;
 }
 
@@ -909,15 +1176,32 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
     const struct param *mat = get(st, "material");
     struct obj_mesh mesh = {0};
     bool ok = false;
-    char buf[SHOW_BYTES + 4];
+    char buf[SHOW_OUT_BYTES], buf2[SHOW_OUT_BYTES];
 
     char *full = resolve_path(ps->dir, file->text);
     if (!full) {
-        fail(ps, file->val_col, "expected memory for a path, got an allocation failure");
+        fail_oom(ps, file->val_col);
         goto done;
     }
-    if (!obj_load(full, &mesh, ps->err)) /* its message names the OBJ/MTL file and line */
+    /* a mesh that cannot be opened is an error of this line; what is inside is the OBJ's */
+    const char *not_regular = NULL;
+    int fd = obj_open_input(full, false, &not_regular);
+    if (fd < 0) {
+        char where[SHOW_OUT_BYTES + 8] = "";
+        if (strcmp(full, file->text) != 0)
+            snprintf(where, sizeof where, " (%s)", show(full, buf));
+        if (not_regular)
+            fail(ps, file->val_col, "expected a regular file for mesh '%s'%s, got %s",
+                 show(file->text, buf2), where, not_regular);
+        else
+            fail(ps, file->val_col, "cannot open mesh '%s'%s: %s", show(file->text, buf2), where,
+                 strerror(errno));
         goto done;
+    }
+    if (!obj_load_fd(fd, full, &mesh, ps->err)) /* its message names the OBJ/MTL file and line */
+        goto done;
+    for (uint32_t i = 0; i < mesh.n_warnings; i++)
+        add_warning(ps, i < OBJ_MAX_WARNINGS ? mesh.warnings[i] : NULL);
     if (mesh.n_tris == 0) {
         fail(ps, file->val_col, "expected at least one face in '%s', got none",
              show(file->text, buf));
@@ -926,9 +1210,10 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
     if ((uint64_t)sc->n_positions + mesh.n_positions > UINT32_MAX ||
         (uint64_t)sc->n_normals + mesh.n_normals > INT32_MAX ||
         (uint64_t)sc->n_uvs + mesh.n_uvs > INT32_MAX) {
-        fail(ps, file->val_col, "expected at most %u vertices and %d normals and uvs in the "
-                                "scene, got more with '%s'", UINT32_MAX, INT32_MAX,
-             show(file->text, buf));
+        fail(ps, file->val_col,
+             "expected at most %u vertices and %d normals and uvs in the "
+             "scene, got more with '%s'",
+             UINT32_MAX, INT32_MAX, show(file->text, buf));
         goto done;
     }
     if (!RESERVE(ps, sc->positions, ps->cap_positions,
@@ -953,8 +1238,10 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
         for (uint32_t i = 0; i < mesh.n_tris; i++)
             needs_default |= mesh.tris[i].mat_idx < 0;
         if (needs_default && ps->default_mat_idx < 0) {
-            struct material m = {.name = "default", .kind = MAT_DIFFUSE,
-                                 .albedo = v3_splat(0.8f), .ior = 1.0f};
+            struct material m = {.name = "default",
+                                 .kind = MAT_DIFFUSE,
+                                 .albedo = v3_splat(0.8f),
+                                 .ior = 1.0f};
             ps->default_mat_idx = sc->n_materials;
             if (!add_material(ps, &m, 0))
                 goto done;
@@ -965,14 +1252,19 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
     struct xform xf;
     xform_from(&xf, st, param_idx(st, "translate"), param_idx(st, "rotate"),
                param_idx(st, "scale"));
+    bool is_moved = get(st, "translate")->key || get(st, "rotate")->key || get(st, "scale")->key;
     for (uint32_t i = 0; i < mesh.n_positions; i++) {
-        vec3 p = xform_point(&xf, mesh.positions[i]);
-        if (!v3_is_finite(p)) {
-            fail(ps, st->kw_col, "expected vertices of '%s' within float range after the "
-                                 "transform, got an overflow", show(file->text, buf));
+        double p[3];
+        xform_point_d(&xf, mesh.positions[i], p);
+        if (!in_scene_range_d(p)) {
+            fail(ps, st->kw_col,
+                 "expected vertices of '%s' inside [-1e18, 1e18]%s (" COORD_WHY
+                 "), got %g,%g,%g (vertex %u)",
+                 show(file->text, buf), is_moved ? " after the transform" : "", p[0], p[1], p[2],
+                 i + 1);
             goto done;
         }
-        sc->positions[sc->n_positions + i] = p;
+        sc->positions[sc->n_positions + i] = xform_point(&xf, mesh.positions[i]);
     }
     for (uint32_t i = 0; i < mesh.n_normals; i++)
         sc->normals[sc->n_normals + i] = xform_normal(&xf, mesh.normals[i]);
@@ -987,8 +1279,7 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
         bool has_vn = true, has_vt = true;
         for (int k = 0; k < 3; k++) {
             assert(t->v[k] < mesh.n_positions);
-            has_vn &= t->vn[k] >= 0 &&
-                      !v3_is_zero(sc->normals[sc->n_normals + (uint32_t)t->vn[k]]);
+            has_vn &= t->vn[k] >= 0 && !v3_is_zero(sc->normals[sc->n_normals + (uint32_t)t->vn[k]]);
             has_vt &= t->vt[k] >= 0;
         }
         for (int k = 0; k < 3; k++) {
@@ -998,9 +1289,9 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
             out->vt[k] = has_vt ? (int32_t)sc->n_uvs + t->vt[j] : -1;
         }
         assert(t->mat_idx < (int32_t)mesh.n_materials);
-        out->mat_idx = mat->key            ? mat->u
-                       : t->mat_idx >= 0   ? mtl_base + (uint32_t)t->mat_idx
-                                           : (uint32_t)ps->default_mat_idx;
+        out->mat_idx = mat->key          ? mat->u
+                       : t->mat_idx >= 0 ? mtl_base + (uint32_t)t->mat_idx
+                                         : (uint32_t)ps->default_mat_idx;
     }
     sc->n_positions += mesh.n_positions;
     sc->n_normals += mesh.n_normals;
@@ -1013,23 +1304,36 @@ done:
     return ok;
 }
 
+/* sphere: inside [-SCENE_MAX_COORD, SCENE_MAX_COORD] after its transform, radius > 0 in float */
 static bool do_sphere(struct parser *ps, const struct stmt *st)
 {
-    char buf[SHOW_BYTES + 4];
+    char buf[SHOW_OUT_BYTES];
     const struct param *scale = get(st, "scale");
     if (scale->key && (scale->f[1] != scale->f[0] || scale->f[2] != scale->f[0]))
         return fail(ps, scale->val_col, "expected a uniform 'scale' for 'sphere', got %s",
                     show(scale->text, buf));
     struct xform xf;
     xform_from(&xf, st, param_idx(st, "translate"), -1, param_idx(st, "scale"));
+    vec3 center = get_vec3(st, "center", v3_splat(0));
+    float radius = get_number(st, "radius", 0);
+    float s_abs = fabsf(scale->key ? scale->f[0] : 1.0f);
     struct sphere s = {
-        .center = xform_point(&xf, get_vec3(st, "center", v3_splat(0))),
-        .radius = get_number(st, "radius", 0) * fabsf(scale->key ? scale->f[0] : 1.0f),
+        .center = xform_point(&xf, center),
+        .radius = radius * s_abs,
         .mat_idx = get(st, "material")->u,
     };
-    if (!v3_is_finite(s.center) || !isfinite(s.radius) || !(s.radius > 0.0f))
-        return fail(ps, st->kw_col, "expected a sphere within float range after the transform, "
-                                    "got an overflow");
+    double c[3], r = (double)radius * s_abs;
+    xform_point_d(&xf, center, c);
+    double extent[3] = {fabs(c[0]) + r, fabs(c[1]) + r, fabs(c[2]) + r};
+    if (!in_scene_range_d(extent))
+        return fail(ps, st->kw_col,
+                    "expected the sphere inside [-1e18, 1e18]%s (" COORD_WHY
+                    "), got center %g,%g,%g and radius %g",
+                    scale->key || get(st, "translate")->key ? " after its transform" : "", c[0],
+                    c[1], c[2], r);
+    if (!(s.radius > 0.0f))
+        return fail(ps, scale->val_col, "expected 'radius' times 'scale' > 0, got %g" UNDERFLOW_WHY,
+                    r);
     struct scene *sc = ps->scene;
     if (!RESERVE(ps, sc->spheres, ps->cap_spheres, (uint64_t)sc->n_spheres + 1))
         return false;
@@ -1037,9 +1341,11 @@ static bool do_sphere(struct parser *ps, const struct stmt *st)
     return true;
 }
 
+/* quad: edges not parallel, before and after the transform (in float), and all four corners
+ * inside [-SCENE_MAX_COORD, SCENE_MAX_COORD] */
 static bool do_quad(struct parser *ps, const struct stmt *st)
 {
-    char buf[SHOW_BYTES + 4];
+    char buf[SHOW_OUT_BYTES];
     vec3 e1 = get_vec3(st, "edge1", v3_splat(0)), e2 = get_vec3(st, "edge2", v3_splat(0));
     const struct param *edge2 = get(st, "edge2");
     double e1_d[3] = {e1.x, e1.y, e1.z}, e2_d[3] = {e2.x, e2.y, e2.z};
@@ -1049,16 +1355,34 @@ static bool do_quad(struct parser *ps, const struct stmt *st)
     struct xform xf;
     xform_from(&xf, st, param_idx(st, "translate"), param_idx(st, "rotate"),
                param_idx(st, "scale"));
+    vec3 corner = get_vec3(st, "corner", v3_splat(0));
     /* a mirroring transform swaps the edges so e1 x e2 stays the transformed front normal */
     struct quad q = {
-        .corner = xform_point(&xf, get_vec3(st, "corner", v3_splat(0))),
+        .corner = xform_point(&xf, corner),
         .e1 = xform_vector(&xf, xf.is_mirror ? e2 : e1),
         .e2 = xform_vector(&xf, xf.is_mirror ? e1 : e2),
         .mat_idx = get(st, "material")->u,
     };
-    if (!v3_is_finite(q.corner) || !v3_is_finite(q.e1) || !v3_is_finite(q.e2))
-        return fail(ps, st->kw_col, "expected a quad within float range after the transform, "
-                                    "got an overflow");
+    double c[3], a[3], b[3];
+    xform_point_d(&xf, corner, c);
+    xform_vector_d(&xf, e1, a);
+    xform_vector_d(&xf, e2, b);
+    double extent[3];
+    for (int i = 0; i < 3; i++)
+        extent[i] = fabs(c[i]) + fabs(a[i]) + fabs(b[i]);
+    bool is_moved = get(st, "translate")->key || get(st, "rotate")->key || get(st, "scale")->key;
+    if (!in_scene_range_d(extent))
+        return fail(ps, st->kw_col,
+                    "expected the quad's corners inside [-1e18, 1e18]%s (" COORD_WHY
+                    "), got corner %g,%g,%g and edges %g,%g,%g and %g,%g,%g",
+                    is_moved ? " after its transform" : "", c[0], c[1], c[2], a[0], a[1], a[2],
+                    b[0], b[1], b[2]);
+    double q1[3] = {q.e1.x, q.e1.y, q.e1.z}, q2[3] = {q.e2.x, q.e2.y, q.e2.z};
+    if (is_parallel(q1, q2)) /* only a 'scale' can underflow the edges */
+        return fail(ps, get(st, "scale")->val_col,
+                    "expected the quad's edges not parallel after "
+                    "'scale', got %g,%g,%g and %g,%g,%g (rounded to single precision)",
+                    q1[0], q1[1], q1[2], q2[0], q2[1], q2[2]);
     struct scene *sc = ps->scene;
     if (!RESERVE(ps, sc->quads, ps->cap_quads, (uint64_t)sc->n_quads + 1))
         return false;
@@ -1071,8 +1395,10 @@ static bool do_plane(struct parser *ps, const struct stmt *st)
     struct scene *sc = ps->scene;
     const struct param *mat = get(st, "material");
     if (is_emissive(&sc->materials[mat->u]))
-        return fail(ps, mat->val_col, "expected a non-emissive material for 'plane' (an "
-                                      "infinite emitter), got '%s'", mat->text);
+        return fail(ps, mat->val_col,
+                    "expected a non-emissive material for 'plane' (an "
+                    "infinite emitter), got '%s'",
+                    mat->text);
     /* normalise in double: a tiny or huge float normal has no float-safe length */
     vec3 n = get_vec3(st, "normal", v3_splat(0));
     double len = sqrt((double)n.x * n.x + (double)n.y * n.y + (double)n.z * n.z);
@@ -1162,10 +1488,11 @@ static bool do_material(struct parser *ps, const struct stmt *st)
     const struct param *ck_uv = get(st, "checker-uv");
     if (ck->key && ck->b) {
         if (is_glass)
-            return fail(ps, ck->key_col, "expected no 'checker' with 'glass=true' (glass has no "
-                                         "albedo), got 'checker=%s'", ck->text);
-        vec3 second = ck->n_f == 3 ? v3(ck->f[0], ck->f[1], ck->f[2])
-                                   : v3_scale(albedo, 0.5f);
+            return fail(ps, ck->key_col,
+                        "expected no 'checker' with 'glass=true' (glass has no "
+                        "albedo), got 'checker=%s'",
+                        ck->text);
+        vec3 second = ck->n_f == 3 ? v3(ck->f[0], ck->f[1], ck->f[2]) : v3_scale(albedo, 0.5f);
         /* a plastic's texture is its base colour, of which the diffuse keeps 1 - metallic */
         float diffuse_share = st->type_idx == 5 ? 1.0f - get_number(st, "metallic", 0.0f) : 1.0f;
         m.checker_albedo = v3_scale(second, diffuse_share);
@@ -1179,7 +1506,7 @@ static bool do_material(struct parser *ps, const struct stmt *st)
 }
 
 static const char *const DIRECT_NAMES[RENDER_DIRECT_COUNT] = {"mis", "light", "bsdf", "cosine",
-                                                               "hemisphere"};
+                                                              "hemisphere"};
 static const char *const SPLIT_NAMES[RENDER_SPLIT_COUNT] = {"full", "direct", "indirect"};
 
 const char *scene_direct_name(enum render_direct direct)
@@ -1249,8 +1576,8 @@ static bool do_render(struct parser *ps, const struct stmt *st)
         if (p->u < 2)
             return fail(ps, p->val_col, "expected 'min-spp' >= 2, got %s", p->text);
         if (r->max_spp && p->u > r->max_spp)
-            return fail(ps, p->val_col, "expected 'min-spp' <= 'max-spp' (%u), got %s",
-                        r->max_spp, p->text);
+            return fail(ps, p->val_col, "expected 'min-spp' <= 'max-spp' (%u), got %s", r->max_spp,
+                        p->text);
         r->min_spp = p->u;
     }
     return true;
@@ -1279,7 +1606,8 @@ static bool do_statement(struct parser *ps, const struct stmt *st)
     case STMT_PLANE:
         return do_plane(ps, st);
     case STMT_LIGHT: {
-        struct light l = {.kind = LIGHT_POINT, .prim_idx = ps->n_points,
+        struct light l = {.kind = LIGHT_POINT,
+                          .prim_idx = ps->n_points,
                           .position = get_vec3(st, "position", v3_splat(0)),
                           .intensity = get_vec3(st, "intensity", v3_splat(0))};
         if (!RESERVE(ps, ps->points, ps->cap_points, (uint64_t)ps->n_points + 1))
@@ -1304,7 +1632,7 @@ static bool do_statement(struct parser *ps, const struct stmt *st)
  * relates parameters to each other (in do_statement). */
 static bool parse_line(struct parser *ps, char *line)
 {
-    char list[200], buf[SHOW_BYTES + 4];
+    char list[200], buf[SHOW_OUT_BYTES];
     char *cur = line;
     char *kw = next_word(&cur);
     if (!kw)
@@ -1320,8 +1648,10 @@ static bool parse_line(struct parser *ps, char *line)
     st.kind = (enum stmt_kind)kind;
     st.spec = &stmt_specs[kind];
     if (st.spec->is_once && ps->seen_line[kind])
-        return fail(ps, st.kw_col, "expected at most one '%s' statement, got a second (the "
-                                   "first is on line %d)", kw, ps->seen_line[kind]);
+        return fail(ps, st.kw_col,
+                    "expected at most one '%s' statement, got a second (the "
+                    "first is on line %d)",
+                    kw, ps->seen_line[kind]);
     ps->seen_line[kind] = ps->line;
 
     /* every word: key=value, a key of this statement, given once */
@@ -1333,8 +1663,7 @@ static bool parse_line(struct parser *ps, char *line)
             return fail(ps, col, "expected 'key=value', got '%s'", show(w, buf));
         *eq = '\0';
         int i = 0;
-        while (i < MAX_PARAMS && st.spec->params[i].key &&
-               strcmp(st.spec->params[i].key, w) != 0)
+        while (i < MAX_PARAMS && st.spec->params[i].key && strcmp(st.spec->params[i].key, w) != 0)
             i++;
         if (i == MAX_PARAMS || !st.spec->params[i].key) {
             list_words(list, sizeof list, st.spec, ALL_TYPES);
@@ -1343,7 +1672,9 @@ static bool parse_line(struct parser *ps, char *line)
         }
         if (st.p[i].key)
             return fail(ps, col, "expected '%s' at most once, got it twice", w);
-        st.p[i] = (struct param){.key = w, .text = eq + 1, .key_col = col,
+        st.p[i] = (struct param){.key = w,
+                                 .text = eq + 1,
+                                 .key_col = col,
                                  .val_col = col + (int)(eq - w) + 1};
         order[n_given++] = i;
     }
@@ -1410,8 +1741,8 @@ static bool build_lights(struct parser *ps)
         return fail(ps, 0, "expected at most %u lights, got %llu", UINT32_MAX,
                     (unsigned long long)n_max);
     if ((size_t)n_max > SIZE_MAX / sizeof *sc->lights)
-        return fail(ps, 0, "expected at most %zu lights, got %llu",
-                    SIZE_MAX / sizeof *sc->lights, (unsigned long long)n_max);
+        return fail(ps, 0, "expected at most %zu lights, got %llu", SIZE_MAX / sizeof *sc->lights,
+                    (unsigned long long)n_max);
     sc->lights = malloc((size_t)n_max * sizeof *sc->lights);
     if (!sc->lights)
         return fail(ps, 0, "expected memory for %llu lights, got an allocation failure",
@@ -1436,44 +1767,62 @@ static bool build_lights(struct parser *ps)
 
 /* ---- public API --------------------------------------------------------------------------- */
 
-bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err)
+/* Parses the scene from the descriptor fd (-1: open path), named path in messages; the files
+ * it names are relative to the first n_dir bytes of path (0: the working directory). */
+static bool load(int fd, const char *path, size_t n_dir, struct scene *scene,
+                 struct mcpt_error *err)
 {
     struct mcpt_error err_local;
-    struct parser ps = {.path = path, .scene = scene, .err = err ? err : &err_local,
+    struct parser ps = {.path = path,
+                        .scene = scene,
+                        .err = err ? err : &err_local,
+                        .fd = fd,
                         .default_mat_idx = -1};
     char *line = NULL;
     bool ok = false;
+    bool is_opened = fd < 0;
     memset(scene, 0, sizeof *scene);
     scene->width = 512;
     scene->height = 512;
-    scene->render = (struct render_settings){.spp = 64, .max_depth = UINT32_MAX,
+    scene->render = (struct render_settings){.spp = 64,
+                                             .max_depth = UINT32_MAX,
                                              .sampler = SAMPLER_DEFAULT,
                                              .adaptive_floor = -1.0f};
 
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        mcpt_error_set(ps.err, path, 0, 0, "expected a readable file, got '%s'",
-                       strerror(errno));
+    /* a regular file, or a pipe (mcpt <(generate) reads /dev/fd/N); never a device, and open()
+     * never waits for a FIFO's writer */
+    const char *not_regular = NULL;
+    if (is_opened)
+        ps.fd = obj_open_input(path, true, &not_regular);
+    if (ps.fd < 0) {
+        if (not_regular)
+            mcpt_error_set(ps.err, path, 0, 0, "expected a regular file, got %s", not_regular);
+        else
+            mcpt_error_set(ps.err, path, 0, 0, "expected a readable file, got '%s'",
+                           strerror(errno));
         goto done;
     }
-    const char *slash = strrchr(path, '/');
-    size_t n_dir = slash ? (size_t)(slash - path) + 1 : 0;
     ps.dir = malloc(n_dir + 1);
     line = malloc(SCENE_MAX_LINE_BYTES + 1);
-    if (!ps.dir || !line) {
-        fail(&ps, 0, "expected memory for the line buffer, got an allocation failure");
+    ps.in = malloc(SCENE_READ_BYTES);
+    if (!ps.dir || !line || !ps.in) {
+        mcpt_error_runtime(ps.err, path, "out of memory");
         goto done;
     }
     memcpy(ps.dir, path, n_dir);
     ps.dir[n_dir] = '\0';
 
+    ps.line = 1;
+    if (!skip_byte_order_mark(&ps))
+        goto done;
+    ps.line = 0;
     for (;;) {
         if (ps.line == INT32_MAX) {
             fail(&ps, 0, "expected at most %d lines, got more", INT32_MAX);
             goto done;
         }
         ps.line++;
-        int r = read_line(&ps, f, line);
+        int r = read_line(&ps, line);
         if (r < 0)
             goto done;
         if (r == 0)
@@ -1488,15 +1837,28 @@ bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err)
     }
     ok = build_lights(&ps);
 done:
-    if (f)
-        fclose(f);
+    if (ps.fd >= 0 && is_opened)
+        close(ps.fd);
     free(line);
+    free(ps.in);
     free(ps.dir);
     free(ps.mat_def_line);
+    obj_names_free(&ps.mat_names);
     free(ps.points);
     if (!ok)
         scene_free(scene);
     return ok;
+}
+
+bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err)
+{
+    const char *slash = strrchr(path, '/');
+    return load(-1, path, slash ? (size_t)(slash - path) + 1 : 0, scene, err);
+}
+
+bool scene_load_stream(FILE *f, const char *name, struct scene *scene, struct mcpt_error *err)
+{
+    return load(fileno(f), name, 0, scene, err); /* read from the descriptor's offset */
 }
 
 void scene_free(struct scene *scene)

@@ -93,6 +93,9 @@ struct render_settings {
     uint32_t rr_depth;         /* bounces before Russian roulette starts */
 };
 
+#define SCENE_MAX_WARNINGS 8    /* warning lines a scene keeps */
+#define SCENE_WARNING_BYTES 400 /* one warning line with its NUL */
+
 struct scene {
     struct camera_params camera;
     int width;  /* film width, pixels */
@@ -121,12 +124,27 @@ struct scene {
     struct light *lights; /* every emissive triangle, quad and sphere, then point lights */
     uint32_t n_lights;
     struct sky sky;
+
+    /* what the load accepted but did not use as written (an MTL 'spectral' colour, a usemtl
+     * no mtllib defines): lines "file:line:col: warning: ..." for main to print on stderr, the
+     * first SCENE_MAX_WARNINGS of n_warnings */
+    char warnings[SCENE_MAX_WARNINGS][SCENE_WARNING_BYTES];
+    uint32_t n_warnings;
 };
 
 /* Parses the scene file at path (and the OBJ/MTL files it names, relative to its folder).
- * On success fills *scene (free with scene_free) and returns true.  On bad input returns false
- * with *scene zeroed and *err naming file:line:col and what was expected. */
+ * The scene file may be a regular file or a pipe; meshes and MTL files must be regular files.
+ * On success fills *scene (free with scene_free) and returns true; scene->warnings holds what
+ * main should print.  On bad input returns false with *scene zeroed and *err naming
+ * file:line:col and what was expected (err->kind: MCPT_ERROR_RUNTIME for out of memory or a
+ * read failure). */
 bool scene_load(const char *path, struct scene *scene, struct mcpt_error *err);
+
+/* As scene_load, from the open stream f, e.g. a copy of standard input: read through its
+ * descriptor from the descriptor's offset (rewind f first) to the end; not closed.  name
+ * stands for the file in error messages ("<stdin>"), and the OBJ/MTL files it names are
+ * relative to the working directory. */
+bool scene_load_stream(FILE *f, const char *name, struct scene *scene, struct mcpt_error *err);
 
 /* Frees everything scene_load allocated and zeroes *scene.  Safe on a zeroed scene. */
 void scene_free(struct scene *scene);

@@ -71,9 +71,15 @@ static void check_mesh(const struct obj_mesh *m)
     for (uint32_t i = 0; i < m->n_materials; i++) {
         const struct obj_material *om = &m->materials[i];
         if (!memchr(om->name, '\0', sizeof om->name) || !v3_is_finite(om->Kd) ||
-            !v3_is_finite(om->Ke) || !isfinite(om->Ni) || om->illum < 0 || om->illum > 10)
+            !v3_is_finite(om->Ke) || !v3_is_finite(om->Ks) || !v3_is_finite(om->Tf) ||
+            !isfinite(om->Ni) || !isfinite(om->d) || om->illum < 0 || om->illum > 10)
             abort();
     }
+    /* warnings: one line each, "file:line:col: warning: ..." */
+    for (uint32_t i = 0; i < m->n_warnings && i < OBJ_MAX_WARNINGS; i++)
+        if (!memchr(m->warnings[i], '\0', OBJ_WARNING_BYTES) ||
+            !strstr(m->warnings[i], ": warning: ") || strpbrk(m->warnings[i], "\r\n"))
+            abort();
 }
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)

@@ -63,8 +63,15 @@ static void check_scene(const struct scene *s)
 {
     if (s->width < 1 || s->height < 1 || s->render.spp < 1)
         abort();
-    for (uint32_t i = 0; i < s->n_positions; i++)
-        if (!v3_is_finite(s->positions[i]))
+    for (uint32_t i = 0; i < s->n_positions; i++) /* inside the scene bound, 1e18 */
+        if (!(fabsf(s->positions[i].x) <= 1e18f && fabsf(s->positions[i].y) <= 1e18f &&
+              fabsf(s->positions[i].z) <= 1e18f))
+            abort();
+    struct camera cam; /* the parser checks the camera with camera_frame: it always builds */
+    if (!camera_init(&cam, &s->camera, s->width, s->height, NULL))
+        abort();
+    for (uint32_t i = 0; i < s->n_warnings && i < SCENE_MAX_WARNINGS; i++)
+        if (!strstr(s->warnings[i], ": warning: ") || strpbrk(s->warnings[i], "\r\n"))
             abort();
     for (uint32_t i = 0; i < s->n_tris; i++) {
         const struct scene_tri *t = &s->tris[i];
@@ -99,14 +106,16 @@ static void check_scene(const struct scene *s)
  * would cost a 20 ms poll per input).  Depth is capped so an input cannot make one run long. */
 static void render_a_little(const struct scene *scene)
 {
-    struct mcpt_error err;
+    struct mcpt_error err = {0};
     struct trace_scene *ts = trace_prepare(scene, 1, &err);
     if (!ts) {
         if (!err.msg[0])
             abort();
         return;
     }
-    struct trace_options opt = {.spp = 1, .seed = 1, .sampler = SAMPLER_INDEPENDENT,
+    struct trace_options opt = {.spp = 1,
+                                .seed = 1,
+                                .sampler = SAMPLER_INDEPENDENT,
                                 .n_threads = 1};
     opt.max_depth = scene->render.max_depth < 16 ? scene->render.max_depth : 16;
     uint64_t n_rays = 0;

@@ -540,7 +540,7 @@ Test(image, write_into_missing_folder_fails)
     cr_assert_not(image_write_png_rgb8(path, 2, 2, rgb8, &err));
     cr_assert_str_eq(err.msg, "cannot write: No such file or directory");
     const float rgb[12] = {0};
-    cr_assert_not(image_write_png_srgb(path, 2, 2, rgb, 0.0f, &err));
+    cr_assert_not(image_write_png_srgb(path, 2, 2, rgb, NULL, &err));
     cr_assert_str_eq(err.msg, "cannot write: No such file or directory");
     cr_assert_eq(count_entries(), 0);
     free(img.data[0]);
@@ -559,7 +559,7 @@ Test(image, refused_write_keeps_existing_file)
     cr_assert_not(image_write_png_rgb8(path, 0, 2, rgb8, &err));
     cr_assert_str_eq(err.msg, "expected a positive image size, got 0x2");
     const float rgb[3 * 6] = {0};
-    cr_assert_not(image_write_png_srgb(path, 3, -1, rgb, 0.0f, &err));
+    cr_assert_not(image_write_png_srgb(path, 3, -1, rgb, NULL, &err));
     size_t n_after;
     unsigned char *after = read_bytes(path, &n_after);
     cr_assert_eq(n_after, n_before);
@@ -621,7 +621,7 @@ Test(image, failed_write_midway_keeps_existing_file)
     cr_assert_str_eq(err.msg, efbig);
     cr_assert_not(image_write_png_rgb8(png_path, w, h, rgb8, &err));
     cr_assert_str_eq(err.msg, efbig);
-    cr_assert_not(image_write_png_srgb(png_path, w, h, rgb, 0.0f, &err));
+    cr_assert_not(image_write_png_srgb(png_path, w, h, rgb, NULL, &err));
     cr_assert_str_eq(err.msg, efbig);
     cr_assert_eq(setrlimit(RLIMIT_FSIZE, &old_lim), 0);
     signal(SIGXFSZ, old_handler);
@@ -690,7 +690,7 @@ Test(image, png_srgb_known_values)
             rgb[3 * i + c] = in[i];
     char path[256];
     struct mcpt_error err;
-    cr_assert(image_write_png_srgb(scratch_path(path, sizeof path, "k.png"), n, 1, rgb, 0.0f, &err),
+    cr_assert(image_write_png_srgb(scratch_path(path, sizeof path, "k.png"), n, 1, rgb, NULL, &err),
               "%s", err.msg);
     int w;
     int h;
@@ -728,7 +728,8 @@ Test(image, png_srgb_exposure_scales_by_powers_of_two)
     for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
         const float rgb[3] = {cases[k].v, cases[k].v, cases[k].v};
         struct mcpt_error err;
-        cr_assert(image_write_png_srgb(path, 1, 1, rgb, cases[k].exposure, &err), "%s", err.msg);
+        struct image_look look = {.exposure = cases[k].exposure};
+        cr_assert(image_write_png_srgb(path, 1, 1, rgb, &look, &err), "%s", err.msg);
         int w;
         int h;
         uint8_t *px = read_png_rgb8(path, &w, &h);
@@ -758,7 +759,8 @@ Test(image, png_srgb_matches_reference_on_ramp)
     scratch_path(path, sizeof path, "ramp.png");
     for (int e = 0; e < 3; e++) {
         struct mcpt_error err;
-        cr_assert(image_write_png_srgb(path, w, h, rgb, exposures[e], &err), "%s", err.msg);
+        struct image_look look = {.exposure = exposures[e]};
+        cr_assert(image_write_png_srgb(path, w, h, rgb, &look, &err), "%s", err.msg);
         int rw;
         int rh;
         uint8_t *px = read_png_rgb8(path, &rw, &rh);
@@ -812,4 +814,46 @@ Test(image, srgb8_matches_reference_on_doubles)
     cr_assert_eq(image_srgb8(&s, NAN), 0);
     cr_assert_eq(image_srgb8(&s, -INFINITY), 0);
     cr_assert_eq(image_srgb8(&s, INFINITY), 255);
+}
+
+/* The tone curves on known inputs (image.h): clamp passes values through; reinhard is
+ * Reinhard et al. 2002's eq. 3, L / (1 + L), on the Rec. 709 luminance Y, every channel scaled
+ * by 1 / (1 + Y) (grey 1 -> 0.5, red 3 -> 3 / 1.6378, blue 4 -> 4 / 1.2888); aces is
+ * Narkowicz 2016's fit x (2.51 x + 0.03) / (x (2.43 x + 0.59) + 0.14) per channel, clamped to
+ * [0, 1] (1 -> 2.54 / 3.16, 0.18 -> 0.086724 / 0.324932, 10 -> 1, -1 -> 0, inf -> 1); NaN
+ * stays NaN. */
+Test(image, tone_curves_on_known_values)
+{
+    const struct {
+        enum image_tonemap t;
+        double in[3];
+        double out[3];
+    } cases[] = {
+        {IMAGE_TONEMAP_CLAMP, {2.0, 0.5, -1.0}, {2.0, 0.5, -1.0}},
+        {IMAGE_TONEMAP_REINHARD, {1.0, 1.0, 1.0}, {0.5, 0.5, 0.5}},
+        {IMAGE_TONEMAP_REINHARD, {3.0, 0.0, 0.0}, {3.0 / 1.6378, 0.0, 0.0}},
+        {IMAGE_TONEMAP_REINHARD, {0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}},
+        {IMAGE_TONEMAP_REINHARD, {0.0, 0.0, 4.0}, {0.0, 0.0, 4.0 / 1.2888}},
+        {IMAGE_TONEMAP_ACES, {1.0, 0.18, 0.0}, {2.54 / 3.16, 0.086724 / 0.324932, 0.0}},
+        {IMAGE_TONEMAP_ACES, {10.0, -1.0, INFINITY}, {1.0, 0.0, 1.0}},
+    };
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        double out[3];
+        image_tonemap_rgb(cases[k].t, cases[k].in, out);
+        for (int c = 0; c < 3; c++)
+            cr_assert(fabs(out[c] - cases[k].out[c]) <= 1e-12 * fmax(1.0, fabs(cases[k].out[c])),
+                      "case %zu channel %d: %.17g, expected %.17g", k, c, out[c], cases[k].out[c]);
+    }
+    const enum image_tonemap all[] = {IMAGE_TONEMAP_CLAMP, IMAGE_TONEMAP_REINHARD,
+                                      IMAGE_TONEMAP_ACES};
+    for (int k = 0; k < 3; k++) {
+        double out[3];
+        image_tonemap_rgb(all[k], (const double[3]){NAN, 0.5, 0.5}, out);
+        cr_assert(isnan(out[0]), "%s: NaN in, %g out", image_tonemap_name(all[k]), out[0]);
+        enum image_tonemap back;
+        cr_assert(image_tonemap_parse(image_tonemap_name(all[k]), &back) && back == all[k]);
+    }
+    enum image_tonemap t;
+    cr_assert_not(image_tonemap_parse("filmic", &t));
+    cr_assert_not(image_tonemap_parse("ACES", &t));
 }

@@ -4,16 +4,24 @@
  * vertex data"); fan triangulation (n corners -> n-2 triangles in order); CRLF, tabs, comments,
  * BOM, no final newline; mtllib/usemtl mapping and MTL keys with their defaults; floats equal to
  * strtof bit for bit (Clinger 1990 fast path); the real Cornell box; and golden error strings
- * "file:line:col: error: msg" for every malformed input (STYLE.md §5).
+ * "file:line:col: error: msg" for every malformed input (STYLE.md §5).  Also what issue 15
+ * found: '\' line continuation, usemtl before its mtllib (resolved as Blender does), MTL
+ * "xyz" colours (IEC 61966-2-1 matrix) and "spectral" ones (a warning), reading in chunks
+ * (a 3 GiB sparse file of NULs stops at 1:1 in little memory), FIFOs refused without
+ * blocking, and name lookups that stay O(1) (counted probes, not time).
  * Fixtures: tests/data/obj/, scenes/models/; paths are relative to the repo root. */
-#define _POSIX_C_SOURCE 200809L /* mkstemp, close, unlink */
+#ifndef _DEFAULT_SOURCE
+#define _DEFAULT_SOURCE /* mkstemp, mkdtemp, mkfifo, close, unlink, ftruncate */
+#endif
 
 #include <criterion/criterion.h>
 
 #include <stdlib.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include "obj.h"
+#include "test_util.h"
 
 #define DATA "tests/data/obj/"
 
@@ -215,9 +223,9 @@ Test(obj, floats_match_strtof)
             uint64_t sign = next_u64(&state) % 3;
             if (sign != 2)
                 s[n++] = sign ? '-' : '+';
-            int n_int = (int)(next_u64(&state) % 4); /* 0..3 digits */
+            int n_int = (int)(next_u64(&state) % 4);                          /* 0..3 digits */
             int n_frac = next_u64(&state) % 4 ? (int)(next_u64(&state) % 8)   /* 0..7 */
-                                               : (int)(next_u64(&state) % 13); /* 0..12 */
+                                              : (int)(next_u64(&state) % 13); /* 0..12 */
             for (int d = 0; d < n_int; d++)
                 s[n++] = (char)('0' + next_u64(&state) % 10);
             if (n_int == 0 && n_frac == 0)
@@ -435,16 +443,18 @@ Test(obj, errors_mtl)
     check_golden(cases, sizeof cases / sizeof cases[0]);
 }
 
-/* Files: a missing OBJ or a directory has no line (strerror text); a missing mtllib points at
- * the name in the OBJ line; NUL bytes and a binary first byte are not misread as text. */
+/* Files: a missing OBJ or a directory has no line (strerror text, or what the path is); a
+ * missing mtllib points at the name in the OBJ line; NUL bytes and a binary first byte are not
+ * misread as text. */
 Test(obj, errors_files)
 {
     static const struct golden cases[] = {
         {DATA "no_such_file.obj", DATA "no_such_file.obj: error: cannot open: No such file or "
                                        "directory"},
-        {"tests/data/obj", "tests/data/obj: error: cannot read: Is a directory"},
-        {DATA "err_mtllib_missing.obj", DATA "err_mtllib_missing.obj:1:8: error: cannot open '"
-                                             DATA "no_such.mtl': No such file or directory"},
+        {"tests/data/obj", "tests/data/obj: error: expected a regular file, got a directory"},
+        {DATA "err_mtllib_missing.obj", DATA "err_mtllib_missing.obj:1:8: error: cannot open "
+                                             "mtllib 'no_such.mtl' (" DATA "no_such.mtl): No "
+                                             "such file or directory"},
         {DATA "err_nul.obj", DATA "err_nul.obj:2:4: error: expected text, got a NUL byte"},
         {DATA "err_keyword.obj", DATA "err_keyword.obj:2:1: error: expected a statement keyword, "
                                       "got '\\x89PNG'"},
@@ -462,4 +472,368 @@ Test(obj, free_is_idempotent)
     cr_assert_null(m.tris);
     cr_assert_eq(m.n_tris, 0);
     obj_free(&m);
+}
+
+/* ---- issue 15: continuation, late mtllib, MTL colour forms, chunks, FIFOs, name tables ---- */
+
+static char tmp_dir[256];
+
+static void tmp_setup(void) { test_make_dir(tmp_dir, sizeof tmp_dir, "obj_test"); }
+static void tmp_teardown(void) { test_remove_dir(tmp_dir); }
+
+/* Writes len bytes of text to tmp_dir/name; returns the path in a static buffer (one at a time). */
+static const char *write_tmp_n(const char *name, const char *text, size_t len)
+{
+    static char path[512];
+    snprintf(path, sizeof path, "%s/%s", tmp_dir, name);
+    FILE *f = fopen(path, "wb");
+    cr_assert_not_null(f, "%s", path);
+    cr_assert_eq(fwrite(text, 1, len, f), len);
+    cr_assert_eq(fclose(f), 0);
+    return path;
+}
+
+static const char *write_tmp(const char *name, const char *text)
+{
+    return write_tmp_n(name, text, strlen(text));
+}
+
+/* The error obj_load gives for path, with tmp_dir cut off the front: "a.obj:2:3: error: ...". */
+static void expect_error(const char *path, const char *golden)
+{
+    struct obj_mesh m;
+    struct mcpt_error err = {0};
+    cr_assert_not(obj_load(path, &m, &err), "%s loaded but should fail", path);
+    char got[700];
+    mcpt_error_format(&err, got, sizeof got);
+    size_t n_dir = strlen(tmp_dir);
+    const char *shown = strncmp(got, tmp_dir, n_dir) == 0 ? got + n_dir + 1 : got;
+    cr_assert_str_eq(shown, golden);
+}
+
+/* The same, for the message with tmp_dir cut out wherever it appears (MTL paths in messages). */
+static void expect_error_anywhere(const char *path, const char *golden)
+{
+    struct obj_mesh m;
+    struct mcpt_error err = {0};
+    cr_assert_not(obj_load(path, &m, &err), "%s loaded but should fail", path);
+    char got[700], cut[700];
+    mcpt_error_format(&err, got, sizeof got);
+    size_t n_dir = strlen(tmp_dir), n = 0;
+    for (const char *s = got; *s;) {
+        if (strncmp(s, tmp_dir, n_dir) == 0 && s[n_dir] == '/')
+            s += n_dir + 1;
+        else
+            cut[n++] = *s++;
+    }
+    cut[n] = '\0';
+    cr_assert_str_eq(cut, golden);
+}
+
+/* Warning i of the mesh with tmp_dir cut off the front. */
+static const char *warning_text(const struct obj_mesh *m, uint32_t i)
+{
+    cr_assert_lt(i, m->n_warnings);
+    size_t n_dir = strlen(tmp_dir);
+    const char *w = m->warnings[i];
+    return strncmp(w, tmp_dir, n_dir) == 0 ? w + n_dir + 1 : w;
+}
+
+/* Wavefront, "Object Files (.obj)": a '\' at the end of a line continues the statement on the
+ * next (Blender reads it so: the '\' and the line end become blanks).  Blanks and a CR may
+ * follow the '\'; a '\' inside a token (a Windows path) is an ordinary byte; the last line's
+ * '\' at the end of the file is a blank.  Faces keep the line they start on, and an error
+ * after a continuation names the physical line and column. */
+Test(obj, backslash_continues_a_statement, .init = tmp_setup, .fini = tmp_teardown)
+{
+    const char *path = write_tmp("cont.obj", "v 0 0 \\\n0\nv 1 \\  \r\n 0 0\r\nv 0 1 0\n"
+                                             "v 1 1 0\nf 1 2 \\\n\\\n 3 4\nf -1 -2 -3 \\");
+    struct obj_mesh m;
+    load_ok(path, &m);
+    cr_assert_eq(m.n_positions, 4);
+    cr_assert(vec3_eq(m.positions[0], v3(0, 0, 0)) && vec3_eq(m.positions[1], v3(1, 0, 0)));
+    cr_assert_eq(m.n_tris, 3);
+    assert_tri(&m, 0, 0, 1, 2, -1, -1, -1, -1, -1, -1);
+    assert_tri(&m, 1, 0, 2, 3, -1, -1, -1, -1, -1, -1);
+    assert_tri(&m, 2, 3, 2, 1, -1, -1, -1, -1, -1, -1);
+    cr_assert_eq(m.tris[0].line, 7, "the face starts on line 7");
+    cr_assert_eq(m.tris[2].line, 10, "the last face follows the joined lines");
+    obj_free(&m);
+
+    path = write_tmp("cont_err.obj", "v 0 0 0\nv 1 2 \\\n  3 oops\n");
+    expect_error(path, "cont_err.obj:3:5: error: expected a number, got 'oops'");
+    path = write_tmp("cont_err2.obj", "v 0 0 0\nf 1 \\\r\n \\\r\n 1 1 9\n");
+    expect_error(path, "cont_err2.obj:4:6: error: expected a vertex index in 1..1 or -1..-1, got "
+                       "9");
+    /* a backslash inside a token is not a continuation */
+    path = write_tmp("cont_token.obj", "v 0 0 0\\x\n");
+    expect_error(path, "cont_token.obj:1:7: error: expected a number, got '0\\x'");
+}
+
+/* Continuation works in MTL files too. */
+Test(obj, backslash_continues_an_mtl_statement, .init = tmp_setup, .fini = tmp_teardown)
+{
+    write_tmp("c.mtl", "newmtl a\nKd 0.25 \\\n 0.5 \\\n 0.75\nKe 1 2 3\n");
+    const char *path = write_tmp("c.obj", "mtllib c.mtl\n");
+    struct obj_mesh m;
+    load_ok(path, &m);
+    cr_assert_eq(m.n_materials, 1);
+    cr_assert(vec3_eq(m.materials[0].Kd, v3(0.25f, 0.5f, 0.75f)));
+    cr_assert(vec3_eq(m.materials[0].Ke, v3(1, 2, 3)));
+    obj_free(&m);
+}
+
+/* A usemtl may come before the mtllib that defines its name: names resolve once every mtllib
+ * is read (Blender reads the MTL files after the whole OBJ).  A name no mtllib defines gets
+ * mat_idx -1 and one warning at its first use, counting the other undefined names; without
+ * any mtllib (the dragon's stray usemtl) there is nothing to warn about. */
+Test(obj, usemtl_before_mtllib_resolves, .init = tmp_setup, .fini = tmp_teardown)
+{
+    write_tmp("late.mtl", "newmtl lamp\nKe 17 12 4\nnewmtl white\nKd 0.7\n");
+    const char *path = write_tmp("late.obj", "usemtl lamp\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                                             "f 1 2 3\nusemtl white\nf 1 2 3\nusemtl nope\n"
+                                             "f 1 2 3\nusemtl nope2\nf 3 2 1\nusemtl lamp\n"
+                                             "f 3 2 1\nmtllib late.mtl\n");
+    struct obj_mesh m;
+    load_ok(path, &m);
+    cr_assert_eq(m.n_tris, 5);
+    const int32_t want[5] = {0, 1, -1, -1, 0};
+    for (uint32_t i = 0; i < 5; i++)
+        cr_assert_eq(m.tris[i].mat_idx, want[i], "tri %u: %d", i, m.tris[i].mat_idx);
+    cr_assert_eq(m.n_warnings, 1);
+    cr_assert_str_eq(warning_text(&m, 0), "late.obj:8:8: warning: usemtl 'nope': no mtllib "
+                                          "defines it, so its faces get the default material "
+                                          "(1 more usemtl name is undefined too)");
+    obj_free(&m);
+
+    path = write_tmp("nolib.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl x\nf 1 2 3\n");
+    load_ok(path, &m);
+    cr_assert_eq(m.tris[0].mat_idx, -1);
+    cr_assert_eq(m.n_warnings, 0, "no mtllib: usemtl names only label faces");
+    obj_free(&m);
+}
+
+/* MTL colour forms (Wavefront, "Material Library File (.mtl)", Ka): "xyz x [y z]" is CIE XYZ,
+ * converted with the IEC 61966-2-1 (sRGB) matrix: D65 white XYZ (0.9505, 1, 1.089) -> RGB
+ * (1, 1, 1) to the matrix's 4 decimals, and one number means x = y = z; "spectral file.rfl
+ * [factor]" is ignored (the key keeps its value) with one warning for the whole load;
+ * "d -halo f" reads f. */
+Test(obj, mtl_xyz_spectral_and_halo, .init = tmp_setup, .fini = tmp_teardown)
+{
+    write_tmp("forms.mtl", "newmtl a\nKd xyz 0.9505 1 1.089\nKa spectral wood.rfl 0.5\n"
+                           "Ke xyz 1\nd -halo 0.25\nnewmtl b\nKd 0.5\nKd spectral w.rfl\n"
+                           "Tf spectral w.rfl 2\n");
+    const char *path = write_tmp("forms.obj", "mtllib forms.mtl\n");
+    struct obj_mesh m;
+    load_ok(path, &m);
+    cr_assert_eq(m.n_materials, 2);
+    const struct obj_material *a = &m.materials[0];
+    cr_assert(fabsf(a->Kd.x - 1.0f) < 1e-4f && fabsf(a->Kd.y - 1.0f) < 1e-4f &&
+                  fabsf(a->Kd.z - 1.0f) < 1e-4f,
+              "D65 white -> (%g, %g, %g)", a->Kd.x, a->Kd.y, a->Kd.z);
+    /* XYZ (1, 1, 1): each row of the matrix summed */
+    cr_assert(fabsf(a->Ke.x - (3.2406f - 1.5372f - 0.4986f)) < 1e-6f &&
+              fabsf(a->Ke.y - (-0.9689f + 1.8758f + 0.0415f)) < 1e-6f &&
+              fabsf(a->Ke.z - (0.0557f - 0.2040f + 1.0570f)) < 1e-6f);
+    cr_assert_eq(a->d, 0.25f);
+    cr_assert(vec3_eq(m.materials[1].Kd, v3(0.5f, 0.5f, 0.5f)), "spectral keeps the value");
+    cr_assert(vec3_eq(m.materials[1].Tf, v3(1, 1, 1)), "spectral keeps the default");
+    cr_assert_eq(m.n_warnings, 1, "one warning for every spectral colour");
+    cr_assert_str_eq(warning_text(&m, 0), "forms.mtl:3:4: warning: 'Ka spectral' ignored: mcpt "
+                                          "reads no .rfl spectral curves, so Ka keeps its value "
+                                          "(2 more 'spectral' colours ignored too)");
+    obj_free(&m);
+
+    write_tmp("bad1.mtl", "newmtl a\nKd xyz 1 2\n");
+    expect_error(write_tmp("bad1.obj", "mtllib bad1.mtl\n"),
+                 "bad1.mtl:2:11: error: expected 1 or 3 numbers after 'Kd xyz', got 2");
+    write_tmp("bad2.mtl", "newmtl a\nKd spectral\n");
+    expect_error(write_tmp("bad2.obj", "mtllib bad2.mtl\n"),
+                 "bad2.mtl:2:12: error: expected an .rfl file name after 'Kd spectral', got end "
+                 "of line");
+    write_tmp("bad3.mtl", "newmtl a\nKe xyz 3e38 0 0\n");
+    expect_error(write_tmp("bad3.obj", "mtllib bad3.mtl\n"),
+                 "bad3.mtl:2:4: error: expected 'Ke xyz' values whose RGB is within float range "
+                 "(|component| <= 3.40282e+38), got 9.7218e+38 for R");
+    write_tmp("bad4.mtl", "newmtl a\nd -halo\n");
+    expect_error(write_tmp("bad4.obj", "mtllib bad4.mtl\n"),
+                 "bad4.mtl:2:8: error: expected 1 number after 'd', got 0");
+}
+
+/* mtllib: a name with spaces that names a file as a whole is one name (Blender's reading; the
+ * Blender exporter writes the OBJ's own name, spaces and all), double quotes are dropped, and
+ * otherwise the names are split at blanks as the format says; a repeated name is read once. */
+Test(obj, mtllib_names_with_spaces_and_quotes, .init = tmp_setup, .fini = tmp_teardown)
+{
+    write_tmp("my scene.mtl", "newmtl a\n");
+    write_tmp("b.mtl", "newmtl b\n");
+    struct obj_mesh m;
+    load_ok(write_tmp("s1.obj", "mtllib my scene.mtl\n"), &m);
+    cr_assert_eq(m.n_materials, 1);
+    obj_free(&m);
+    load_ok(write_tmp("s2.obj", "mtllib \"my scene.mtl\"\nmtllib b.mtl \"b.mtl\" b.mtl\n"), &m);
+    cr_assert_eq(m.n_materials, 2);
+    cr_assert_str_eq(m.materials[1].name, "b");
+    obj_free(&m);
+    expect_error_anywhere(write_tmp("s3.obj", "mtllib b.mtl nope.mtl\n"),
+                          "s3.obj:1:14: error: cannot open mtllib 'nope.mtl' (nope.mtl): No "
+                          "such file or directory");
+}
+
+/* A FIFO (no writer) as OBJ or as MTL is refused at once, not waited on in open(); so are a
+ * directory and a character device as MTL.  UTF-16 is named as such. */
+Test(obj, fifo_and_other_files_refused, .init = tmp_setup, .fini = tmp_teardown, .timeout = 10)
+{
+    char fifo[400];
+    snprintf(fifo, sizeof fifo, "%s/pipe.obj", tmp_dir);
+    cr_assert_eq(mkfifo(fifo, 0600), 0);
+    expect_error(fifo, "pipe.obj: error: expected a regular file, got a FIFO");
+    expect_error_anywhere(write_tmp("f.obj", "mtllib pipe.obj\n"),
+                          "f.obj:1:8: error: expected a regular file for mtllib 'pipe.obj' "
+                          "(pipe.obj), got a FIFO");
+    expect_error_anywhere(write_tmp("d.obj", "mtllib .\n"),
+                          "d.obj:1:8: error: expected a regular file for mtllib '.' (.), got a "
+                          "directory");
+    expect_error_anywhere(write_tmp("z.obj", "mtllib /dev/zero\n"),
+                          "z.obj:1:8: error: expected a regular file for mtllib '/dev/zero' "
+                          "(/dev/zero), got a character device");
+    expect_error(write_tmp_n("u16.obj", "\xff\xfev\0 \0", 6),
+                 "u16.obj:1:1: error: expected UTF-8 text, got UTF-16 (byte order mark 0xff "
+                 "0xfe)");
+}
+
+/* Reading in chunks: a file of many chunks reads as one (statements cross chunk boundaries,
+ * one of them continued across one), and a NUL byte far into the file is reported at its
+ * line and column after the statements before it. */
+Test(obj, chunks_join_and_stop_at_the_first_nul, .init = tmp_setup, .fini = tmp_teardown)
+{
+    enum { N_VERTS = 100000 }; /* ~2 MB: several 256 KiB chunks */
+    size_t cap = (size_t)N_VERTS * 40 + 64, n = 0;
+    char *text = malloc(cap);
+    cr_assert_not_null(text);
+    for (int i = 0; i < N_VERTS; i++)
+        n += (size_t)snprintf(text + n, cap - n,
+                              i % 1000 == 7 ? "v %d.5 -%d \\\n %d\n" : "v %d.5 -%d %d\n", i, i,
+                              i % 7);
+    n += (size_t)snprintf(text + n, cap - n, "f 1 2 3\n");
+    struct obj_mesh m;
+    load_ok(write_tmp_n("big.obj", text, n), &m);
+    cr_assert_eq(m.n_positions, N_VERTS);
+    for (int i = 0; i < N_VERTS; i++)
+        cr_assert(vec3_eq(m.positions[i], v3((float)i + 0.5f, -(float)i, (float)(i % 7))),
+                  "vertex %d", i);
+    obj_free(&m);
+    size_t at = n - 8 + 3; /* the face line: "f 1\0..." */
+    text[at] = '\0';
+    int n_lines = N_VERTS + N_VERTS / 1000 + 1; /* + the joined lines: the face's line */
+    char golden[200];
+    snprintf(golden, sizeof golden, "big.obj:%d:4: error: expected text, got a NUL byte", n_lines);
+    expect_error(write_tmp_n("big.obj", text, n), golden);
+    free(text);
+}
+
+/* A 3 GiB sparse file of NUL bytes (no disk used): the error comes at 1:1 after reading one
+ * chunk, and the process holds far less than the file (it held 3.1 GB when the reader read
+ * whole files). */
+Test(obj, sparse_3gib_of_nuls_stops_at_once, .init = tmp_setup, .fini = tmp_teardown, .timeout = 20)
+{
+    char path[400];
+    snprintf(path, sizeof path, "%s/zeros.obj", tmp_dir);
+    int fd = open(path, O_WRONLY | O_CREAT | O_TRUNC, 0600);
+    cr_assert_geq(fd, 0);
+    cr_assert_eq(ftruncate(fd, (off_t)3 << 30), 0);
+    close(fd);
+    expect_error(path, "zeros.obj:1:1: error: expected text, got a NUL byte");
+    struct rusage ru;
+    cr_assert_eq(getrusage(RUSAGE_SELF, &ru), 0);
+    cr_assert_lt(ru.ru_maxrss, 256 * 1024, "peak %ld KiB", ru.ru_maxrss); /* ru_maxrss: KiB */
+}
+
+/* A statement longer than 16 MiB (here one line of 20 MB without a newline) is refused
+ * instead of growing the buffer without bound. */
+Test(obj, overlong_statement_refused, .init = tmp_setup, .fini = tmp_teardown, .timeout = 30)
+{
+    size_t n = 20u << 20;
+    char *text = malloc(n);
+    cr_assert_not_null(text);
+    memcpy(text, "v 0 0 0\nv", 9);
+    memset(text + 9, ' ', n - 9);
+    expect_error(write_tmp_n("long.obj", text, n),
+                 "long.obj:2:1: error: expected a statement of at most 16777216 bytes ('\\' "
+                 "continuation lines included), got a longer one");
+    free(text);
+}
+
+/* The name table: every name found with its value, absent names not found, keys kept; and
+ * the cost stays O(1) per operation, counted in probes rather than timed: with the table at
+ * most half full, linear probing inspects about 1.5 slots per successful search and 2.5 per
+ * unsuccessful one (Knuth, TAOCP vol. 3, 6.4), so 3 per operation on average is a generous
+ * bound.  A quadratic lookup (the old linear scan) would inspect ~n/2 per operation. */
+Test(obj, name_table_is_linear)
+{
+    enum { N = 300000 };
+    struct obj_names t = {0};
+    char name[32];
+    uint32_t n_wrong = 0; /* one assertion at the end: a million cr_asserts cost seconds */
+    for (uint32_t i = 0; i < N; i++) {
+        int len = snprintf(name, sizeof name, "mat_%u", i * 7919u);
+        n_wrong += obj_names_find(&t, name, (size_t)len) != -1;
+        n_wrong += !obj_names_add(&t, name, (size_t)len, i);
+    }
+    for (uint32_t i = 0; i < N; i++) {
+        int len = snprintf(name, sizeof name, "mat_%u", i * 7919u);
+        n_wrong += obj_names_find(&t, name, (size_t)len) != (int64_t)i;
+    }
+    cr_assert_eq(n_wrong, 0);
+    cr_assert_eq(obj_names_find(&t, "mat_1", 5), -1);
+    cr_assert_eq(obj_names_find(&t, "mat_", 4), -1);
+    cr_assert_str_eq(obj_names_key(&t, 3), "mat_23757");
+    uint64_t n_ops = 3u * (uint64_t)N; /* a find and an add per name, then a find */
+    cr_assert_lt(t.n_probes, 3 * n_ops, "%llu probes for %llu operations",
+                 (unsigned long long)t.n_probes, (unsigned long long)n_ops);
+    obj_names_free(&t);
+    cr_assert_null(t.slots);
+}
+
+/* 200k materials and 200k usemtl in one OBJ: the duplicate check of newmtl and the usemtl
+ * lookups were linear scans (2 * 2e10 string compares: minutes); with the hash tables this
+ * loads in well under a second.  The timeout is the hang cap, set far above the linear time
+ * (sanitizer builds are ~10x slower) and far below the quadratic one. */
+Test(obj, many_materials_load_in_linear_time, .init = tmp_setup, .fini = tmp_teardown,
+     .timeout = 60)
+{
+    enum { N = 200000 };
+    size_t cap = (size_t)N * 32, n_mtl = 0, n_obj = 0;
+    char *mtl = malloc(cap), *obj = malloc(cap + 64);
+    cr_assert(mtl && obj);
+    n_obj += (size_t)sprintf(obj, "mtllib many.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n");
+    for (int i = 0; i < N; i++) {
+        n_mtl += (size_t)sprintf(mtl + n_mtl, "newmtl m%d\nKd 0.5\n", i);
+        n_obj += (size_t)sprintf(obj + n_obj, "usemtl m%d\nf 1 2 3\n", N - 1 - i);
+    }
+    write_tmp_n("many.mtl", mtl, n_mtl);
+    struct obj_mesh m;
+    load_ok(write_tmp_n("many.obj", obj, n_obj), &m);
+    cr_assert_eq(m.n_materials, N);
+    for (uint32_t i = 0; i < N; i++)
+        cr_assert_eq(m.tris[i].mat_idx, (int32_t)(N - 1 - i));
+    obj_free(&m);
+    free(mtl);
+    free(obj);
+}
+
+/* Number literals at the edges: a literal that underflows is the 0 or denormal it rounds to
+ * (strtof's ERANGE is not an error); hexadecimal floats, which strtof would read, are not OBJ
+ * numbers (the scene format refuses them too); NaN in any spelling is refused. */
+Test(obj, number_literal_edges, .init = tmp_setup, .fini = tmp_teardown)
+{
+    struct obj_mesh m;
+    load_ok(write_tmp("tiny.obj", "v 1e-50 -1e-50 1e-40\n"), &m);
+    cr_assert(m.positions[0].x == 0.0f && m.positions[0].y == 0.0f && signbit(m.positions[0].y));
+    cr_assert_eq(m.positions[0].z, 1e-40f);
+    obj_free(&m);
+    expect_error(write_tmp("hex.obj", "v 0x1p3 0 0\n"), "hex.obj:1:3: error: expected a number, "
+                                                        "got '0x1p3'");
+    expect_error(write_tmp("nanp.obj", "v 0 nan(0x1) 0\n"), "nanp.obj:1:5: error: expected a "
+                                                            "finite number, got 'nan(0x1)'");
 }

@@ -1,9 +1,11 @@
 /* tests/output_test.c - output.c: the names of a render's files and their writing.  The image's
- * name comes from -o or the scene's base name; the preview, snapshots, heat map, contact sheet
- * and curve files are named from it by replacing the extension (appending where there is none,
- * and never taking a leading dot for one); a name that does not fit is refused before any
- * render (bad input).  An image is written as the EXR of every render (7 channels) with its PNG
- * beside it; a snapshot's names carry the spp zero-padded to the final spp's digits. */
+ * name comes from -o or the scene's base name, and its extension says its format (.exr: the
+ * float image and its PNG preview; .png: the PNG alone; anything else refused, as is a name
+ * that does not fit, before any render: bad input); the preview, snapshots, heat map, contact
+ * sheet and curve files are named from it by replacing the extension (never taking a leading
+ * dot for one).  An image is written as the EXR of every render (7 channels and mcpt's header
+ * attributes) with its PNG beside it; a snapshot's names carry the spp zero-padded to the
+ * final spp's digits. */
 #include <criterion/criterion.h>
 
 #include "image.h"
@@ -14,25 +16,50 @@ Test(output, names_follow_the_image)
 {
     struct output_paths p;
     struct mcpt_error err;
-    cr_assert(output_paths_init(&p, "scenes/cornell-box.txt", NULL, NULL, NULL, false, &err));
+    cr_assert(output_paths_init(&p, "scenes/cornell-box.txt", NULL, NULL, NULL, false, true, &err));
     cr_assert_str_eq(p.exr, "cornell-box.exr");
     cr_assert_str_eq(p.png, "cornell-box.png");
     cr_assert_str_eq(p.checkpoint, "cornell-box.exr.ckpt");
     cr_assert_str_eq(p.heatmap, "");
-    cr_assert(output_paths_init(&p, "x/.hidden", "out/v1.2/render", NULL, NULL, true, &err));
-    cr_assert_str_eq(p.exr, "out/v1.2/render");
+    cr_assert(
+        output_paths_init(&p, "x/.hidden", "out/v1.2/render.exr", NULL, NULL, true, true, &err));
+    cr_assert_str_eq(p.exr, "out/v1.2/render.exr");
     cr_assert_str_eq(p.png, "out/v1.2/render.png");
     cr_assert_str_eq(p.heatmap, "out/v1.2/render.samples.png");
-    cr_assert(output_paths_init(&p, "s.txt", "dir/.x", "c.ckpt", "h.png", true, &err));
+    cr_assert(output_paths_init(&p, "s.txt", "dir/.x.EXR", "c.ckpt", "h.png", true, true, &err));
     cr_assert_str_eq(p.png, "dir/.x.png");
     cr_assert_str_eq(p.checkpoint, "c.ckpt");
     cr_assert_str_eq(p.heatmap, "h.png");
-    cr_assert(output_paths_init(&p, "x/.hidden", NULL, NULL, NULL, false, &err));
+    cr_assert(output_paths_init(&p, "x/.hidden", NULL, NULL, NULL, false, true, &err));
     cr_assert_str_eq(p.exr, ".hidden.exr");
+
+    /* --no-preview: the EXR alone */
+    cr_assert(output_paths_init(&p, "s.txt", "a.exr", NULL, NULL, false, false, &err));
+    cr_assert_str_eq(p.exr, "a.exr");
+    cr_assert_str_eq(p.png, "");
+    /* an image named .png is a PNG and nothing else; the other names follow it */
+    cr_assert(output_paths_init(&p, "s.txt", "d/x.png", NULL, NULL, true, true, &err));
+    cr_assert_str_eq(p.exr, "");
+    cr_assert_str_eq(p.png, "d/x.png");
+    cr_assert_str_eq(output_image_path(&p), "d/x.png");
+    cr_assert_str_eq(p.checkpoint, "d/x.png.ckpt");
+    cr_assert_str_eq(p.heatmap, "d/x.samples.png");
+    /* any other name is refused: no format is written under another's name */
+    const char *bad[] = {"x.jpg", "render", "dir.exr/render", ".exr", "x.exr.tmp"};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        cr_assert_not(output_paths_init(&p, "s.txt", bad[i], NULL, NULL, false, true, &err), "%s",
+                      bad[i]);
+        cr_assert_eq(err.kind, MCPT_ERROR_INPUT);
+        cr_assert_str_eq(err.file, "mcpt");
+        cr_assert(strstr(err.msg, "expected an output name ending in .exr (float image and PNG "
+                                  "preview) or .png (8-bit sRGB only), got '"),
+                  "%s", err.msg);
+    }
 
     static char long_name[FILE_PATH_BYTES];
     memset(long_name, 'n', sizeof long_name - 5);
-    cr_assert_not(output_paths_init(&p, "s.txt", long_name, NULL, NULL, false, &err));
+    memcpy(long_name + sizeof long_name - 5, ".exr", 4);
+    cr_assert_not(output_paths_init(&p, "s.txt", long_name, NULL, NULL, false, true, &err));
     cr_assert_eq(err.kind, MCPT_ERROR_INPUT);
     cr_assert(strstr(err.msg, "expected a file name of at most 4095 bytes"), "%s", err.msg);
 }
@@ -45,13 +72,18 @@ Test(output, image_and_snapshot_files)
     snprintf(out, sizeof out, "%s/r.exr", dir);
     struct output_paths p;
     struct mcpt_error err;
-    cr_assert(output_paths_init(&p, "s.txt", out, NULL, NULL, false, &err));
+    cr_assert(output_paths_init(&p, "s.txt", out, NULL, NULL, false, true, &err));
     struct film film;
     cr_assert(film_init(&film, 3, 2, &err));
     for (int i = 0; i < 6; i++)
         for (int k = 0; k < 2 + i; k++)
             film_add(&film.pixels[i], v3(0.1f * (float)k, 0.5f, 1.0f));
-    cr_assert(output_write_image(&p, &film, NULL, 0.0f, &err), "%s", err.msg);
+    struct output_meta meta = {.scene = "s.txt",
+                               .sampler = "sobol",
+                               .seed = 7,
+                               .max_depth = UINT32_MAX,
+                               .render_s = 1.5};
+    cr_assert(output_write_image(&p, &film, NULL, &meta, NULL, &err), "%s", err.msg);
     cr_assert(test_exists(p.png));
     struct image img;
     cr_assert(image_read_exr(p.exr, &img, &err), "%s", err.msg);
@@ -59,10 +91,26 @@ Test(output, image_and_snapshot_files)
     int s = image_find_channel(&img, "samples");
     cr_assert(s >= 0 && img.data[s][5] == 7.0f);
     cr_assert(image_find_channel(&img, "variance.G") >= 0);
+    /* the header: mcpt's attributes (spp: the mean of 2..7 samples), the Rec. 709 primaries */
+    const char *attrs[][2] = {
+        {"mcpt.version", MCPT_VERSION},  {"mcpt.spp", "4.5"}, {"mcpt.scene", "s.txt"},
+        {"mcpt.sampler", "sobol"},       {"mcpt.seed", "7"},  {"mcpt.max-depth", "inf"},
+        {"mcpt.render-seconds", "1.500"}};
+    for (size_t i = 0; i < sizeof attrs / sizeof attrs[0]; i++) {
+        const char *v = image_find_attr(&img, attrs[i][0]);
+        cr_assert(v && strcmp(v, attrs[i][1]) == 0, "%s: %s", attrs[i][0], v ? v : "(none)");
+    }
+    const float rec709[8] = IMAGE_REC709_CHROMATICITIES;
+    cr_assert(img.has_chromaticities);
+    cr_assert_eq(memcmp(img.chromaticities, rec709, sizeof rec709), 0);
     image_free(&img);
-    cr_assert(output_write_snapshot(&p, &film, 4, 100, 0.0f, &err), "%s", err.msg);
+    meta.render_s = -1.0; /* left out */
+    cr_assert(output_write_snapshot(&p, &film, 4, 100, &meta, NULL, &err), "%s", err.msg);
     snprintf(path, sizeof path, "%s/r-spp004.exr", dir);
-    cr_assert(test_exists(path), "%s", path);
+    cr_assert(image_read_exr(path, &img, &err), "%s", err.msg);
+    cr_assert_null(image_find_attr(&img, "mcpt.render-seconds"));
+    cr_assert_str_eq(image_find_attr(&img, "mcpt.seed"), "7");
+    image_free(&img);
     snprintf(path, sizeof path, "%s/r-spp004.png", dir);
     cr_assert(test_exists(path), "%s", path);
     cr_assert(output_write_heatmap(&p, &film, &err)); /* none asked for: nothing written */

@@ -325,9 +325,10 @@ static int assert_within_rounding(const struct image *merged, const struct image
 
 /* GNU parallel runs 4 mcpt processes over the uneven disjoint ranges 0:10, 10:27, 27:50 and
  * 50:64 of a 64-spp render of the glass Cornell box (refraction, every kind of path), mcpt
- * merge joins them, and the result equals one process rendering all 64 samples within the
- * float-rounding bound above; for the Sobol' sampler and for the stratified one (whose strata
- * span the whole render, so a range must use the whole render's sets). */
+ * merge --partial joins them (keeping the sums the bound below reads), and the result equals
+ * one process rendering all 64 samples within the float-rounding bound above; for the Sobol'
+ * sampler and for the stratified one (whose strata span the whole render, so a range must use
+ * the whole render's sets). */
 Test(distributed, gnu_parallel_four_ranges_equal_one_process, .init = setup, .fini = teardown,
      .timeout = 120)
 {
@@ -342,8 +343,8 @@ Test(distributed, gnu_parallel_four_ranges_equal_one_process, .init = setup, .fi
                            "--sample-range {} -o %s/part-{#}.exr ::: 0:10 10:27 27:50 50:64",
                            mcpt_bin(), common, samplers[s], g_dir),
                      0, "parallel or one of the partial renders failed");
-        cr_assert_eq(shell("%s merge --quiet %s/part-*.exr -o %s/merged.exr", mcpt_bin(), g_dir,
-                           g_dir),
+        cr_assert_eq(shell("%s merge --quiet --partial %s/part-*.exr -o %s/merged.exr", mcpt_bin(),
+                           g_dir, g_dir),
                      0);
         cr_assert_eq(shell("%s %s --sampler %s -o %s/full.exr", mcpt_bin(), common, samplers[s],
                            g_dir),

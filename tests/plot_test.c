@@ -1,11 +1,13 @@
 /* tests/plot_test.c - plot.c: the pictures of results.  Their sizes follow the documented
  * layout (docs/convergence.md): a heat map scales a film narrower than 256 pixels up by a whole
  * factor above a 43-row legend; a contact sheet tiles thumbnails of about 160 pixels, five to a
- * row, each above two lines of labels.  The bitmap font draws each glyph's rows as stored; the
- * SVG is complete and escapes the scene's name.  A map too large, or a sheet with no
+ * row, each above three lines of labels (spp, PSNR, whose seed).  The bitmap font draws each
+ * glyph's rows as stored; the SVG is complete, escapes the scene's name and draws the
+ * uncorrected curve dashed above the corrected one.  A map too large, or a sheet with no
  * thumbnail, is refused (a runtime error) and writes nothing. */
 #include <criterion/criterion.h>
 
+#include <png.h>
 #include <stdlib.h>
 
 #include "plot.h"
@@ -100,8 +102,8 @@ Test(plot, error_heatmap_size)
 }
 
 /* Three thumbnails of an 8 x 8 film, each repeated up by 160 / 8 = 20 to 160 x 160, tile in one
- * row: width 8 + 3 (160 + 8) = 512, height 8 + 160 + 2 (7 + 3) 2 + 8 = 216.  No thumbnail: no
- * sheet. */
+ * row: width 8 + 3 (160 + 8) = 512, height 8 + 160 + 3 (7 + 3) 2 + 8 = 236 (three label lines:
+ * spp, PSNR, seed).  No thumbnail: no sheet. */
 Test(plot, contact_sheet_layout)
 {
     char dir[256], path[300];
@@ -115,15 +117,17 @@ Test(plot, contact_sheet_layout)
     cr_assert_str_eq(err.msg, "expected snapshots for the contact sheet, got none");
     cr_assert_eq(err.kind, MCPT_ERROR_RUNTIME);
     cr_assert_not(test_exists(path));
-    cr_assert(plot_sheet_add(&sheet, &fx.img, 1, 20.0, STATS_ERR_REFERENCE, 0.0f, &err));
-    cr_assert(plot_sheet_add(&sheet, &fx.img, 2, NAN, STATS_ERR_REFERENCE_CORRECTED, 0.0f, &err));
-    cr_assert(plot_sheet_add(&sheet, &fx.img, 4, INFINITY, STATS_ERR_OWN_VARIANCE, 1.0f, &err));
+    const struct image_look plain = {0}, brighter = {.exposure = 1.0f};
+    cr_assert(plot_sheet_add(&sheet, &fx.img, 1, 20.0, STATS_ERR_REFERENCE, &plain, &err));
+    cr_assert(plot_sheet_add(&sheet, &fx.img, 2, NAN, STATS_ERR_REFERENCE_CORRECTED, &plain, &err));
+    cr_assert(
+        plot_sheet_add(&sheet, &fx.img, 4, INFINITY, STATS_ERR_OWN_VARIANCE, &brighter, &err));
     cr_assert_eq(sheet.n_thumbs, 3);
     cr_assert(sheet.thumbs[0].width == 160 && sheet.thumbs[0].height == 160);
     cr_assert(plot_write_contact_sheet(path, &sheet, &err), "%s", err.msg);
     uint32_t w, h;
     png_size(path, &w, &h);
-    cr_assert(w == 512 && h == 216, "%ux%u", w, h);
+    cr_assert(w == 512 && h == 236, "%ux%u", w, h);
     plot_sheet_free(&sheet);
     film_free(&fx.film);
     test_remove_dir(dir);
@@ -180,4 +184,92 @@ Test(plot, font_draws_stored_glyphs)
             cr_assert_eq(img[r][col][0] == 255, one, "'1' row %d col %d", r, col);
             cr_assert_eq(img[r][6 + col][0] == 255, box, "box row %d col %d", r, col);
         }
+}
+
+/* The third label line of a tile names the seed whose PSNR it shows, "only" when the run had
+ * several (the summary table averages over them): the sheet's pixels there are exactly those
+ * of the font drawing "seed 7 only" on the background. */
+Test(plot, contact_sheet_names_the_seed)
+{
+    char dir[256], path[300];
+    test_make_dir(dir, sizeof dir, "plot_seed");
+    snprintf(path, sizeof path, "%s/sheet.png", dir);
+    struct fixture fx;
+    fixture_init(&fx);
+    struct plot_sheet sheet = {.seed = 7, .n_seeds = 3};
+    struct mcpt_error err;
+    const struct image_look look = {0};
+    cr_assert(plot_sheet_add(&sheet, &fx.img, 1, 20.0, STATS_ERR_REFERENCE, &look, &err));
+    cr_assert(plot_write_contact_sheet(path, &sheet, &err), "%s", err.msg);
+    png_image im;
+    memset(&im, 0, sizeof im);
+    im.version = PNG_IMAGE_VERSION;
+    cr_assert(png_image_begin_read_from_file(&im, path), "%s", im.message);
+    im.format = PNG_FORMAT_RGB;
+    uint8_t *got = malloc(PNG_IMAGE_SIZE(im));
+    cr_assert(got && png_image_finish_read(&im, NULL, got, 0, NULL), "%s", im.message);
+    int w = (int)im.width, h = (int)im.height;
+    /* the layout of plot_write_contact_sheet: margin 8, font scale 2, a 160-pixel tile, labels
+     * 3 scale below it, (7 + 3) scale apart */
+    const int scale = 2, x0 = 8, y = 8 + 160 + 3 * scale + 2 * (PLOT_FONT_H + 3) * scale;
+    uint8_t *want = malloc((size_t)w * h * 3);
+    cr_assert_not_null(want);
+    for (int i = 0; i < w * h; i++)
+        memcpy(want + 3 * i, (const uint8_t[3]){32, 32, 32}, 3); /* the sheet's background */
+    int text_w = plot_draw_text(want, w, h, x0, y, scale, "seed 7 only",
+                                (const uint8_t[3]){255, 255, 255});
+    cr_assert_gt(text_w, 0);
+    for (int yy = y; yy < y + PLOT_FONT_H * scale; yy++)
+        for (int xx = x0; xx < x0 + text_w; xx++)
+            for (int c = 0; c < 3; c++)
+                cr_assert_eq(got[3 * (yy * w + xx) + c], want[3 * (yy * w + xx) + c], "pixel %d,%d",
+                             xx, yy);
+    free(want);
+    free(got);
+    plot_sheet_free(&sheet);
+    film_free(&fx.film);
+    test_remove_dir(dir);
+}
+
+/* Against a reference with variance channels the plot has the corrected RMSE (solid) and the
+ * uncorrected one, dashed and drawn after it, so that it shows where the two coincide. */
+Test(plot, uncorrected_curve_is_dashed_and_on_top)
+{
+    char dir[256], path[300];
+    test_make_dir(dir, sizeof dir, "plot_raw");
+    snprintf(path, sizeof path, "%s/c.svg", dir);
+    struct fixture ref, fx;
+    fixture_init(&ref);
+    fixture_init(&fx);
+    for (int i = 0; i < 64; i++) /* the image: brighter than the reference, so the error > 0 */
+        film_add(&fx.film.pixels[i], v3(0.9f, 0.25f, 0.125f));
+    struct stats_run_info info = {.scene = "s.txt",
+                                  .sampler = "sobol",
+                                  .integrator = "path-mis",
+                                  .max_depth = 5,
+                                  .width = 8,
+                                  .height = 8};
+    struct stats_curve curve;
+    stats_curve_init(&curve, &info);
+    struct mcpt_error err;
+    for (uint32_t spp = 1; spp <= 4; spp *= 2)
+        cr_assert(stats_curve_add(&curve, &fx.film, &ref.img, 1, spp, 0.1 * spp, NULL, &err), "%s",
+                  err.msg);
+    struct stats_summary sum;
+    cr_assert(stats_summarize(&curve, 0.0, &sum));
+    cr_assert_eq(sum.source, STATS_ERR_REFERENCE_CORRECTED);
+    cr_assert(plot_write_svg(path, &curve, &sum, &err), "%s", err.msg);
+    static char text[1 << 16];
+    cr_assert(test_read_file(path, text, sizeof text) > 0);
+    const char *raw = strstr(text, "fill=\"none\" stroke=\"#ff7f0e\" stroke-width=\"1.8\" "
+                                   "stroke-dasharray=\"5,3\" points=\"");
+    const char *rmse = strstr(text, "fill=\"none\" stroke=\"#1f77b4\" stroke-width=\"1.8\" "
+                                    "points=\"");
+    cr_assert(raw && rmse, "%.2000s", text);
+    cr_assert_gt(raw, rmse, "the uncorrected curve is drawn before (under) the corrected one");
+    stats_summary_free(&sum);
+    stats_curve_free(&curve);
+    film_free(&fx.film);
+    film_free(&ref.film);
+    test_remove_dir(dir);
 }

@@ -172,12 +172,13 @@ Test(resume, mismatch_refused, .init = setup, .fini = teardown)
     snprintf(want, sizeof want, "%s: error: expected --spp 8 as in the checkpoint, got 9\n", ckpt);
     cr_assert_str_eq(err, want);
 
+    /* --width alone keeps the film's aspect ratio: 24x16 -> 8x5 (5.33 rounded) */
     const char *size[] = {"--resume", ckpt, "--width", "8", "-o", out, NULL};
     cr_assert_eq(test_run_mcpt(size, NULL, err_path, ALARM_S), 2);
     test_read_file(err_path, err, sizeof err);
     snprintf(want, sizeof want,
              "%s: error: expected a 24x16 film as in the checkpoint, got "
-             "8x16\n",
+             "8x5\n",
              ckpt);
     cr_assert_str_eq(err, want);
 
