@@ -1167,10 +1167,10 @@ void bvh_edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx,
 /* Woop's test redone in double for a (ray, triangle) pair whose float result could not decide
  * the side of the origin (tri_hit, woop8).  Every float input (vertex, origin, direction) is
  * exact in double; the shear constants, translation, shear, edge functions, T and det are
- * recomputed, with the same error bounds in units of u = 2^-53.  For float inputs no double operation here
- * overflows or underflows (products of at most four floats stay within 2^+-600), so the bounds
- * need no absolute term.  A hit needs t certainly > 0 and t_min < t < t_max, the latter tested
- * on the float t returned (the double one rounded).  When even double cannot
+ * recomputed, with the same error bounds in units of u = 2^-53.  For float inputs no double
+ * operation here overflows or underflows (products of at most four floats stay within 2^+-600),
+ * so the bounds need no absolute term.  A hit needs t certainly > 0 and t_min < t < t_max, the
+ * latter tested on the float t returned (the double one rounded).  When even double cannot
  * decide (the origin within about 2^-50 of the plane, relative to the triangle's extent from
  * it), the hit is rejected: the origin lies on the plane, and t_min is exclusive. */
 bool bvh_tri_hit_double(const struct bvh_tri *tri, const struct ray_pre *rp, const float edge[3],
