@@ -131,7 +131,12 @@ vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *op
         if (!hit || n_bounces++ == max_bounces)
             break;
 
-        /* the vertex: its material (albedo texture looked up) and local shading frame */
+        /* the vertex: its material (albedo texture looked up) and local shading frame; a
+         * shading normal that puts wo on the other side than the geometric one does (seen
+         * near a smooth mesh's silhouette) gives way to the geometric normal, so no sampled
+         * direction is thrown away for being on the wrong side of the surface */
+        if (v3_dot(wo_world, hr.sf.ns) * v3_dot(wo_world, hr.sf.ng) <= 0.0f)
+            hr.sf.ns = hr.sf.ng;
         struct material m_textured;
         struct vertex v = make_vertex(&hr.sf, &scene->materials[hr.sf.mat_idx], wo_world,
                                       &m_textured);

@@ -322,6 +322,126 @@ Test(extremes, sheared_quads_render_exactly, .timeout = 120)
     }
 }
 
+/* ---- smooth shading normals ---- */
+
+/* A UV sphere of radius 1 about the origin, n_stacks x n_slices (poles fanned), written as an
+ * OBJ without normals to dir/name; a scene around it goes to scene_path, its statements
+ * (camera, material, film...) from head, its mesh with normals=smooth, under a constant sky 1. */
+static void write_smooth_sphere(const char *dir, const char *name, int n_stacks, int n_slices,
+                                const char *head, char *scene_path, size_t bytes)
+{
+    char obj_path[300];
+    snprintf(obj_path, sizeof obj_path, "%s/%s.obj", dir, name);
+    FILE *f = fopen(obj_path, "w");
+    cr_assert_not_null(f);
+    fprintf(f, "v 0 1 0\nv 0 -1 0\n");
+    for (int i = 1; i < n_stacks; i++)
+        for (int j = 0; j < n_slices; j++) {
+            double theta = M_PI * i / n_stacks, phi = 2.0 * M_PI * j / n_slices;
+            fprintf(f, "v %.9g %.9g %.9g\n", sin(theta) * cos(phi), cos(theta),
+                    -sin(theta) * sin(phi));
+        }
+    /* vertex (i, j), i = 1 .. n_stacks - 1, is 3 + (i - 1) n_slices + j; outward winding */
+    for (int i = 1; i < n_stacks; i++)
+        for (int j = 0; j < n_slices; j++) {
+            int jn = (j + 1) % n_slices;
+            int a = 3 + (i - 1) * n_slices + j, b = 3 + (i - 1) * n_slices + jn;
+            if (i == 1)
+                fprintf(f, "f 1 %d %d\n", a, b);
+            if (i == n_stacks - 1)
+                fprintf(f, "f 2 %d %d\n", b, a);
+            else
+                fprintf(f, "f %d %d %d\nf %d %d %d\n", a, a + n_slices, b + n_slices, a,
+                        b + n_slices, b);
+        }
+    fclose(f);
+    snprintf(scene_path, bytes, "%s/%s.txt", dir, name);
+    f = fopen(scene_path, "w");
+    cr_assert_not_null(f);
+    fprintf(f, "%smesh file=%s material=m normals=smooth\nsky type=constant radiance=1,1,1\n", head,
+            obj_path);
+    fclose(f);
+}
+
+/* The largest angle between a triangle's geometric normal and the shading normal of one of its
+ * corners, over the scene's triangles. */
+static double max_shading_angle(const char *path)
+{
+    struct scene sc;
+    struct mcpt_error err;
+    cr_assert(scene_load(path, &sc, &err), "%s: %s", path, err.msg);
+    double angle = 0.0;
+    for (uint32_t i = 0; i < sc.n_tris; i++) {
+        const struct scene_tri *t = &sc.tris[i];
+        vec3 p0 = sc.positions[t->v[0]];
+        vec3 ng = v3_normalize(
+            v3_cross(v3_sub(sc.positions[t->v[1]], p0), v3_sub(sc.positions[t->v[2]], p0)));
+        for (int k = 0; k < 3; k++) {
+            cr_assert_geq(t->vn[k], 0, "triangle %u has no smooth normal", i);
+            double c = v3_dot(ng, sc.normals[t->vn[k]]);
+            angle = fmax(angle, acos(fmin(1.0, c)));
+        }
+    }
+    scene_free(&sc);
+    return angle;
+}
+
+/* Issue 12: smooth shading normals in a white furnace.  A convex sphere of 80 triangles with
+ * angle-weighted normals, albedo 1, under a constant sky 1.  With the geometric normal every
+ * pixel is exactly 1 (light and BSDF samples each add 1/2).  A shading normal tilted by theta
+ * from the face sends the share (1 - cos theta) / 2 of its cosine lobe below the face, and the
+ * geometric-side test drops those samples (the fraction of the projected unit disc outside the
+ * ellipse of semi-axes cos theta and 1): so no sample exceeds 1 (no light gained or leaked,
+ * exact up to float rounding), the image mean is at least 1 - (1 - cos theta_max) / 2 (4 SE),
+ * and no pixel is black: a view direction on the wrong side of the shading normal (near the
+ * silhouette) takes the geometric normal, so every pixel keeps at least half its samples'
+ * worth (>= 0.5; the chance that most of 64 samples lose both halves is negligible). */
+Test(extremes, smooth_sphere_in_white_furnace, .timeout = 60)
+{
+    char dir[64], path[400];
+    test_make_dir(dir, sizeof dir, "smooth");
+    write_smooth_sphere(dir, "furnace", 6, 8,
+                        "camera eye=0.3,0.2,3.2 look-at=0,0,0 up=0,1,0 fov=42\n"
+                        "film width=32 height=32\nrender spp=64 sampler=independent\n"
+                        "material name=m type=diffuse albedo=1,1,1\n",
+                        path, sizeof path);
+    double theta_max = max_shading_angle(path);
+    cr_assert_gt(theta_max, 0.1, "the shading normals differ from the faces'");
+    struct film f;
+    struct trace_result r;
+    render_file(path, 1, &f, &r);
+    cr_assert_eq(r.n_nonfinite, 0);
+    size_t n = (size_t)f.width * (size_t)f.height;
+    for (size_t i = 0; i < n; i++)
+        for (int c = 0; c < 3; c++) {
+            double m = film_mean(&f.pixels[i], c);
+            cr_assert(m <= 1.0 + 1e-5, "pixel %zu channel %d: %.9f > 1", i, c, m);
+            cr_assert(m >= 0.5, "pixel %zu channel %d: %.6f, black", i, c, m);
+        }
+    struct estimate e = region(&f, 0, 0, f.width, f.height, 1);
+    double bound = 1.0 - (1.0 - cos(theta_max)) / 2.0;
+    cr_log_info("smooth furnace: theta_max %.1f deg, mean %.5f (SE %.2g), bound %.5f",
+                theta_max * 180.0 / M_PI, e.mean, sqrt(e.var), bound);
+    cr_assert(e.mean >= bound - N_SE * sqrt(e.var), "mean %.6f below %.6f", e.mean, bound);
+    film_free(&f);
+    test_remove_dir(dir);
+}
+
+/* Issue 12: the camera inside the same smooth sphere (diffuse, albedo 0.5) under a white sky:
+ * shading normals let no light in, every pixel is exactly 0. */
+Test(extremes, smooth_sphere_lets_no_sky_in, .timeout = 60)
+{
+    char dir[64], path[400];
+    test_make_dir(dir, sizeof dir, "smooth");
+    write_smooth_sphere(dir, "inside", 6, 8,
+                        "camera eye=0.1,0.2,0.3 look-at=0.5,-0.2,-1 up=0,1,0 fov=100\n"
+                        "film width=32 height=32\nrender spp=64 sampler=independent\n"
+                        "material name=m type=diffuse albedo=0.5,0.5,0.5\n",
+                        path, sizeof path);
+    assert_black(path);
+    test_remove_dir(dir);
+}
+
 /* Rays aimed exactly at the vertices and at points along every edge of a mesh hit it: from the
  * centre of the closed icosphere (every edge shared by two faces), and from above the sliver fan
  * (its interior edges).  Woop et al. 2013's test is watertight, so no such ray slips through. */
