@@ -39,6 +39,7 @@ struct bvh {
     struct bvh_node *nodes; /* n_nodes nodes, 64-byte aligned; root at 0, nodes[1] unused */
     struct bvh_tri *tris;   /* n_tris triangles in BVH order */
     uint32_t *prim_idx;     /* prim_idx[i]: the caller's index of tris[i] */
+    uint32_t n_refs;        /* length of tris and prim_idx: triangles plus spatial splits' copies */
     uint32_t n_nodes;       /* length of nodes, the unused nodes[1] included; 0 when empty */
     /* wide (BVH_LAYOUT_WIDE), bvh_wide.c */
     struct wide_node *wide;  /* n_wide nodes, root at 0 */
