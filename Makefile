@@ -115,8 +115,11 @@ $(FUZZ_BUILD)/%.o: %.c $(FUZZ_STAMP)
 $(FUZZ_BUILD)/fuzz_%: fuzz/fuzz_%.c $(FUZZ_LIB_OBJS) $(FUZZ_STAMP)
 	$(FUZZ_CC) $(FUZZ_CFLAGS) -fsanitize=fuzzer -o $@ $(filter %.c %.o,$^) $(LDLIBS_ALL)
 
-fuzz: $(FUZZ_BUILD)/fuzz_scene $(FUZZ_BUILD)/fuzz_obj
-	fuzz/run.sh $(FUZZ_SECONDS) $(FUZZ_BUILD)
+# the objects are kept between builds (a pattern rule's prerequisites are otherwise removed)
+.SECONDARY: $(FUZZ_LIB_OBJS)
+FUZZ_HARNESSES := scene obj checkpoint partial
+fuzz: $(FUZZ_HARNESSES:%=$(FUZZ_BUILD)/fuzz_%)
+	fuzz/run.sh $(FUZZ_SECONDS) $(FUZZ_BUILD) $(FUZZ_HARNESSES)
 
 # Regenerates the checked-in sobol_matrices.h from Joe & Kuo's direction numbers (only when the
 # table should change; mcpt never reads the direction file).
@@ -178,7 +181,7 @@ uninstall:
 # Embree 3 in the same invocation and prints mcpt/Embree ratios; it is built only where Embree
 # is installed (Debian: libembree-dev), and nothing else depends on Embree.
 BENCH_MODELS_DIR ?= ../shared/models
-BENCH_MODELS ?= stanford-bunny stanford-dragon-100k sponza-dabrovic
+BENCH_MODELS ?= stanford-bunny stanford-dragon-100k sponza-dabrovic lucy-100k
 BENCH_RUNS ?= 5
 BENCH_DIR := $(BUILD)/bench
 BENCH_OBJS := $(BUILD)/bvh.o $(BUILD)/bvh_wide.o $(BUILD)/obj.o $(BUILD)/camera.o $(BUILD)/sample.o

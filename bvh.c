@@ -1,12 +1,13 @@
 /* bvh.c - the scalar reference BVH over triangles: 32-byte binary nodes in one flat array,
  * triangles permuted into BVH order, the binned-SAH build (Wald 2007, "On fast Construction of
- * SAH-based Bounding Volume Hierarchies") on several threads for large meshes, ordered
+ * SAH-based Bounding Volume Hierarchies") with spatial splits (Stich, Friedrich, Dietrich 2009,
+ * "Spatial Splits in Bounding Volume Hierarchies") on several threads for large meshes, ordered
  * traversal with a conservative slab test (PBRT 4e, ch. 6, "Conservative Ray-Bounds
  * Intersections"), the watertight triangle test (Woop, Benthin, Wald 2013, "Watertight
- * Ray/Triangle Intersection"), brute force and stats.  Reading order: layout, build,
- * traversal, triangle test, brute force, stats.  The fast 8-wide layout is converted from this
- * tree in bvh_wide.c, which is checked against it; bvh_internal.h is what the two share.
- * Measurements: docs/bvh.md. */
+ * Ray/Triangle Intersection"), brute force and stats.  Reading order: layout, build, spatial
+ * splits, traversal, triangle test, brute force, stats.  The fast 8-wide layout is converted
+ * from this tree in bvh_wide.c, which is checked against it; bvh_internal.h is what the two
+ * share.  Measurements: docs/bvh.md. */
 #include "bvh.h"
 
 #include <assert.h>
@@ -68,47 +69,98 @@
 #define BVH_SUBTREES_PER_THREAD 4   /* subtrees handed to the threads, per thread */
 #define BVH_MAX_THREADS 64
 
-/* What the build knows of one triangle: its box (the centre is derived from it). */
+/* What the build knows of one triangle, or of the part of one that a spatial split left on one
+ * side of its plane: its box (the centre is derived from it). */
 struct prim_ref {
-    float min[3];      /* lower corner of the box of the stored vertices */
-    uint32_t prim_idx; /* the caller's index of the triangle */
-    float max[3];      /* upper corner */
+    float min[3];           /* lower corner of the box of the stored vertices */
+    uint32_t prim_idx;      /* the caller's index of the triangle */
+    float max[3];           /* upper corner */
     uint32_t is_degenerate; /* 1 for a zero-area triangle (dropped from the wide layout) */
-}; /* 32 bytes */
+};                          /* 32 bytes */
 
 struct bin {
     struct box box; /* union of the boxes of the triangles whose centre falls in the bin */
     uint32_t n;     /* number of those triangles */
-}; /* 36 bytes */
+};                  /* 36 bytes */
 
 struct bins {
     struct bin b[3][BVH_N_BINS]; /* per axis */
-}; /* 1728 bytes */
+};                               /* 1728 bytes */
 
 /* A node waiting to be built: refs[begin, end) at depth, with the bounds of the refs' boxes
- * and of their centres (computed while the parent partitioned them). */
+ * and of their centres (computed while the parent partitioned them); refs[end, cap) are spare
+ * slots for the copies of spatial splits (none in a binned build). */
 struct build_task {
     uint32_t node_idx;        /* node to fill */
     uint32_t begin;           /* first ref */
     uint32_t end;             /* one past the last */
+    uint32_t cap;             /* one past the last slot the task owns */
     uint32_t depth;           /* root = 0 */
     uint32_t node_base;       /* parallel subtrees: first node index of its reserved range */
     struct box bounds;        /* of the refs' boxes */
     struct box centre_bounds; /* of their centres */
-}; /* 84 bytes */
+};                            /* 88 bytes */
 
 /* A split candidate: sah_sum = A_L N_L + A_R N_R (half areas), the part of C_split that varies. */
 struct split {
     int axis;      /* 0, 1, 2; -1 when no candidate separates the centres */
     int bin;       /* the left child takes bins 0..bin */
     float sah_sum; /* A_L * N_L + A_R * N_R */
-}; /* 12 bytes */
+};                 /* 12 bytes */
 
 struct build_ctx {
-    struct prim_ref *refs;  /* n_tris refs, permuted into BVH order by the build */
+    struct prim_ref *refs;  /* the refs, permuted into BVH order by the build (with gaps) */
     struct bvh_node *nodes; /* node array being written */
     int n_threads;          /* 1 .. BVH_MAX_THREADS */
+    bool spatial;           /* spatial splits (BVH_QUALITY_SPATIAL) */
+    float min_overlap;      /* half area of overlap that tries a spatial split */
+    const vec3 *positions;  /* the caller's mesh, for clipping triangles */
+    const uint32_t *indices;
 };
+
+/* Four float lanes (x, y, z and a padding lane kept 0) as a GNU C vector type, which gcc and clang
+ * compile to one SIMD operation where the target has SIMD and to scalar code elsewhere: portable
+ * C, not intrinsics (STYLE.md, section 3).  v4_min(a, b) is a < b ? a : b lane by lane, the
+ * comparison box_grow makes, so both give the same bits. */
+typedef float v4f __attribute__((vector_size(16)));
+typedef int32_t v4i __attribute__((vector_size(16)));
+
+static inline v4f v4_load(const float p[4])
+{
+    v4f v;
+    memcpy(&v, p, sizeof v);
+    return v;
+}
+
+static inline void v4_store(float p[4], v4f v) { memcpy(p, &v, sizeof v); }
+
+static inline v4f v4_min(v4f a, v4f b)
+{
+    v4i m = a < b;
+    return (v4f)((m & (v4i)a) | (~m & (v4i)b));
+}
+
+static inline v4f v4_max(v4f a, v4f b)
+{
+    v4i m = a > b;
+    return (v4f)((m & (v4i)a) | (~m & (v4i)b));
+}
+
+/* A ref's corners as vectors: one load each, lane 3 (prim_idx, is_degenerate in memory) masked
+ * to 0. */
+static inline v4f ref_lo(const struct prim_ref *r)
+{
+    v4f v;
+    memcpy(&v, r->min, sizeof v); /* min[3] and prim_idx */
+    return (v4f)((v4i)v & (v4i){-1, -1, -1, 0});
+}
+
+static inline v4f ref_hi(const struct prim_ref *r)
+{
+    v4f v;
+    memcpy(&v, r->max, sizeof v); /* max[3] and is_degenerate */
+    return (v4f)((v4i)v & (v4i){-1, -1, -1, 0});
+}
 
 /* b grows to contain c: all four lanes (the padding lanes stay 0), which the compiler turns into
  * one minps and one maxps. */
@@ -149,63 +201,31 @@ static void bins_clear(struct bins *bins)
             bins->b[axis][k] = (struct bin){empty_box, 0};
 }
 
-/* One pass fills the bins of all three axes (Wald 2007, sec. 3.2).  With SSE2 one ref's box,
- * centre and three bin indices are each one 4-lane operation (lane 3 is zeroed padding); the
- * scalar loop below is the same arithmetic lane by lane, so both give the same bins. */
-#if defined(__SSE2__) && !defined(BVH_NO_SIMD)
-#include <emmintrin.h>
-
-static inline __m128 box_lane_mask(void)
+/* One pass fills the bins of all three axes (Wald 2007, sec. 3.2).  One ref's box, centre and
+ * three bin indices are each one 4-lane vector operation (lane 3 is zero padding):
+ *   k_a = (int) min((c_a - c_min_a) scale_a, N - 1),  which equals min((int) ..., N - 1)
+ * (bin_index's form) for the finite, non-negative values met here. */
+static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t begin, uint32_t end,
+                      const struct box *centre_bounds)
 {
-    return _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
-}
-
-static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t begin,
-                      uint32_t end, const struct box *centre_bounds)
-{
-    const __m128 xyz = box_lane_mask();
-    const __m128 c_min = _mm_and_ps(_mm_loadu_ps(centre_bounds->min), xyz);
-    const __m128 scale = _mm_setr_ps(bin_scale(centre_bounds, 0), bin_scale(centre_bounds, 1),
-                                     bin_scale(centre_bounds, 2), 0.0f);
-    const __m128 half = _mm_set1_ps(0.5f);
-    const __m128 last = _mm_set1_ps((float)(BVH_N_BINS - 1));
+    const v4f c_min = {centre_bounds->min[0], centre_bounds->min[1], centre_bounds->min[2], 0.0f};
+    const v4f scale = {bin_scale(centre_bounds, 0), bin_scale(centre_bounds, 1),
+                       bin_scale(centre_bounds, 2), 0.0f};
+    const v4f last = {BVH_N_BINS - 1, BVH_N_BINS - 1, BVH_N_BINS - 1, BVH_N_BINS - 1};
     for (uint32_t i = begin; i < end; i++) {
         const struct prim_ref *r = &refs[i];
-        __m128 lo = _mm_and_ps(_mm_loadu_ps(r->min), xyz); /* lane 3 held prim_idx */
-        __m128 hi = _mm_and_ps(_mm_loadu_ps(r->max), xyz);
-        __m128 c = _mm_mul_ps(half, _mm_add_ps(lo, hi));
-        /* bin_index: (int) min((c - c_min) scale, N - 1), which equals min((int) ..., N - 1) */
-        __m128i k = _mm_cvttps_epi32(_mm_min_ps(_mm_mul_ps(_mm_sub_ps(c, c_min), scale), last));
-        int idx[4];
-        _mm_storeu_si128((__m128i *)idx, k);
+        v4f lo = ref_lo(r);
+        v4f hi = ref_hi(r);
+        v4f c = 0.5f * (lo + hi);
+        v4i k = __builtin_convertvector(v4_min((c - c_min) * scale, last), v4i);
         for (int axis = 0; axis < 3; axis++) {
-            struct bin *b = &bins->b[axis][idx[axis]];
-            _mm_storeu_ps(b->box.min, _mm_min_ps(lo, _mm_loadu_ps(b->box.min)));
-            _mm_storeu_ps(b->box.max, _mm_max_ps(hi, _mm_loadu_ps(b->box.max)));
+            struct bin *b = &bins->b[axis][k[axis]];
+            v4_store(b->box.min, v4_min(lo, v4_load(b->box.min)));
+            v4_store(b->box.max, v4_max(hi, v4_load(b->box.max)));
             b->n++;
         }
     }
 }
-#else
-static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t begin,
-                      uint32_t end, const struct box *centre_bounds)
-{
-    float scale[3];
-    for (int axis = 0; axis < 3; axis++)
-        scale[axis] = bin_scale(centre_bounds, axis);
-    for (uint32_t i = begin; i < end; i++) {
-        const struct prim_ref *r = &refs[i];
-        float c[3];
-        ref_centre(r, c);
-        for (int axis = 0; axis < 3; axis++) {
-            struct bin *b = &bins->b[axis][bin_index(c[axis], centre_bounds->min[axis],
-                                                     scale[axis])];
-            box_grow(&b->box, r->min, r->max);
-            b->n++;
-        }
-    }
-}
-#endif
 
 static void bins_merge(struct bins *into, const struct bins *from)
 {
@@ -218,82 +238,47 @@ static void bins_merge(struct bins *into, const struct bins *from)
 }
 
 /* The cheapest plane of n binned refs: per axis a sweep from the right gathers the right
- * children's areas and one from the left evaluates every plane.  With SSE2 the running box is
- * one register and its half area dx dy + dy dz + dz dx is formed from one shuffled product,
- * added in the same order as box_half_area, so both paths give the same split. */
-#if defined(__SSE2__) && !defined(BVH_NO_SIMD)
-static inline float half_area_sse(__m128 lo, __m128 hi)
+ * children's areas and one from the left evaluates every plane.  The running box is one vector
+ * and its half area dx dy + dy dz + dz dx comes from one rotated product, added in
+ * box_half_area's order (so both give the same bits). */
+static inline float half_area_v4(v4f lo, v4f hi)
 {
-    __m128 d = _mm_sub_ps(hi, lo);
-    __m128 d_yzx = _mm_shuffle_ps(d, d, _MM_SHUFFLE(3, 0, 2, 1));
-    __m128 p = _mm_mul_ps(d, d_yzx); /* dx dy, dy dz, dz dx */
-    float q[4];
-    _mm_storeu_ps(q, p);
-    return q[0] + q[1] + q[2];
+    v4f d = hi - lo;
+    v4f p = d * __builtin_shufflevector(d, d, 1, 2, 0, 3); /* dx dy, dy dz, dz dx */
+    return p[0] + p[1] + p[2];
 }
 
 static struct split bins_best_split(const struct bins *bins, uint32_t n)
 {
     struct split best = {-1, 0, INFINITY};
-    const __m128 empty_lo = _mm_loadu_ps(empty_box.min);
-    const __m128 empty_hi = _mm_loadu_ps(empty_box.max);
-    for (int axis = 0; axis < 3; axis++) {
-        const struct bin *b = bins->b[axis];
-        float right_area[BVH_N_BINS];
-        uint32_t right_n[BVH_N_BINS];
-        __m128 lo = empty_lo;
-        __m128 hi = empty_hi;
-        uint32_t acc_n = 0;
-        for (int k = BVH_N_BINS - 1; k > 0; k--) {
-            lo = _mm_min_ps(_mm_loadu_ps(b[k].box.min), lo);
-            hi = _mm_max_ps(_mm_loadu_ps(b[k].box.max), hi);
-            acc_n += b[k].n;
-            right_area[k] = acc_n > 0 ? half_area_sse(lo, hi) : 0.0f;
-            right_n[k] = acc_n;
-        }
-        lo = empty_lo;
-        hi = empty_hi;
-        acc_n = 0;
-        for (int k = 0; k < BVH_N_BINS - 1; k++) {
-            lo = _mm_min_ps(_mm_loadu_ps(b[k].box.min), lo);
-            hi = _mm_max_ps(_mm_loadu_ps(b[k].box.max), hi);
-            acc_n += b[k].n;
-            if (acc_n == 0 || acc_n == n)
-                continue;
-            float sah_sum = half_area_sse(lo, hi) * (float)acc_n +
-                            right_area[k + 1] * (float)right_n[k + 1];
-            if (sah_sum < best.sah_sum)
-                best = (struct split){axis, k, sah_sum};
-        }
-    }
-    return best;
-}
-#else
-static struct split bins_best_split(const struct bins *bins, uint32_t n)
-{
-    struct split best = {-1, 0, INFINITY};
+    const v4f empty_lo = v4_load(empty_box.min);
+    const v4f empty_hi = v4_load(empty_box.max);
     for (int axis = 0; axis < 3; axis++) {
         const struct bin *b = bins->b[axis];
         /* right sweep: right_area[k], right_n[k] describe bins k .. BVH_N_BINS - 1 */
         float right_area[BVH_N_BINS];
         uint32_t right_n[BVH_N_BINS];
-        struct box acc = empty_box;
+        v4f lo = empty_lo;
+        v4f hi = empty_hi;
         uint32_t acc_n = 0;
         for (int k = BVH_N_BINS - 1; k > 0; k--) {
-            box_union(&acc, &b[k].box);
+            lo = v4_min(v4_load(b[k].box.min), lo);
+            hi = v4_max(v4_load(b[k].box.max), hi);
             acc_n += b[k].n;
-            right_area[k] = acc_n > 0 ? box_half_area(&acc) : 0.0f;
+            right_area[k] = acc_n > 0 ? half_area_v4(lo, hi) : 0.0f;
             right_n[k] = acc_n;
         }
         /* left sweep: the plane after bin k puts bins 0..k left, k+1.. right */
-        acc = empty_box;
+        lo = empty_lo;
+        hi = empty_hi;
         acc_n = 0;
         for (int k = 0; k < BVH_N_BINS - 1; k++) {
-            box_union(&acc, &b[k].box);
+            lo = v4_min(v4_load(b[k].box.min), lo);
+            hi = v4_max(v4_load(b[k].box.max), hi);
             acc_n += b[k].n;
             if (acc_n == 0 || acc_n == n)
                 continue; /* one side would be empty */
-            float sah_sum = box_half_area(&acc) * (float)acc_n +
+            float sah_sum = half_area_v4(lo, hi) * (float)acc_n +
                             right_area[k + 1] * (float)right_n[k + 1];
             if (sah_sum < best.sah_sum)
                 best = (struct split){axis, k, sah_sum};
@@ -301,7 +286,6 @@ static struct split bins_best_split(const struct bins *bins, uint32_t n)
     }
     return best;
 }
-#endif
 
 /* Fork-join on up to n_threads threads: fn(arg + i * arg_bytes) for i in [0, n_jobs), job 0 on
  * the calling thread.  A thread that cannot be started runs its job inline. */
@@ -383,10 +367,471 @@ static void range_bounds(const struct prim_ref *refs, uint32_t begin, uint32_t e
     }
 }
 
-/* Decides task's node and partitions its refs in place.  Returns the first index of the right
- * child, or task->begin when the node is to be a leaf; fills the children's bounds. */
-static uint32_t split_task(const struct build_ctx *ctx, const struct build_task *task,
-                           int n_threads, struct box child_bounds[2], struct box child_centres[2])
+/* ---- Spatial splits: Stich, Friedrich, Dietrich 2009, "Spatial Splits in Bounding Volume
+ * Hierarchies" -----------------------------------------------------------------------------------
+ * An object split sends each triangle whole to one side.  Where the two children's boxes then
+ * overlap a lot (long thin triangles, architecture), a plane that cuts triangles can do better.
+ * The node's box (not its centres' box) is cut into BVH_N_SPATIAL_BINS slabs per axis, and each
+ * ref is clipped into every slab it crosses: the slab's box grows by the box of the triangle's
+ * part inside it ("chopped binning", sec. 4.2), and the ref is counted entering its first slab
+ * and leaving its last.  The plane after slab k then costs, as an object split does,
+ *   sah_sum = A_L N_L + A_R N_R,   N_L = refs entering slabs 0..k,   N_R = refs leaving k+1..
+ * Spatial splits are searched only where the best object split's children overlap by more
+ * than alpha = 1e-5 of the root's area (sec. 4.3), and taken when cheaper.  A ref the chosen
+ * plane cuts is kept whole on one side when that costs less than the two copies (reference
+ * unsplitting, sec. 4.4):
+ *   both:  A_L N_L + A_R N_R,   left only:  A(L + ref) N_L + A_R (N_R - 1),   right: alike
+ * Clipping never loses part of a triangle: a ref's box is that of the triangle's vertices on
+ * its side and of the points where its edges cross the plane, computed in double and widened
+ * by one float step (so each contains the exact point), then cut to the ref's old box.  Copies
+ * cost memory: a task owns refs[begin, cap), its refs in [begin, end) and spare slots after
+ * them; the root gets BVH_SPLIT_BUDGET of the triangle count spare, and each split shares what
+ * is left between its children in proportion to their refs.  A cut ref finding no spare slot
+ * is unsplit.  All of this depends only on the node's refs, so the tree is still the same for
+ * any thread count. */
+#define BVH_N_SPATIAL_BINS 16             /* slabs per axis */
+#define BVH_SPLIT_ALPHA 1e-5f             /* Stich et al. 2009, sec. 4.3: overlap / root area */
+#define BVH_SPLIT_BUDGET 0.25             /* spare refs for copies, fraction of the triangles */
+#define BVH_SPATIAL_MIN_REFS 64           /* smaller nodes: object splits only */
+#define BVH_SPATIAL_MIN_NODE_OVERLAP 0.1f /* and overlap / the node's own area, to search */
+
+struct spatial_bin {
+    struct box box; /* union of the boxes of the refs' parts inside the slab */
+    uint32_t enter; /* refs whose first slab this is */
+    uint32_t exit;  /* refs whose last slab this is */
+};                  /* 40 bytes */
+
+struct spatial_bins {
+    struct spatial_bin b[3][BVH_N_SPATIAL_BINS]; /* per axis */
+};                                               /* 1920 bytes */
+
+/* The slabs of a node's box: slab k of axis a is [lo + k step, lo + (k + 1) step]. */
+struct slab_grid {
+    float lo[3];
+    float step[3];     /* extent / BVH_N_SPATIAL_BINS */
+    float inv_step[3]; /* BVH_N_SPATIAL_BINS / extent; 0 where the axis offers no plane */
+};
+
+static void slab_grid_init(struct slab_grid *g, const struct box *bounds)
+{
+    for (int a = 0; a < 3; a++) {
+        float extent = bounds->max[a] - bounds->min[a];
+        g->lo[a] = bounds->min[a];
+        g->step[a] = extent / (float)BVH_N_SPATIAL_BINS;
+        float inv = (float)BVH_N_SPATIAL_BINS / extent;
+        g->inv_step[a] = extent > 0.0f && g->step[a] > 0.0f && isfinite(inv) ? inv : 0.0f;
+    }
+}
+
+static int slab_of(const struct slab_grid *g, int a, float x)
+{
+    int k = (int)((x - g->lo[a]) * g->inv_step[a]);
+    return k < 0 ? 0 : k >= BVH_N_SPATIAL_BINS ? BVH_N_SPATIAL_BINS - 1 : k;
+}
+
+/* The plane between slabs k - 1 and k of axis a. */
+static float slab_plane(const struct slab_grid *g, int a, int k)
+{
+    return g->lo[a] + (float)k * g->step[a];
+}
+
+static bool box_is_empty(const struct box *b)
+{
+    return !(b->min[0] <= b->max[0] && b->min[1] <= b->max[1] && b->min[2] <= b->max[2]);
+}
+
+static struct box box_of_ref(const struct prim_ref *r)
+{
+    return (struct box){{r->min[0], r->min[1], r->min[2], 0.0f},
+                        {r->max[0], r->max[1], r->max[2], 0.0f}};
+}
+
+/* b shrinks to its intersection with c (empty when they do not meet). */
+static void box_clip(struct box *b, const struct box *c)
+{
+    for (int a = 0; a < 3; a++) {
+        b->min[a] = c->min[a] > b->min[a] ? c->min[a] : b->min[a];
+        b->max[a] = c->max[a] < b->max[a] ? c->max[a] : b->max[a];
+    }
+}
+
+/* The boxes of the parts of triangle tri inside box `in` on either side of the plane
+ * x_axis = plane, each cut to `in`: box_is_empty for a side it does not reach. */
+static void split_tri_box(const struct bvh_tri *tri, const struct box *in, int axis, float plane,
+                          struct box *left, struct box *right)
+{
+    const float *v[3] = {tri->p0, tri->p1, tri->p2};
+    *left = empty_box;
+    *right = empty_box;
+    for (int k = 0; k < 3; k++) {
+        const float *u = v[k];
+        const float *w = v[k == 2 ? 0 : k + 1];
+        if (u[axis] <= plane)
+            box_grow(left, u, u);
+        if (u[axis] >= plane)
+            box_grow(right, u, u);
+        if ((u[axis] < plane && w[axis] > plane) || (u[axis] > plane && w[axis] < plane)) {
+            /* the edge meets the plane at u + s (w - u), s = (plane - u_a) / (w_a - u_a); in
+             * double each coordinate is within 2^-50 of its value relative, and one float step
+             * either side of its rounding brackets it */
+            double s = ((double)plane - (double)u[axis]) / ((double)w[axis] - (double)u[axis]);
+            float lo[3];
+            float hi[3];
+            for (int a = 0; a < 3; a++) {
+                if (a == axis) {
+                    lo[a] = hi[a] = plane;
+                    continue;
+                }
+                float x = (float)((double)u[a] + s * ((double)w[a] - (double)u[a]));
+                lo[a] = nextafterf(x, -INFINITY);
+                hi[a] = nextafterf(x, INFINITY);
+            }
+            box_grow(left, lo, hi);
+            box_grow(right, lo, hi);
+        }
+    }
+    box_clip(left, in);
+    box_clip(right, in);
+}
+
+static void spatial_bins_clear(struct spatial_bins *sb)
+{
+    for (int a = 0; a < 3; a++)
+        for (int k = 0; k < BVH_N_SPATIAL_BINS; k++)
+            sb->b[a][k] = (struct spatial_bin){empty_box, 0, 0};
+}
+
+/* The triangle's parts in the slabs first..last of axis a, cut to the ref's box [lo, hi], into
+ * the bins (chopped binning).  With the vertices sorted along a (A <= B <= C), a plane between
+ * two slabs crosses edge AC and edge AB (below B) or BC (above): slab k's part is bounded by
+ * the crossings on its two planes and by the vertices inside it.  The crossings are computed in
+ * float without widening: these boxes only estimate the SAH; the refs themselves are clipped
+ * conservatively by split_tri_box. */
+static void chop_into_bins(struct spatial_bin *bins, const struct slab_grid *g, int a, int first,
+                           int last, const v4f v[3], v4f lo, v4f hi)
+{
+    int ia = 0;
+    int ib = 1;
+    int ic = 2;
+    if (v[ib][a] < v[ia][a]) {
+        ia = 1;
+        ib = 0;
+    }
+    if (v[ic][a] < v[ib][a]) {
+        int t = ic;
+        ic = ib;
+        ib = t;
+        if (v[ib][a] < v[ia][a]) {
+            t = ib;
+            ib = ia;
+            ia = t;
+        }
+    }
+    const v4f A = v[ia];
+    const v4f B = v[ib];
+    const v4f C = v[ic];
+    v4f part_lo[BVH_N_SPATIAL_BINS];
+    v4f part_hi[BVH_N_SPATIAL_BINS];
+    for (int k = first; k <= last; k++) {
+        part_lo[k] = (v4f){INFINITY, INFINITY, INFINITY, 0.0f};
+        part_hi[k] = (v4f){-INFINITY, -INFINITY, -INFINITY, 0.0f};
+    }
+    /* each plane's two crossings bound the slabs on both sides of it */
+    for (int k = first + 1; k <= last; k++) {
+        float p = slab_plane(g, a, k);
+        float s_ac = C[a] > A[a] ? (p - A[a]) / (C[a] - A[a]) : 0.0f;
+        s_ac = s_ac < 0.0f ? 0.0f : s_ac > 1.0f ? 1.0f : s_ac;
+        v4f x = A + (C - A) * s_ac;
+        const v4f U = p <= B[a] ? A : B; /* the other edge crossed: AB or BC */
+        const v4f W = p <= B[a] ? B : C;
+        float s_uw = W[a] > U[a] ? (p - U[a]) / (W[a] - U[a]) : 0.0f;
+        s_uw = s_uw < 0.0f ? 0.0f : s_uw > 1.0f ? 1.0f : s_uw;
+        v4f y = U + (W - U) * s_uw;
+        v4f p_lo = v4_min(x, y);
+        v4f p_hi = v4_max(x, y);
+        part_lo[k - 1] = v4_min(part_lo[k - 1], p_lo);
+        part_hi[k - 1] = v4_max(part_hi[k - 1], p_hi);
+        part_lo[k] = v4_min(part_lo[k], p_lo);
+        part_hi[k] = v4_max(part_hi[k], p_hi);
+    }
+    /* each vertex bounds its own slab */
+    for (int j = 0; j < 3; j++) {
+        int k = slab_of(g, a, v[j][a]);
+        k = k < first ? first : k > last ? last : k;
+        part_lo[k] = v4_min(part_lo[k], v[j]);
+        part_hi[k] = v4_max(part_hi[k], v[j]);
+    }
+    for (int k = first; k <= last; k++) {
+        v4f l = v4_max(part_lo[k], lo); /* cut to the ref's box */
+        v4f h = v4_min(part_hi[k], hi);
+        if (l[0] <= h[0] && l[1] <= h[1] && l[2] <= h[2]) {
+            struct box *b = &bins[k].box;
+            v4_store(b->min, v4_min(l, v4_load(b->min)));
+            v4_store(b->max, v4_max(h, v4_load(b->max)));
+        }
+    }
+}
+
+/* Chopped binning of refs[begin, end) into the slabs of g. */
+static void spatial_bins_fill(struct spatial_bins *sb, const struct build_ctx *ctx, uint32_t begin,
+                              uint32_t end, const struct slab_grid *g)
+{
+    for (uint32_t i = begin; i < end; i++) {
+        const struct prim_ref *r = &ctx->refs[i];
+        const v4f lo = ref_lo(r);
+        const v4f hi = ref_hi(r);
+        bool have_tri = false;
+        v4f v[3];
+        for (int a = 0; a < 3; a++) {
+            if (g->inv_step[a] == 0.0f)
+                continue;
+            int first = slab_of(g, a, r->min[a]);
+            int last = slab_of(g, a, r->max[a]);
+            sb->b[a][first].enter++;
+            sb->b[a][last].exit++;
+            if (first == last) {
+                struct box *b = &sb->b[a][first].box;
+                v4_store(b->min, v4_min(lo, v4_load(b->min)));
+                v4_store(b->max, v4_max(hi, v4_load(b->max)));
+                continue;
+            }
+            if (!have_tri) {
+                for (int k = 0; k < 3; k++) {
+                    vec3 p = ctx->positions[ctx->indices[3 * (size_t)r->prim_idx + (size_t)k]];
+                    v[k] = (v4f){p.x, p.y, p.z, 0.0f};
+                }
+                have_tri = true;
+            }
+            chop_into_bins(sb->b[a], g, a, first, last, v, lo, hi);
+        }
+    }
+}
+
+struct spatial_job {
+    const struct build_ctx *ctx;
+    uint32_t begin;
+    uint32_t end;
+    const struct slab_grid *grid;
+    struct spatial_bins bins;
+};
+
+static void *spatial_job_run(void *arg)
+{
+    struct spatial_job *job = arg;
+    spatial_bins_clear(&job->bins);
+    spatial_bins_fill(&job->bins, job->ctx, job->begin, job->end, job->grid);
+    return NULL;
+}
+
+/* Chopped binning on n_threads threads (private bins per slice, merged: exact). */
+static void spatial_bins_fill_parallel(struct spatial_bins *sb, const struct build_ctx *ctx,
+                                       uint32_t begin, uint32_t end, const struct slab_grid *g,
+                                       int n_threads)
+{
+    struct spatial_job *jobs = malloc((size_t)n_threads * sizeof *jobs);
+    spatial_bins_clear(sb);
+    if (!jobs) {
+        spatial_bins_fill(sb, ctx, begin, end, g);
+        return;
+    }
+    for (int i = 0; i < n_threads; i++)
+        jobs[i] = (struct spatial_job){.ctx = ctx,
+                                       .begin = slice_begin(begin, end - begin, i, n_threads),
+                                       .end = slice_begin(begin, end - begin, i + 1, n_threads),
+                                       .grid = g};
+    run_jobs(n_threads, spatial_job_run, jobs, sizeof *jobs);
+    for (int i = 0; i < n_threads; i++) {
+        for (int a = 0; a < 3; a++) {
+            for (int k = 0; k < BVH_N_SPATIAL_BINS; k++) {
+                box_union(&sb->b[a][k].box, &jobs[i].bins.b[a][k].box);
+                sb->b[a][k].enter += jobs[i].bins.b[a][k].enter;
+                sb->b[a][k].exit += jobs[i].bins.b[a][k].exit;
+            }
+        }
+    }
+    free(jobs);
+}
+
+/* The two sides of the plane after slab k of axis a: their boxes and ref counts. */
+static void spatial_sides(const struct spatial_bins *sb, int a, int k, struct box *left,
+                          struct box *right, uint32_t *n_left, uint32_t *n_right)
+{
+    *left = empty_box;
+    *right = empty_box;
+    *n_left = 0;
+    *n_right = 0;
+    for (int j = 0; j < BVH_N_SPATIAL_BINS; j++) {
+        const struct spatial_bin *b = &sb->b[a][j];
+        if (j <= k) {
+            box_union(left, &b->box);
+            *n_left += b->enter;
+        } else {
+            box_union(right, &b->box);
+            *n_right += b->exit;
+        }
+    }
+}
+
+/* The cheapest plane between slabs, swept as bins_best_split does. */
+static struct split spatial_best_split(const struct spatial_bins *sb, const struct slab_grid *g)
+{
+    struct split best = {-1, 0, INFINITY};
+    for (int a = 0; a < 3; a++) {
+        if (g->inv_step[a] == 0.0f)
+            continue;
+        const struct spatial_bin *b = sb->b[a];
+        float right_area[BVH_N_SPATIAL_BINS];
+        uint32_t right_n[BVH_N_SPATIAL_BINS];
+        struct box acc = empty_box;
+        uint32_t acc_n = 0;
+        for (int k = BVH_N_SPATIAL_BINS - 1; k > 0; k--) {
+            box_union(&acc, &b[k].box);
+            acc_n += b[k].exit;
+            right_area[k] = acc_n > 0 ? box_half_area(&acc) : 0.0f;
+            right_n[k] = acc_n;
+        }
+        acc = empty_box;
+        acc_n = 0;
+        for (int k = 0; k < BVH_N_SPATIAL_BINS - 1; k++) {
+            box_union(&acc, &b[k].box);
+            acc_n += b[k].enter;
+            if (acc_n == 0 || right_n[k + 1] == 0)
+                continue;
+            float sah_sum = box_half_area(&acc) * (float)acc_n +
+                            right_area[k + 1] * (float)right_n[k + 1];
+            if (sah_sum < best.sah_sum)
+                best = (struct split){a, k, sah_sum};
+        }
+    }
+    return best;
+}
+
+/* Gives the children their ranges: left refs in [begin, left_end), right refs in
+ * [right_begin, right_end) (right_begin >= left_end, right_end <= cap); the spare slots
+ * cap - begin - n_L - n_R are shared in proportion to the counts, the right block moving up to
+ * make the left one's share. */
+static void place_children(struct prim_ref *refs, const struct build_task *task, uint32_t left_end,
+                           uint32_t right_begin, uint32_t right_end, struct build_task child[2])
+{
+    uint32_t n_l = left_end - task->begin;
+    uint32_t n_r = right_end - right_begin;
+    uint32_t spare = task->cap - task->begin - n_l - n_r;
+    uint32_t spare_l = (uint32_t)((uint64_t)spare * n_l / (n_l + n_r));
+    uint32_t dest = left_end + spare_l;
+    if (dest != right_begin)
+        memmove(&refs[dest], &refs[right_begin], (size_t)n_r * sizeof *refs);
+    child[0].begin = task->begin;
+    child[0].end = left_end;
+    child[0].cap = dest;
+    child[1].begin = dest;
+    child[1].end = dest + n_r;
+    child[1].cap = task->cap;
+}
+
+/* The spatial split s of task: refs wholly left of the plane go left, wholly right go right,
+ * each cut one to both sides as two clipped refs or whole to one side (unsplitting, within the
+ * spare slots).  false, with task's refs permuted but the same multiset in [begin, end), when a
+ * side would be empty or memory is short: the caller then splits by objects. */
+static bool spatial_partition(const struct build_ctx *ctx, const struct build_task *task,
+                              const struct spatial_bins *sb, const struct slab_grid *g,
+                              struct split s, struct build_task child[2])
+{
+    struct prim_ref *refs = ctx->refs;
+    const uint32_t begin = task->begin;
+    const uint32_t end = task->end;
+    const int axis = s.axis;
+    const float plane = slab_plane(g, axis, s.bin + 1);
+    /* three ways: [begin, lt) left of the plane, [lt, gt) cut by it, [gt, end) right */
+    uint32_t lt = begin;
+    uint32_t i = begin;
+    uint32_t gt = end;
+    while (i < gt) {
+        struct prim_ref tmp = refs[i];
+        if (slab_of(g, axis, tmp.max[axis]) <= s.bin) {
+            refs[i++] = refs[lt];
+            refs[lt++] = tmp;
+        } else if (slab_of(g, axis, tmp.min[axis]) > s.bin) {
+            refs[i] = refs[--gt];
+            refs[gt] = tmp;
+        } else {
+            i++;
+        }
+    }
+    uint32_t n_cut = gt - lt;
+    struct prim_ref *right_parts = malloc((size_t)n_cut * sizeof *right_parts + 1);
+    if (!right_parts)
+        return false;
+    struct box left_box;
+    struct box right_box;
+    uint32_t n_left;
+    uint32_t n_right;
+    spatial_sides(sb, axis, s.bin, &left_box, &right_box, &n_left, &n_right);
+    float a_l = box_half_area(&left_box);
+    float a_r = box_half_area(&right_box);
+    uint32_t spare = task->cap - end;
+    uint32_t wl = lt; /* the cut refs' left parts are written back in place, from lt on */
+    uint32_t n_rp = 0;
+    for (uint32_t k = lt; k < gt; k++) {
+        struct prim_ref r = refs[k];
+        struct bvh_tri tri;
+        bvh_load_tri(&tri, ctx->positions, ctx->indices, r.prim_idx);
+        struct box whole = box_of_ref(&r);
+        struct box l;
+        struct box rt;
+        split_tri_box(&tri, &whole, axis, plane, &l, &rt);
+        enum { TO_LEFT, TO_RIGHT, TO_BOTH } to;
+        if (box_is_empty(&l)) {
+            to = TO_RIGHT;
+        } else if (box_is_empty(&rt)) {
+            to = TO_LEFT;
+        } else {
+            struct box l_whole = left_box;
+            struct box r_whole = right_box;
+            box_union(&l_whole, &whole);
+            box_union(&r_whole, &whole);
+            float c_both = a_l * (float)n_left + a_r * (float)n_right;
+            float c_left = box_half_area(&l_whole) * (float)n_left + a_r * (float)(n_right - 1);
+            float c_right = a_l * (float)(n_left - 1) + box_half_area(&r_whole) * (float)n_right;
+            to = c_left <= c_right ? TO_LEFT : TO_RIGHT;
+            if (c_both < (c_left <= c_right ? c_left : c_right) && spare > 0) {
+                to = TO_BOTH;
+                spare--;
+            }
+        }
+        if (to != TO_RIGHT) {
+            struct prim_ref part = r;
+            if (to == TO_BOTH) {
+                memcpy(part.min, l.min, sizeof part.min);
+                memcpy(part.max, l.max, sizeof part.max);
+            }
+            refs[wl++] = part;
+        }
+        if (to != TO_LEFT) {
+            struct prim_ref part = r;
+            if (to == TO_BOTH) {
+                memcpy(part.min, rt.min, sizeof part.min);
+                memcpy(part.max, rt.max, sizeof part.max);
+            }
+            right_parts[n_rp++] = part;
+        }
+    }
+    /* the right block: the right parts of cut refs, then the refs wholly right */
+    uint32_t n_r = n_rp + (end - gt);
+    memmove(&refs[wl + n_rp], &refs[gt], (size_t)(end - gt) * sizeof *refs);
+    memcpy(&refs[wl], right_parts, (size_t)n_rp * sizeof *refs);
+    free(right_parts);
+    if (wl == begin || n_r == 0) /* no copy was made (a copy puts a ref on both sides) */
+        return false;
+    range_bounds(refs, begin, wl, &child[0].bounds, &child[0].centre_bounds);
+    range_bounds(refs, wl, wl + n_r, &child[1].bounds, &child[1].centre_bounds);
+    place_children(refs, task, wl, wl, wl + n_r, child);
+    return true;
+}
+
+/* Decides task's node: false when it is to be a leaf; otherwise partitions its refs and fills
+ * the children's ranges and bounds (child[i]: begin, end, cap, bounds, centre_bounds). */
+static bool split_task(const struct build_ctx *ctx, const struct build_task *task, int n_threads,
+                       struct build_task child[2])
 {
     struct prim_ref *refs = ctx->refs;
     uint32_t begin = task->begin;
@@ -395,7 +840,7 @@ static uint32_t split_task(const struct build_ctx *ctx, const struct build_task 
     /* C_split >= C_trav A (children's areas are >= 0) while C_leaf = C_isect N A: for
      * N <= C_trav / C_isect (= 2) the leaf always wins, and binning is skipped */
     if (n * BVH_COST_INTERSECT <= BVH_COST_TRAVERSAL || task->depth >= BVH_MAX_DEPTH)
-        return begin;
+        return false;
     struct bins bins;
     if (n_threads > 1 && n >= BVH_PARALLEL_BIN_MIN) {
         bins_fill_parallel(&bins, refs, begin, end, &task->centre_bounds, n_threads);
@@ -406,47 +851,72 @@ static uint32_t split_task(const struct build_ctx *ctx, const struct build_task 
     struct split best = bins_best_split(&bins, n);
     if (best.axis < 0) { /* all centres coincide: halve the range, or stop when small */
         if (n <= BVH_MAX_LEAF_TRIS)
-            return begin;
+            return false;
         uint32_t mid = begin + n / 2;
-        range_bounds(refs, begin, mid, &child_bounds[0], &child_centres[0]);
-        range_bounds(refs, mid, end, &child_bounds[1], &child_centres[1]);
-        return mid;
+        range_bounds(refs, begin, mid, &child[0].bounds, &child[0].centre_bounds);
+        range_bounds(refs, mid, end, &child[1].bounds, &child[1].centre_bounds);
+        place_children(refs, task, mid, mid, end, child);
+        return true;
+    }
+    /* a spatial split, where the object split's children overlap */
+    struct split spatial = {-1, 0, INFINITY};
+    struct spatial_bins sbins;
+    struct slab_grid grid;
+    if (ctx->spatial && n >= BVH_SPATIAL_MIN_REFS) {
+        struct box side[2] = {empty_box, empty_box};
+        for (int k = 0; k < BVH_N_BINS; k++)
+            box_union(&side[k <= best.bin ? 0 : 1], &bins.b[best.axis][k].box);
+        box_clip(&side[0], &side[1]);
+        float overlap = box_is_empty(&side[0]) ? 0.0f : box_half_area(&side[0]);
+        if (overlap > ctx->min_overlap &&
+            overlap > BVH_SPATIAL_MIN_NODE_OVERLAP * box_half_area(&task->bounds)) {
+            slab_grid_init(&grid, &task->bounds);
+            if (n_threads > 1 && n >= BVH_PARALLEL_BIN_MIN) {
+                spatial_bins_fill_parallel(&sbins, ctx, begin, end, &grid, n_threads);
+            } else {
+                spatial_bins_clear(&sbins);
+                spatial_bins_fill(&sbins, ctx, begin, end, &grid);
+            }
+            spatial = spatial_best_split(&sbins, &grid);
+        }
     }
     /* C_split < C_leaf, both multiplied by A so that a zero-area box (a point) needs no division:
      * C_trav A + C_isect (A_L N_L + A_R N_R) < C_isect N A */
     float area = box_half_area(&task->bounds);
-    float split_cost = BVH_COST_TRAVERSAL * area + BVH_COST_INTERSECT * best.sah_sum;
+    float sah_sum = spatial.sah_sum < best.sah_sum ? spatial.sah_sum : best.sah_sum;
+    float split_cost = BVH_COST_TRAVERSAL * area + BVH_COST_INTERSECT * sah_sum;
     float leaf_cost = BVH_COST_INTERSECT * (float)n * area;
     if (split_cost >= leaf_cost && n <= BVH_MAX_LEAF_TRIS)
-        return begin;
+        return false;
+    if (spatial.sah_sum < best.sah_sum &&
+        spatial_partition(ctx, task, &sbins, &grid, spatial, child))
+        return true;
+    /* the object split: left takes the centres in bins 0..best.bin */
     int axis = best.axis;
     float c_min = task->centre_bounds.min[axis];
     float scale = bin_scale(&task->centre_bounds, axis);
+    struct box child_bounds[2];
+    struct box child_centres[2];
     for (int side = 0; side < 2; side++) {
         child_bounds[side] = empty_box;
         child_centres[side] = empty_box;
     }
     uint32_t i = begin;
     uint32_t j = end;
-#if defined(__SSE2__) && !defined(BVH_NO_SIMD)
-    /* the scalar loop below, four lanes at a time: the side's box and centre bounds grow */
-    const __m128 xyz = box_lane_mask();
-    const __m128 half = _mm_set1_ps(0.5f);
-    __m128 side_lo[2] = {_mm_loadu_ps(empty_box.min), _mm_loadu_ps(empty_box.min)};
-    __m128 side_hi[2] = {_mm_loadu_ps(empty_box.max), _mm_loadu_ps(empty_box.max)};
-    __m128 side_c_lo[2] = {side_lo[0], side_lo[0]};
-    __m128 side_c_hi[2] = {side_hi[0], side_hi[0]};
+    /* left takes bins 0..best.bin; each ref's side grows that side's box and centre bounds */
+    v4f side_lo[2] = {v4_load(empty_box.min), v4_load(empty_box.min)};
+    v4f side_hi[2] = {v4_load(empty_box.max), v4_load(empty_box.max)};
+    v4f side_c_lo[2] = {side_lo[0], side_lo[0]};
+    v4f side_c_hi[2] = {side_hi[0], side_hi[0]};
     while (i < j) {
-        __m128 lo = _mm_and_ps(_mm_loadu_ps(refs[i].min), xyz);
-        __m128 hi = _mm_and_ps(_mm_loadu_ps(refs[i].max), xyz);
-        __m128 c = _mm_mul_ps(half, _mm_add_ps(lo, hi));
-        float c_axis[4];
-        _mm_storeu_ps(c_axis, c);
-        int side = bin_index(c_axis[axis], c_min, scale) <= best.bin ? 0 : 1;
-        side_lo[side] = _mm_min_ps(lo, side_lo[side]);
-        side_hi[side] = _mm_max_ps(hi, side_hi[side]);
-        side_c_lo[side] = _mm_min_ps(c, side_c_lo[side]);
-        side_c_hi[side] = _mm_max_ps(c, side_c_hi[side]);
+        v4f lo = ref_lo(&refs[i]);
+        v4f hi = ref_hi(&refs[i]);
+        v4f c = 0.5f * (lo + hi);
+        int side = bin_index(c[axis], c_min, scale) <= best.bin ? 0 : 1;
+        side_lo[side] = v4_min(lo, side_lo[side]);
+        side_hi[side] = v4_max(hi, side_hi[side]);
+        side_c_lo[side] = v4_min(c, side_c_lo[side]);
+        side_c_hi[side] = v4_max(c, side_c_hi[side]);
         if (side == 0) {
             i++;
         } else {
@@ -456,30 +926,18 @@ static uint32_t split_task(const struct build_ctx *ctx, const struct build_task 
         }
     }
     for (int side = 0; side < 2; side++) {
-        _mm_storeu_ps(child_bounds[side].min, side_lo[side]);
-        _mm_storeu_ps(child_bounds[side].max, side_hi[side]);
-        _mm_storeu_ps(child_centres[side].min, side_c_lo[side]);
-        _mm_storeu_ps(child_centres[side].max, side_c_hi[side]);
+        v4_store(child_bounds[side].min, side_lo[side]);
+        v4_store(child_bounds[side].max, side_hi[side]);
+        v4_store(child_centres[side].min, side_c_lo[side]);
+        v4_store(child_centres[side].max, side_c_hi[side]);
     }
-#else
-    while (i < j) { /* left takes bins 0..best.bin; each ref's side grows that side's bounds */
-        float c[3];
-        ref_centre(&refs[i], c);
-        if (bin_index(c[axis], c_min, scale) <= best.bin) {
-            box_grow(&child_bounds[0], refs[i].min, refs[i].max);
-            box_grow(&child_centres[0], c, c);
-            i++;
-        } else {
-            box_grow(&child_bounds[1], refs[i].min, refs[i].max);
-            box_grow(&child_centres[1], c, c);
-            struct prim_ref tmp = refs[i];
-            refs[i] = refs[--j];
-            refs[j] = tmp;
-        }
-    }
-#endif
     assert(i > begin && i < end); /* bins_best_split only offers planes with both sides used */
-    return i;
+    for (int side = 0; side < 2; side++) {
+        child[side].bounds = child_bounds[side];
+        child[side].centre_bounds = child_centres[side];
+    }
+    place_children(refs, task, i, i, end, child);
+    return true;
 }
 
 static void node_set_box(struct bvh_node *node, const struct box *b)
@@ -495,10 +953,7 @@ static bool build_node(const struct build_ctx *ctx, const struct build_task *tas
 {
     struct bvh_node *node = &ctx->nodes[task->node_idx];
     node_set_box(node, &task->bounds);
-    struct box child_bounds[2];
-    struct box child_centres[2];
-    uint32_t mid = split_task(ctx, task, n_threads, child_bounds, child_centres);
-    if (mid == task->begin) {
+    if (!split_task(ctx, task, n_threads, child)) {
         node->left_first = task->begin;
         node->n_tris = task->end - task->begin;
         return false;
@@ -507,18 +962,18 @@ static bool build_node(const struct build_ctx *ctx, const struct build_task *tas
     *next += 2;
     node->left_first = left_idx;
     node->n_tris = 0;
-    child[0] = (struct build_task){left_idx, task->begin, mid, task->depth + 1, 0,
-                                   child_bounds[0], child_centres[0]};
-    child[1] = (struct build_task){left_idx + 1, mid, task->end, task->depth + 1, 0,
-                                   child_bounds[1], child_centres[1]};
+    for (int side = 0; side < 2; side++) {
+        child[side].node_idx = left_idx + (uint32_t)side;
+        child[side].depth = task->depth + 1;
+        child[side].node_base = 0;
+    }
     return true;
 }
 
 /* Builds the subtree of root depth first from an explicit stack, allocating child pairs from
  * root.node_base on.  Returns the deepest depth reached; *n_next is one past the last node
  * used.  Started at the root with node_base 2, this numbers nodes in the canonical order. */
-static uint32_t build_subtree(const struct build_ctx *ctx, struct build_task root,
-                              uint32_t *n_next)
+static uint32_t build_subtree(const struct build_ctx *ctx, struct build_task root, uint32_t *n_next)
 {
     struct build_task stack[BVH_MAX_DEPTH + 2]; /* one pending right child per level + current */
     int n_stack = 0;
@@ -636,19 +1091,20 @@ void *bvh_alloc_array(size_t n, size_t size)
     return malloc(n * size == 0 ? 1 : n * size);
 }
 
-/* Builds the binary tree over ctx->refs[0, n) into a fresh exact-size node array (*out_nodes,
- * *out_n_nodes).  Returns the maximum depth, or UINT32_MAX when out of memory. */
-static uint32_t build_tree(struct build_ctx *ctx, uint32_t n, const struct box *root_bounds,
-                           const struct box *root_centres, struct bvh_node **out_nodes,
-                           uint32_t *out_n_nodes)
+/* Builds the binary tree over ctx->refs[0, n) (with room for cap refs) into a fresh exact-size
+ * node array (*out_nodes, *out_n_nodes).  Returns the maximum depth, or UINT32_MAX when out of
+ * memory. */
+static uint32_t build_tree(struct build_ctx *ctx, uint32_t n, uint32_t cap,
+                           const struct box *root_bounds, const struct box *root_centres,
+                           struct bvh_node **out_nodes, uint32_t *out_n_nodes)
 {
-    struct bvh_node *work = bvh_alloc_aligned(2 * (size_t)n, sizeof *work);
+    struct bvh_node *work = bvh_alloc_aligned(2 * (size_t)cap, sizeof *work);
     struct build_task *pending = NULL;
     if (!work)
         return UINT32_MAX;
     ctx->nodes = work;
     work[1] = (struct bvh_node){{0}, 0, {0}, 0};
-    struct build_task root = {0, 0, n, 0, 2, *root_bounds, *root_centres};
+    struct build_task root = {0, 0, n, cap, 0, 2, *root_bounds, *root_centres};
     uint32_t max_depth = 0;
     uint32_t n_used = 0;
     bool renumbered = false;
@@ -657,8 +1113,8 @@ static uint32_t build_tree(struct build_ctx *ctx, uint32_t n, const struct box *
     } else {
         /* top nodes, largest first, until every thread has BVH_SUBTREES_PER_THREAD subtrees */
         uint32_t target = (uint32_t)ctx->n_threads * BVH_SUBTREES_PER_THREAD;
-        uint32_t cap = 2 * target + 2;
-        pending = malloc(cap * sizeof *pending);
+        uint32_t max_pending = 2 * target + 2;
+        pending = malloc(max_pending * sizeof *pending);
         if (!pending) {
             free(work);
             return UINT32_MAX;
@@ -684,13 +1140,13 @@ static uint32_t build_tree(struct build_ctx *ctx, uint32_t n, const struct box *
             pending[n_pending++] = child[0];
             pending[n_pending++] = child[1];
         }
-        /* a subtree of m refs has at most 2 (m - 1) nodes below its root */
+        /* a subtree of at most m refs (cap - begin) has at most 2 (m - 1) nodes below its root */
         qsort(pending, n_pending, sizeof *pending, compare_task_size);
         for (uint32_t i = 0; i < n_pending; i++) {
             pending[i].node_base = next;
-            next += 2 * (pending[i].end - pending[i].begin - 1);
+            next += 2 * (pending[i].cap - pending[i].begin - 1);
         }
-        assert(next <= 2 * n);
+        assert(next <= 2 * cap);
         struct subtree_pool pool = {ctx, pending, n_pending, 0, max_depth};
         struct subtree_pool *handles[BVH_MAX_THREADS];
         for (int i = 0; i < ctx->n_threads; i++)
@@ -822,6 +1278,32 @@ static void make_refs(struct prim_ref *refs, const vec3 *positions, const uint32
     }
 }
 
+/* The leaves' ranges of refs have gaps (the spare slots of spatial splits): the refs are copied
+ * into one sequence in depth-first leaf order, each leaf pointing at its new range (for a
+ * binned build this changes nothing).  prim_idx and degenerate get n_refs entries. */
+static void compact_leaves(struct bvh_node *nodes, const struct prim_ref *refs, uint32_t *prim_idx,
+                           uint8_t *degenerate)
+{
+    uint32_t stack[BVH_MAX_DEPTH + 2];
+    int n_stack = 0;
+    uint32_t k = 0;
+    stack[n_stack++] = 0;
+    while (n_stack > 0) {
+        struct bvh_node *node = &nodes[stack[--n_stack]];
+        if (node->n_tris == 0) {
+            stack[n_stack++] = node->left_first + 1;
+            stack[n_stack++] = node->left_first;
+            continue;
+        }
+        for (uint32_t j = 0; j < node->n_tris; j++) {
+            prim_idx[k + j] = refs[node->left_first + j].prim_idx;
+            degenerate[k + j] = (uint8_t)refs[node->left_first + j].is_degenerate;
+        }
+        node->left_first = k;
+        k += node->n_tris;
+    }
+}
+
 static double now_ms(void)
 {
     struct timespec ts;
@@ -834,7 +1316,7 @@ static void compute_stats(struct bvh *bvh);
 struct bvh *bvh_build(const vec3 *positions, const uint32_t *indices, uint32_t n_tris,
                       int n_threads)
 {
-    struct bvh_build_options opt = {n_threads, BVH_LAYOUT_WIDE};
+    struct bvh_build_options opt = {n_threads, BVH_LAYOUT_WIDE, BVH_QUALITY_DEFAULT};
     return bvh_build_with(positions, indices, n_tris, &opt);
 }
 
@@ -842,13 +1324,17 @@ struct bvh *bvh_build_with(const vec3 *positions, const uint32_t *indices, uint3
                            const struct bvh_build_options *opt)
 {
     double t_start_ms = now_ms();
-    struct bvh_build_options o = opt ? *opt : (struct bvh_build_options){1, BVH_LAYOUT_WIDE};
+    struct bvh_build_options o = opt ? *opt
+                                     : (struct bvh_build_options){1, BVH_LAYOUT_WIDE,
+                                                                  BVH_QUALITY_DEFAULT};
     unsigned layouts = o.layouts ? o.layouts : BVH_LAYOUT_WIDE;
     if (n_tris >= BVH_WIDE_MAX_TRIS)
         layouts = BVH_LAYOUT_BINARY;
-    int n_threads = o.n_threads < 1 ? 1 : o.n_threads > BVH_MAX_THREADS ? BVH_MAX_THREADS
-                                                                          : o.n_threads;
-    struct build_ctx ctx = {NULL, NULL, n_threads};
+    int n_threads = o.n_threads < 1                 ? 1
+                    : o.n_threads > BVH_MAX_THREADS ? BVH_MAX_THREADS
+                                                    : o.n_threads;
+    bool spatial = o.quality != BVH_QUALITY_BINNED;
+    struct build_ctx ctx = {NULL, NULL, n_threads, spatial, 0.0f, positions, indices};
     uint8_t *degenerate = NULL; /* per binary triangle position, for the conversion */
     struct bvh *bvh = calloc(1, sizeof *bvh);
     if (!bvh)
@@ -856,27 +1342,35 @@ struct bvh *bvh_build_with(const vec3 *positions, const uint32_t *indices, uint3
     bvh->n_tris = n_tris;
     bvh->stats.n_threads = n_threads;
     if (n_tris > 0) {
-        if (n_tris > UINT32_MAX / 2)
-            goto fail; /* 2 n nodes (2 n - 1 and the unused nodes[1]) must fit in uint32_t */
-        ctx.refs = bvh_alloc_aligned(n_tris, sizeof *ctx.refs);
-        bvh->prim_idx = bvh_alloc_array(n_tris, sizeof *bvh->prim_idx);
-        if (!ctx.refs || !bvh->prim_idx)
+        /* room for the copies of spatial splits: 2 cap nodes (2 cap - 1 and the unused
+         * nodes[1]) must fit in uint32_t */
+        uint64_t cap = n_tris + (spatial ? (uint64_t)((double)n_tris * BVH_SPLIT_BUDGET) : 0);
+        if ((layouts & BVH_LAYOUT_WIDE) && cap >= BVH_WIDE_MAX_TRIS) /* copies count there */
+            cap = BVH_WIDE_MAX_TRIS - 1 > n_tris ? BVH_WIDE_MAX_TRIS - 1 : n_tris;
+        if (cap > UINT32_MAX / 2)
+            goto fail;
+        ctx.refs = bvh_alloc_aligned(cap, sizeof *ctx.refs);
+        if (!ctx.refs)
             goto fail;
         struct box bounds;
         struct box centres;
         make_refs(ctx.refs, positions, indices, n_tris, n_threads, &bounds, &centres);
-        uint32_t depth = build_tree(&ctx, n_tris, &bounds, &centres, &bvh->nodes, &bvh->n_nodes);
+        ctx.min_overlap = BVH_SPLIT_ALPHA * box_half_area(&bounds);
+        uint32_t depth = build_tree(&ctx, n_tris, (uint32_t)cap, &bounds, &centres, &bvh->nodes,
+                                    &bvh->n_nodes);
         if (depth == UINT32_MAX)
             goto fail;
         bvh->stats.max_depth = depth;
         /* the refs are in BVH order now; keep what the conversion needs of them */
-        degenerate = bvh_alloc_array(n_tris, sizeof *degenerate);
-        if (!degenerate)
+        uint32_t n_refs = 0;
+        for (uint32_t i = 0; i < bvh->n_nodes; i++)
+            n_refs += i == 1 ? 0 : bvh->nodes[i].n_tris;
+        bvh->n_refs = n_refs;
+        bvh->prim_idx = bvh_alloc_array(n_refs, sizeof *bvh->prim_idx);
+        degenerate = bvh_alloc_array(n_refs, sizeof *degenerate);
+        if (!bvh->prim_idx || !degenerate)
             goto fail;
-        for (uint32_t i = 0; i < n_tris; i++) {
-            bvh->prim_idx[i] = ctx.refs[i].prim_idx;
-            degenerate[i] = (uint8_t)ctx.refs[i].is_degenerate;
-        }
+        compact_leaves(bvh->nodes, ctx.refs, bvh->prim_idx, degenerate);
         free(ctx.refs);
         ctx.refs = NULL;
         compute_stats(bvh); /* of the binary tree, before it may be dropped */
@@ -889,10 +1383,10 @@ struct bvh *bvh_build_with(const vec3 *positions, const uint32_t *indices, uint3
         free(degenerate);
         degenerate = NULL;
         if (layouts & BVH_LAYOUT_BINARY) {
-            bvh->tris = bvh_alloc_array(n_tris, sizeof *bvh->tris);
+            bvh->tris = bvh_alloc_array(bvh->n_refs, sizeof *bvh->tris);
             if (!bvh->tris)
                 goto fail;
-            for (uint32_t i = 0; i < n_tris; i++)
+            for (uint32_t i = 0; i < bvh->n_refs; i++)
                 bvh_load_tri(&bvh->tris[i], positions, indices, bvh->prim_idx[i]);
         } else {
             free(bvh->nodes);
@@ -907,7 +1401,8 @@ struct bvh *bvh_build_with(const vec3 *positions, const uint32_t *indices, uint3
     }
     bvh->stats.binary_bytes = bvh->layouts & BVH_LAYOUT_BINARY
                                   ? (size_t)bvh->n_nodes * sizeof(struct bvh_node) +
-                                        (size_t)n_tris * (sizeof(struct bvh_tri) + sizeof(uint32_t))
+                                        (size_t)bvh->n_refs *
+                                            (sizeof(struct bvh_tri) + sizeof(uint32_t))
                                   : 0;
     bvh->stats.bytes = bvh->stats.binary_bytes + bvh->stats.wide_bytes; /* by bvh_wide_convert */
     bvh->stats.build_ms = now_ms() - t_start_ms;
@@ -920,7 +1415,6 @@ fail:
 }
 
 unsigned bvh_layouts(const struct bvh *bvh) { return bvh->layouts; }
-
 
 /* ---- Reference traversal ----------------------------------------------------------------------
  * Closest hit: iterative, depth first, nearer child first.  At an interior node both children's
@@ -1127,8 +1621,8 @@ static inline float max_abs3(float a, float b, float c)
 }
 
 /* The double-precision fallback for one triangle's sheared 2D vertices (woop8 uses it too). */
-void bvh_edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx, float Cy,
-                               float *U, float *V, float *W)
+void bvh_edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx, float Cy, float *U,
+                               float *V, float *W)
 {
     double CxBy = (double)Cx * (double)By;
     double CyBx = (double)Cy * (double)Bx;
@@ -1215,8 +1709,8 @@ static bool tri_hit(const struct bvh_tri *tri, const struct ray_pre *rp, float t
  * bit-identical to what the traversals compute for it; among exactly equal t the lowest BVH
  * position wins.  Without the binary layout it walks the wide leaves in their stored order
  * (bvh_wide_brute). */
-void bvh_brute_step(const struct bvh_tri *tri, uint32_t prim, const struct ray_pre *rp,
-                    float t_min, struct bvh_hit *best)
+void bvh_brute_step(const struct bvh_tri *tri, uint32_t prim, const struct ray_pre *rp, float t_min,
+                    struct bvh_hit *best)
 {
     float t;
     float u;
@@ -1231,7 +1725,7 @@ bool bvh_intersect_brute(const struct bvh *bvh, const struct ray *ray, struct bv
     ray_setup(ray, &rp);
     struct bvh_hit best = {ray->t_max, 0.0f, 0.0f, UINT32_MAX};
     if (bvh->layouts & BVH_LAYOUT_BINARY) {
-        for (uint32_t i = 0; i < bvh->n_tris; i++)
+        for (uint32_t i = 0; i < bvh->n_refs; i++)
             bvh_brute_step(&bvh->tris[i], bvh->prim_idx[i], &rp, ray->t_min, &best);
     } else if (bvh->n_wide > 0) {
         bvh_wide_brute(bvh, &rp, ray->t_min, &best);
@@ -1251,6 +1745,7 @@ static void compute_stats(struct bvh *bvh)
 {
     struct bvh_stats *st = &bvh->stats;
     st->n_tris = bvh->n_tris;
+    st->n_refs = bvh->n_refs;
     st->n_nodes = bvh->n_nodes > 0 ? bvh->n_nodes - 1 : 0; /* without the unused nodes[1] */
     st->n_leaves = 0;
     st->sah_cost = 0.0;

@@ -1,5 +1,6 @@
-/* bvh.h - bounding volume hierarchy over triangles: binned SAH build (Wald 2007), flattened
- * nodes, triangles stored in BVH order, watertight ray-triangle test (Woop, Benthin, Wald 2013).
+/* bvh.h - bounding volume hierarchy over triangles: binned SAH build (Wald 2007) with spatial
+ * splits (Stich et al. 2009), flattened nodes, triangles stored in BVH order (a triangle cut by
+ * a spatial split in each leaf it reaches), watertight ray-triangle test (Woop et al. 2013).
  * Two traversal layouts: the scalar binary reference (bvh.c), and an 8-wide layout (SoA child
  * boxes, SoA leaves, SIMD; bvh_wide.c) converted from it, which the renderer uses.  Analytic
  * shapes (spheres, quads, planes) are not in the BVH; trace.c tests them directly. */
@@ -18,7 +19,7 @@ struct bvh_node {
     uint32_t left_first; /* first child node index (interior) or first triangle (leaf) */
     float max[3];
     uint32_t n_tris; /* triangles in this leaf; 0 for an interior node */
-}; /* 32 bytes */
+};                   /* 32 bytes */
 _Static_assert(sizeof(struct bvh_node) == 32, "bvh_node must be 32 bytes");
 
 struct bvh; /* opaque */
@@ -33,12 +34,13 @@ struct bvh_hit {
 
 struct bvh_stats {
     uint32_t n_tris;
-    uint32_t n_nodes;    /* binary nodes (the tree every layout is converted from) */
-    uint32_t n_leaves;   /* binary leaves */
-    uint32_t max_depth;  /* of the binary tree, root = 0 */
-    double sah_cost;     /* SAH cost of the binary tree, in units of one node traversal */
-    double build_ms;     /* wall-clock build time, conversion to the wide layout included */
-    size_t bytes;        /* what the BVH keeps: nodes + triangle data of every layout it carries */
+    uint32_t n_refs;    /* triangle references in the leaves: n_tris plus spatial splits' copies */
+    uint32_t n_nodes;   /* binary nodes (the tree every layout is converted from) */
+    uint32_t n_leaves;  /* binary leaves */
+    uint32_t max_depth; /* of the binary tree, root = 0 */
+    double sah_cost;    /* SAH cost of the binary tree, in units of one node traversal */
+    double build_ms;    /* wall-clock build time, conversion to the wide layout included */
+    size_t bytes;       /* what the BVH keeps: nodes + triangle data of every layout it carries */
     /* the 8-wide layout (0 when the BVH carries none) */
     uint32_t n_wide_nodes;  /* 8-wide nodes */
     uint32_t n_wide_leaves; /* leaves of the wide tree (non-empty binary leaves) */
@@ -54,9 +56,17 @@ enum bvh_layout {
     BVH_LAYOUT_WIDE = 2,   /* 8-wide nodes, SoA boxes and leaves, converted from the binary tree */
 };
 
+/* How the binary tree is split (docs/bvh.md, "Build"). */
+enum bvh_quality {
+    BVH_QUALITY_DEFAULT = 0, /* what bvh_build uses: BVH_QUALITY_SPATIAL */
+    BVH_QUALITY_BINNED = 1,  /* object splits only: binned SAH (Wald 2007) */
+    BVH_QUALITY_SPATIAL = 2, /* object and spatial splits (Stich, Friedrich, Dietrich 2009) */
+};
+
 struct bvh_build_options {
-    int n_threads;    /* <= 1: build on the calling thread; the tree is the same for any count */
-    unsigned layouts; /* OR of enum bvh_layout; 0 means BVH_LAYOUT_WIDE */
+    int n_threads;            /* <= 1: build on the calling thread; the tree is the same for any */
+    unsigned layouts;         /* OR of enum bvh_layout; 0 means BVH_LAYOUT_WIDE */
+    enum bvh_quality quality; /* 0: the default */
 };
 
 /* Builds a BVH over n_tris triangles whose vertex indices are indices[3i .. 3i+2] into

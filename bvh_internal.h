@@ -30,7 +30,7 @@ struct bvh_tri {
     float p0[3]; /* vertex 0, scene units */
     float p1[3]; /* vertex 1 */
     float p2[3]; /* vertex 2 */
-}; /* 36 bytes */
+};               /* 36 bytes */
 
 struct wide_node; /* bvh_wide.c */
 
@@ -39,6 +39,7 @@ struct bvh {
     struct bvh_node *nodes; /* n_nodes nodes, 64-byte aligned; root at 0, nodes[1] unused */
     struct bvh_tri *tris;   /* n_tris triangles in BVH order */
     uint32_t *prim_idx;     /* prim_idx[i]: the caller's index of tris[i] */
+    uint32_t n_refs;        /* length of tris and prim_idx: triangles plus spatial splits' copies */
     uint32_t n_nodes;       /* length of nodes, the unused nodes[1] included; 0 when empty */
     /* wide (BVH_LAYOUT_WIDE), bvh_wide.c */
     struct wide_node *wide;  /* n_wide nodes, root at 0 */
@@ -57,7 +58,7 @@ struct bvh {
 struct box {
     float min[4]; /* lower corner; +inf when empty; [3] is padding for 4-lane SIMD (kept 0) */
     float max[4]; /* upper corner; -inf when empty; [3] likewise */
-}; /* 32 bytes */
+};                /* 32 bytes */
 
 static const struct box empty_box = {{INFINITY, INFINITY, INFINITY, 0.0f},
                                      {-INFINITY, -INFINITY, -INFINITY, 0.0f}};
@@ -96,14 +97,14 @@ static inline float node_half_area(const struct bvh_node *node)
 
 /* Per-ray constants, computed once per ray and shared by every box and triangle test. */
 struct ray_pre {
-    float o[3];        /* origin */
-    float d[3];        /* direction */
-    float inv_d[3];    /* 1 / d per axis; +-inf where d is +-0 */
-    int is_neg[3];     /* inv_d[a] < 0: the slab's near plane is max[a], the far plane min[a] */
-    float far_scale;   /* 1 + 2 gamma(3), PBRT 4e, ch. 6, "Conservative Ray-Bounds Intersections" */
-    int kx, ky, kz;    /* Woop et al. 2013: kz = argmax |d|, (kx, ky) swapped when d[kz] < 0 */
-    float sx, sy, sz;  /* shear: sx = d[kx] / d[kz], sy = d[ky] / d[kz], sz = 1 / d[kz] */
-}; /* 72 bytes */
+    float o[3];       /* origin */
+    float d[3];       /* direction */
+    float inv_d[3];   /* 1 / d per axis; +-inf where d is +-0 */
+    int is_neg[3];    /* inv_d[a] < 0: the slab's near plane is max[a], the far plane min[a] */
+    float far_scale;  /* 1 + 2 gamma(3), PBRT 4e, ch. 6, "Conservative Ray-Bounds Intersections" */
+    int kx, ky, kz;   /* Woop et al. 2013: kz = argmax |d|, (kx, ky) swapped when d[kz] < 0 */
+    float sx, sy, sz; /* shear: sx = d[kx] / d[kz], sy = d[ky] / d[kz], sz = 1 / d[kz] */
+};                    /* 72 bytes */
 
 /* max(running, candidate) and min(...) where a NaN candidate leaves running unchanged: fmaxf /
  * fminf semantics for the one operand that can be NaN, written as a comparison so that gcc
@@ -186,7 +187,7 @@ static inline bool box_hit(const struct bvh_node *node, const struct ray_pre *rp
 struct stack_entry {
     uint32_t node_idx; /* node still to visit (binary index or wide reference) */
     float t_entry;     /* where the ray enters its box */
-}; /* 8 bytes */
+};                     /* 8 bytes */
 
 /* ---- What bvh.c lends bvh_wide.c ------------------------------------------------------------- */
 
@@ -202,13 +203,13 @@ void bvh_load_tri(struct bvh_tri *tri, const vec3 *positions, const uint32_t *in
 
 /* Woop et al. 2013's double-precision fallback: the three edge functions U, V, W of the sheared
  * 2D vertices A, B, C, each from two exact double products and one rounding. */
-void bvh_edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx, float Cy,
-                               float *U, float *V, float *W);
+void bvh_edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx, float Cy, float *U,
+                               float *V, float *W);
 
 /* Brute force's step: tests tri (the caller's triangle prim) with the scalar watertight test and
  * keeps it in *best when it is hit before best->t (prim_idx UINT32_MAX while nothing is hit). */
-void bvh_brute_step(const struct bvh_tri *tri, uint32_t prim, const struct ray_pre *rp,
-                    float t_min, struct bvh_hit *best);
+void bvh_brute_step(const struct bvh_tri *tri, uint32_t prim, const struct ray_pre *rp, float t_min,
+                    struct bvh_hit *best);
 
 /* ---- What bvh_wide.c lends bvh.c ------------------------------------------------------------- */
 

@@ -1,12 +1,13 @@
 /* bvh_wide.c - the fast layout, converted from bvh.c's binary reference and checked against it
  * (tinybvh's way): the SAH-optimal collapse into 8-wide nodes (Ylitie, Karras, Laine 2017,
  * "Efficient Incoherent Ray Traversal on GPUs Through Compressed Wide BVHs", sec. 4.1) with SoA
- * child boxes and SoA leaves of up to 8 triangles; eight SIMD lanes (AVX2 intrinsics, or the
- * scalar loops that define them); Woop, Benthin, Wald 2013's watertight test on eight lanes;
- * single rays nearest child first (Wald et al. 2008, "Getting Rid of Packets") and 8-ray
- * packets (Benthin et al. 2012).  Every hit equals the reference's to the bit.  Reading order:
- * layout, conversion, SIMD lanes, woop8, wide traversal, packets, brute force over the leaves.
- * Public API in bvh.h; bvh_internal.h is what this file shares with bvh.c. */
+ * child boxes, a child order per ray octant (Fuetterling et al. 2017) and SoA leaves of up to 8
+ * triangles; eight SIMD lanes (AVX2 intrinsics, or the scalar loops that define them); Woop,
+ * Benthin, Wald 2013's watertight test on eight lanes; single rays near child first (Wald et
+ * al. 2008, "Getting Rid of Packets") and 8-ray packets (Benthin et al. 2012).  Every hit equals
+ * the reference's to the bit.  Reading order: layout, conversion, SIMD lanes, woop8, wide
+ * traversal, packets, brute force over the leaves.  Public API in bvh.h; bvh_internal.h is what
+ * this file shares with bvh.c. */
 #include "bvh_internal.h"
 
 #include <assert.h>
@@ -20,10 +21,12 @@
  * bounds[2 a + 1][lane] = max, so one ray meets all eight boxes in one SIMD slab test.
  * A child reference is a wide node index, or WIDE_LEAF | first << 3 | (n - 1) for a leaf of
  * n in 1..8 triangles starting at wide triangle `first`.  An unused lane has the empty box
- * (min +inf, max -inf), which no ray hits, whatever the signs of its direction.
- * A leaf holds the triangles of one binary subtree (at most 8) minus the degenerate ones (a
- * binary leaf of more than 8, which only the depth cap makes, becomes a small wide subtree of
- * 8-triangle leaves).  A leaf's triangles
+ * (min +inf, max -inf), which no ray hits, whatever the signs of its direction, and reference
+ * 0.  order[] holds, for each of the 8 octants of ray directions, the children from the
+ * farthest to the nearest along that octant's diagonal (wide_node_set_order).
+ * A leaf holds the triangles of one binary subtree (at most 8 references) minus the degenerate
+ * ones, each triangle once (a binary leaf of more than 8, which only the depth cap makes,
+ * becomes a small wide subtree of 8-triangle leaves).  A leaf's triangles
  * are SoA: leaf_tris[9 first + (3 k + a) n + i] is coordinate a of vertex k of its triangle i
  * (the same three vertices as struct bvh_tri, so the test stays watertight), and
  * wide_prim_idx[first + i] is the caller's index.  The array has 8 floats of padding at its end
@@ -36,11 +39,20 @@
 
 struct wide_node {
     _Alignas(64) float bounds[6][BVH_WIDTH]; /* SoA child boxes: min x, max x, min y, ... */
-    uint32_t child[BVH_WIDTH];               /* child references */
-    uint32_t n_children;                     /* lanes in use: 0 .. n_children - 1 */
-    uint32_t pad[7];
-}; /* 256 bytes: four cache lines */
+    uint32_t child[BVH_WIDTH];               /* child references; 0 in unused lanes */
+    uint32_t order[BVH_WIDTH];               /* per octant, the lanes farthest first (below) */
+};                                           /* 256 bytes: four cache lines */
 _Static_assert(sizeof(struct wide_node) == 256, "wide_node must be 256 bytes");
+
+/* The children in use fill lanes 0 .. n - 1; a child reference is never 0 (the root is nobody's
+ * child), so 0 marks an unused lane. */
+static inline uint32_t wide_n_children(const struct wide_node *w)
+{
+    uint32_t n = 0;
+    while (n < BVH_WIDTH && w->child[n] != 0)
+        n++;
+    return n;
+}
 
 /* ---- Conversion to the wide layout ----------------------------------------------------------
  * The binary tree is collapsed into 8-wide nodes by the SAH-optimal dynamic programme of
@@ -59,7 +71,8 @@ _Static_assert(sizeof(struct wide_node) == 256, "wide_node must be 256 bytes");
  * becomes a small wide subtree of 8-triangle parts.  A first pass counts nodes and triangles so
  * that the arrays are allocated once at their exact size. */
 #define WIDE_COST_NODE 1.0f /* c_node: one wide node visit (eight box tests) */
-#define WIDE_COST_LEAF 1.0f /* c_leaf: one leaf (woop8), in units of c_node; 1.5 and 2.0 gave
+#define WIDE_COST_LEAF                                                                             \
+    1.0f /* c_leaf: one leaf (woop8), in units of c_node; 1.5 and 2.0 gave
                                the same visits per ray within 1% (docs/bvh.md) */
 
 #define CHOICE_FEWER 0   /* C(n, i) = C(n, i - 1) */
@@ -75,20 +88,20 @@ struct collapse_entry {
 }; /* 52 bytes */
 
 struct convert {
-    const struct bvh *bvh;       /* binary tree: nodes, prim_idx */
-    const uint8_t *degenerate;   /* per binary triangle position: zero area, dropped */
+    const struct bvh *bvh;           /* binary tree: nodes, prim_idx */
+    const uint8_t *degenerate;       /* per binary triangle position: zero area, dropped */
     const struct collapse_entry *dp; /* per binary node */
-    const vec3 *positions;       /* the caller's mesh, read again for the leaves */
-    const uint32_t *indices;     /* (the wide leaves keep the same vertices as struct bvh_tri) */
-    struct wide_node *wide;      /* NULL in the counting pass */
-    float *leaf_tris;            /* SoA leaves */
-    uint32_t *prim_idx;          /* of the wide triangles */
-    uint32_t *scratch;           /* valid triangles of one leaf */
-    uint32_t n_wide;             /* nodes allocated so far */
-    uint32_t n_wide_tris;        /* triangles written so far */
-    uint32_t n_leaves;           /* wide leaves */
-    uint32_t depth;              /* current wide depth, root = 0 */
-    uint32_t max_depth;          /* deepest wide node */
+    const vec3 *positions;           /* the caller's mesh, read again for the leaves */
+    const uint32_t *indices; /* (the wide leaves keep the same vertices as struct bvh_tri) */
+    struct wide_node *wide;  /* NULL in the counting pass */
+    float *leaf_tris;        /* SoA leaves */
+    uint32_t *prim_idx;      /* of the wide triangles */
+    uint32_t *scratch;       /* valid triangles of one leaf */
+    uint32_t n_wide;         /* nodes allocated so far */
+    uint32_t n_wide_tris;    /* triangles written so far */
+    uint32_t n_leaves;       /* wide leaves */
+    uint32_t depth;          /* current wide depth, root = 0 */
+    uint32_t max_depth;      /* deepest wide node */
 };
 
 /* Wide depth stays below the binary depth cap plus the levels of one oversized leaf
@@ -156,20 +169,57 @@ static void wide_node_init(struct wide_node *w)
             w->bounds[2 * a + 1][lane] = -INFINITY;
         }
         w->child[lane] = 0;
+        w->order[lane] = 0;
     }
-    w->n_children = 0;
-    memset(w->pad, 0, sizeof w->pad);
 }
 
 static void wide_node_add(struct wide_node *w, const struct box *b, uint32_t ref)
 {
-    uint32_t lane = w->n_children++;
-    assert(lane < BVH_WIDTH);
+    uint32_t lane = wide_n_children(w);
+    assert(lane < BVH_WIDTH && ref != 0);
     for (int a = 0; a < 3; a++) {
         w->bounds[2 * a][lane] = b->min[a];
         w->bounds[2 * a + 1][lane] = b->max[a];
     }
     w->child[lane] = ref;
+}
+
+/* The child order of each octant (struct wide_node's order), once its children are in place.
+ * A ray whose direction signs are those of octant o, s_a = -1 where bit a of o is set and +1
+ * elsewhere, meets boxes roughly in the order of their centres' depth along s, so children are
+ * ranked by s . (min + max) (twice that depth), farthest first; the sort is stable and unused
+ * lanes, never hit, rank first.  Fuetterling, Lojewski, Pfreundt, Ebert 2017, "Accelerated
+ * Single Ray Tracing for Wide Vector Units", store such per-octant orders in the node (as does
+ * tinybvh's BVH8_CPU). */
+static void wide_node_set_order(struct wide_node *w)
+{
+    uint32_t n = wide_n_children(w);
+    for (uint32_t octant = 0; octant < 8; octant++) {
+        float depth[BVH_WIDTH];
+        uint32_t lanes[BVH_WIDTH];
+        for (uint32_t lane = 0; lane < n; lane++) {
+            depth[lane] = 0.0f;
+            for (int a = 0; a < 3; a++) {
+                float twice_centre = w->bounds[2 * a][lane] + w->bounds[2 * a + 1][lane];
+                depth[lane] += (octant >> a & 1u) ? -twice_centre : twice_centre;
+            }
+            lanes[lane] = lane;
+        }
+        /* insertion sort, deepest first; the unused lanes n .. 7 come before them */
+        for (uint32_t i = 1; i < n; i++) {
+            uint32_t lane = lanes[i];
+            uint32_t j = i;
+            while (j > 0 && depth[lanes[j - 1]] < depth[lane]) {
+                lanes[j] = lanes[j - 1];
+                j--;
+            }
+            lanes[j] = lane;
+        }
+        for (uint32_t r = 0; r < BVH_WIDTH; r++) {
+            uint32_t lane = r < BVH_WIDTH - n ? n + r : lanes[r - (BVH_WIDTH - n)];
+            w->order[r] = (w->order[r] & ~(7u << (3 * octant))) | lane << (3 * octant);
+        }
+    }
 }
 
 /* The next wide node, empty (initialised in the writing pass only). */
@@ -181,7 +231,7 @@ static uint32_t new_wide_node(struct convert *cv)
     return w;
 }
 
-/* Child ref with box b into lane n_children of wide node w (writing pass only). */
+/* Child ref with box b into the next free lane of wide node w (writing pass only). */
 static void add_child(struct convert *cv, uint32_t w, const struct box *b, uint32_t ref)
 {
     if (cv->wide)
@@ -241,19 +291,27 @@ static uint32_t emit_triangles(struct convert *cv, const uint32_t *tris, uint32_
         box_grow(box, part_box.min, part_box.max);
         add_child(cv, w, &part_box, ref);
     }
+    if (cv->wide)
+        wide_node_set_order(&cv->wide[w]);
     cv->depth--;
     return w;
 }
 
-/* The wide leaf of binary subtree idx without its degenerate triangles; false when none is
- * left (the leaf is dropped). */
+/* The wide leaf of binary subtree idx without its degenerate triangles, and with each triangle
+ * once (the two parts of a triangle cut by a spatial split may meet again in one leaf); false
+ * when none is left (the leaf is dropped). */
 static bool emit_subtree_leaf(struct convert *cv, uint32_t idx, uint32_t *ref)
 {
     const struct collapse_entry *e = &cv->dp[idx];
+    const uint32_t *prim_idx = cv->bvh->prim_idx;
     uint32_t n = 0;
-    for (uint32_t i = e->first; i < e->first + e->n_tris; i++)
-        if (!cv->degenerate[i])
+    for (uint32_t i = e->first; i < e->first + e->n_tris; i++) {
+        bool seen = cv->degenerate[i];
+        for (uint32_t j = 0; j < n && !seen; j++)
+            seen = prim_idx[cv->scratch[j]] == prim_idx[i];
+        if (!seen)
             cv->scratch[n++] = i;
+    }
     if (n == 0)
         return false;
     struct box unused = empty_box;
@@ -307,6 +365,8 @@ static uint32_t emit_wide(struct convert *cv, uint32_t idx)
         if (emit_slot(cv, slots[i], &ref))
             add_child(cv, w, &b, ref);
     }
+    if (cv->wide)
+        wide_node_set_order(&cv->wide[w]);
     cv->depth--;
     return w;
 }
@@ -324,6 +384,8 @@ static void emit_root(struct convert *cv)
     uint32_t ref;
     if (emit_subtree_leaf(cv, 0, &ref))
         add_child(cv, w, &b, ref);
+    if (cv->wide)
+        wide_node_set_order(&cv->wide[w]);
 }
 
 bool bvh_wide_convert(struct bvh *bvh, const vec3 *positions, const uint32_t *indices,
@@ -331,7 +393,7 @@ bool bvh_wide_convert(struct bvh *bvh, const vec3 *positions, const uint32_t *in
 {
     bool ok = false;
     struct collapse_entry *dp = bvh_alloc_array(bvh->n_nodes, sizeof *dp);
-    uint32_t *scratch = bvh_alloc_array(bvh->n_tris, sizeof *scratch);
+    uint32_t *scratch = bvh_alloc_array(bvh->n_refs, sizeof *scratch);
     if (!dp || !scratch)
         goto done;
     collapse_costs(bvh, dp);
@@ -395,6 +457,9 @@ struct f8 {
 struct m8 {
     __m256 v;
 };
+struct i8 {
+    __m256i v;
+};
 #else
 #define BVH_AVX2 0
 struct f8 {
@@ -403,18 +468,21 @@ struct f8 {
 struct m8 {
     int32_t v[8]; /* 0 or -1 */
 };
+struct i8 {
+    uint32_t v[8];
+};
 #endif
 
 /* The scalar forms: r.v[i] = expr for each lane i (a mask lane is -1 where expr holds). */
-#define F8_MAP(expr)                                                                              \
-    struct f8 r;                                                                                  \
-    for (int i = 0; i < 8; i++)                                                                   \
-        r.v[i] = (expr);                                                                          \
+#define F8_MAP(expr)                                                                               \
+    struct f8 r;                                                                                   \
+    for (int i = 0; i < 8; i++)                                                                    \
+        r.v[i] = (expr);                                                                           \
     return r
-#define M8_MAP(expr)                                                                              \
-    struct m8 r;                                                                                  \
-    for (int i = 0; i < 8; i++)                                                                   \
-        r.v[i] = (expr) ? -1 : 0;                                                                 \
+#define M8_MAP(expr)                                                                               \
+    struct m8 r;                                                                                   \
+    for (int i = 0; i < 8; i++)                                                                    \
+        r.v[i] = (expr) ? -1 : 0;                                                                  \
     return r
 
 const char *bvh_simd_name(void) { return BVH_AVX2 ? "avx2" : "scalar"; }
@@ -631,6 +699,119 @@ static inline float f8_hmin(struct f8 a)
     return m;
 #endif
 }
+/* Eight uint32 lanes: child references and lane indices, for the ordered push of the single-ray
+ * traversal. */
+#define I8_MAP(expr)                                                                               \
+    struct i8 r;                                                                                   \
+    for (int i = 0; i < 8; i++)                                                                    \
+        r.v[i] = (expr);                                                                           \
+    return r
+/* (p[i] >> shift) & 7, p 32-byte aligned: a node's child order for one octant */
+static inline struct i8 i8_order(const uint32_t *p, int shift)
+{
+#if BVH_AVX2
+    __m256i v = _mm256_srli_epi32(_mm256_load_si256((const __m256i *)p), shift);
+    return (struct i8){_mm256_and_si256(v, _mm256_set1_epi32(7))};
+#else
+    I8_MAP(p[i] >> shift & 7u);
+#endif
+}
+/* p 32-byte aligned */
+static inline struct i8 i8_load(const uint32_t *p)
+{
+#if BVH_AVX2
+    return (struct i8){_mm256_load_si256((const __m256i *)p)};
+#else
+    I8_MAP(p[i]);
+#endif
+}
+static inline void i8_store(uint32_t *p, struct i8 a)
+{
+#if BVH_AVX2
+    _mm256_storeu_si256((__m256i *)p, a.v);
+#else
+    memcpy(p, a.v, sizeof a.v);
+#endif
+}
+/* r[i] = a[idx[i]], idx in 0..7 */
+static inline struct i8 i8_permute(struct i8 a, struct i8 idx)
+{
+#if BVH_AVX2
+    return (struct i8){_mm256_permutevar8x32_epi32(a.v, idx.v)};
+#else
+    I8_MAP(a.v[idx.v[i]]);
+#endif
+}
+static inline struct f8 f8_permute(struct f8 a, struct i8 idx)
+{
+#if BVH_AVX2
+    return (struct f8){_mm256_permutevar8x32_ps(a.v, idx.v)};
+#else
+    F8_MAP(a.v[idx.v[i]]);
+#endif
+}
+/* every lane: lane `lane` of a */
+static inline struct f8 f8_splat_lane(struct f8 a, int lane)
+{
+#if BVH_AVX2
+    return (struct f8){_mm256_permutevar8x32_ps(a.v, _mm256_set1_epi32(lane))};
+#else
+    F8_MAP(a.v[lane]);
+#endif
+}
+static inline struct m8 m8_permute(struct m8 a, struct i8 idx)
+{
+#if BVH_AVX2
+    return (struct m8){_mm256_permutevar8x32_ps(a.v, idx.v)};
+#else
+    struct m8 r;
+    for (int i = 0; i < 8; i++)
+        r.v[i] = a.v[idx.v[i]];
+    return r;
+#endif
+}
+/* The lanes i of a whose bit i is set, in order, moved to lanes 0, 1, ...; the rest is 0.
+ * AVX-512 has the instruction (vpcompressd); with AVX2 the permutation that does it is built
+ * from the bits with BMI2 (pdep spreads each bit over a byte, pext gathers those bytes' lane
+ * numbers). */
+static inline struct i8 i8_compress(struct i8 a, uint32_t bits)
+{
+#if BVH_AVX2 && defined(__AVX512F__) && defined(__AVX512VL__)
+    return (struct i8){_mm256_maskz_compress_epi32((__mmask8)bits, a.v)};
+#elif BVH_AVX2 && defined(__BMI2__)
+    uint64_t byte_mask = _pdep_u64(bits, 0x0101010101010101ull) * 0xFF;
+    uint64_t lanes = _pext_u64(0x0706050403020100ull, byte_mask);
+    __m256i idx = _mm256_cvtepu8_epi32(_mm_cvtsi64_si128((long long)lanes));
+    __m256i kept = _mm256_permutevar8x32_epi32(a.v, idx);
+    /* zero the lanes past the count (pext left them 0, which would repeat lane 0) */
+    __m256i count = _mm256_set1_epi32(__builtin_popcount(bits));
+    __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    return (struct i8){_mm256_and_si256(kept, _mm256_cmpgt_epi32(count, lane))};
+#else
+    uint32_t in[8];
+    uint32_t out[8] = {0};
+    i8_store(in, a);
+    int n = 0;
+    for (int i = 0; i < 8; i++)
+        if (bits >> i & 1u)
+            out[n++] = in[i];
+#if BVH_AVX2
+    return (struct i8){_mm256_loadu_si256((const __m256i *)out)};
+#else
+    return i8_load(out);
+#endif
+#endif
+}
+/* lane i of a */
+static inline uint32_t i8_lane(struct i8 a, int i)
+{
+#if BVH_AVX2
+    return (uint32_t)_mm256_cvtsi256_si32(_mm256_permutevar8x32_epi32(a.v, _mm256_set1_epi32(i)));
+#else
+    return a.v[i];
+#endif
+}
+#undef I8_MAP
 #undef F8_MAP
 #undef M8_MAP
 
@@ -674,9 +855,8 @@ struct woop8_out {
     struct f8 v; /* W / det */
 };
 
-static void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, struct f8 Bx,
-                               struct f8 By, struct f8 Cx, struct f8 Cy, struct f8 *U,
-                               struct f8 *V, struct f8 *W)
+static void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, struct f8 Bx, struct f8 By,
+                           struct f8 Cx, struct f8 Cy, struct f8 *U, struct f8 *V, struct f8 *W)
 {
     float ax[8], ay[8], bx[8], by[8], cx[8], cy[8], u[8], v[8], w[8];
     f8_store(ax, Ax);
@@ -742,10 +922,10 @@ static inline uint32_t woop8(const struct woop8_in *in, uint32_t valid, struct w
     struct f8 delta_x = f8_mul(f8_set1(mcpt_gamma(5)), f8_add(max_xt, max_z));
     struct f8 delta_y = f8_mul(f8_set1(mcpt_gamma(5)), f8_add(max_yt, max_z));
     struct f8 delta_z = f8_mul(f8_set1(mcpt_gamma(3)), max_zt);
-    struct f8 delta_e = f8_mul(
-        f8_set1(2.0f), f8_add(f8_add(f8_mul(f8_mul(f8_set1(mcpt_gamma(2)), max_xt), max_yt),
-                                     f8_mul(delta_y, max_xt)),
-                              f8_mul(delta_x, max_yt)));
+    struct f8 delta_e = f8_mul(f8_set1(2.0f),
+                               f8_add(f8_add(f8_mul(f8_mul(f8_set1(mcpt_gamma(2)), max_xt), max_yt),
+                                             f8_mul(delta_y, max_xt)),
+                                      f8_mul(delta_x, max_yt)));
     struct f8 delta_t = f8_mul(
         f8_mul(f8_set1(3.0f), f8_add(f8_add(f8_mul(f8_mul(f8_set1(mcpt_gamma(3)), max_e), max_zt),
                                             f8_mul(delta_e, max_zt)),
@@ -782,25 +962,27 @@ struct wide_ray {
     bool fast;          /* the fused form applies (every constant finite) */
     float t_min;
     struct ray_pre *rp; /* for Woop's constants, computed at the first leaf */
-}; /* 104 bytes */
+};                      /* 104 bytes */
 
 /* struct wide_ray broadcast to eight lanes, a local of the traversal loop. */
 struct wide_ray8 {
-    struct f8 o[3];               /* origin, slab order */
-    struct f8 inv_d[3];           /* 1 / d */
-    struct f8 inv_d_far[3];       /* the conservative far-plane factor */
-    struct f8 c_near[3];          /* fused form constants */
+    struct f8 o[3];         /* origin, slab order */
+    struct f8 inv_d[3];     /* 1 / d */
+    struct f8 inv_d_far[3]; /* the conservative far-plane factor */
+    struct f8 c_near[3];    /* fused form constants */
     struct f8 c_far[3];
     struct f8 t_min;
-    struct f8 o_k[3];             /* Woop: o[kx], o[ky], o[kz] (set at the first leaf) */
-    struct f8 sx;                 /* Woop's shear constants */
+    struct f8 o_k[3]; /* Woop: o[kx], o[ky], o[kz] (set at the first leaf) */
+    struct f8 sx;     /* Woop's shear constants */
     struct f8 sy;
     struct f8 sz;
-    int k[3];                     /* kx, ky, kz */
-    size_t near_off[3];           /* byte offsets of the near and far bounds rows in a node */
+    int k[3];           /* kx, ky, kz */
+    size_t near_off[3]; /* byte offsets of the near and far bounds rows in a node */
     size_t far_off[3];
+    int order_shift;              /* 3 octant: the ray's child order (struct wide_node) */
     const struct wide_node *wide; /* the node array */
-}; /* 640 bytes with AVX2 */
+    struct ray_pre *rp;           /* the caller's; Woop's constants go there at the first leaf */
+};                                /* 640 bytes with AVX2 */
 
 /* The slab test takes max(max(t_0, t_1), max(t_2, t_min)) as a tree, which shortens the chain
  * of dependent instructions per node.  A slab distance is NaN only where inv_d is infinite
@@ -871,12 +1053,15 @@ static inline void wide_ray8_box(const struct bvh *bvh, const struct wide_ray *w
         v->c_far[j] = f8_set1(wr->c_far[j]);
     }
     v->t_min = f8_set1(wr->t_min);
+    const int *is_neg = wr->rp->is_neg;
+    v->order_shift = 3 * (is_neg[0] | is_neg[1] << 1 | is_neg[2] << 2);
+    v->rp = wr->rp;
 }
 
 /* Woop's constants: computed into *rp (which the caller owns) on the first leaf. */
-static inline void wide_ray8_woop(const struct wide_ray *wr, struct wide_ray8 *v)
+static inline void wide_ray8_woop(struct wide_ray8 *v)
 {
-    struct ray_pre *rp = wr->rp;
+    struct ray_pre *rp = v->rp;
     ray_setup_woop(rp);
     v->k[0] = rp->kx;
     v->k[1] = rp->ky;
@@ -890,8 +1075,8 @@ static inline void wide_ray8_woop(const struct wide_ray *wr, struct wide_ray8 *v
 
 /* Slab test of one ray against a wide node's children; returns the mask of children hit in
  * [t_min, t_max] and their entry distances. */
-static inline uint32_t wide_box_hit(const struct wide_node *node, const struct wide_ray8 *v,
-                                    const bool fast, float t_max, struct f8 *t_entry)
+static inline struct m8 wide_box_hit(const struct wide_node *node, const struct wide_ray8 *v,
+                                     const bool fast, float t_max, struct f8 *t_entry)
 {
     struct f8 t_near[3];
     struct f8 t_far[3];
@@ -910,13 +1095,12 @@ static inline uint32_t wide_box_hit(const struct wide_node *node, const struct w
     struct f8 t0 = f8_max_num(f8_max_num(v->t_min, t_near[2]), f8_max_num(t_near[1], t_near[0]));
     struct f8 t1 = f8_min_num(f8_min_num(f8_set1(t_max), t_far[2]), f8_min_num(t_far[1], t_far[0]));
     *t_entry = t0;
-    return m8_bits(f8_le(t0, t1));
+    return f8_le(t0, t1);
 }
 
 /* woop8 of one ray against the n (1..8) triangles of the leaf at wide triangle `first`. */
 static inline uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint32_t n,
-                                     const struct wide_ray8 *v, float t_max,
-                                     struct woop8_out *out)
+                                     const struct wide_ray8 *v, float t_max, struct woop8_out *out)
 {
     const float *base = bvh->leaf_tris + 9 * (size_t)first;
     struct woop8_in in;
@@ -936,82 +1120,84 @@ static inline uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint
 
 /* The closest hit so far. */
 struct wide_hit {
-    float t;      /* t_hit, initially the ray's t_max */
+    float t; /* t_hit, initially the ray's t_max */
     float u;
     float v;
     uint32_t tri; /* wide triangle index, UINT32_MAX while none */
 };
 
-/* Pushes the children in mask (at least three) and sorts them so the nearest is on top. */
-static inline void push_sorted(struct stack_entry *stack, uint32_t *n_stack,
-                               const struct wide_node *node, uint32_t mask, const float *dist)
+/* The hit children of a node (vector mask hit, entry distances t_entry), two or more of them,
+ * onto the stack in the node's order for the ray's octant, nearest on top: the order's ranks
+ * whose lane is hit are compressed into lanes 0 .. k - 1, farthest first, and references and
+ * distances stored as two vectors (the stack has room for eight more).  No comparison of
+ * distances, no branch per child: the order is precomputed, so it is only approximately by
+ * entry distance (Fuetterling et al. 2017).  Returns the nearest, which is not kept. */
+static inline uint32_t push_ordered(uint32_t *stack_ref, float *stack_t, uint32_t *n_stack,
+                                    const struct wide_node *node, int order_shift, struct m8 hit,
+                                    struct f8 t_entry)
 {
-    uint32_t base = *n_stack;
-    uint32_t n = base;
-    for (; mask; mask &= mask - 1) {
-        int c = lowest_bit(mask);
-        struct stack_entry e = {node->child[c], dist[c]};
-        /* insertion: farther entries sink below nearer ones */
-        uint32_t i = n++;
-        while (i > base && stack[i - 1].t_entry < e.t_entry) {
-            stack[i] = stack[i - 1];
-            i--;
-        }
-        stack[i] = e;
-    }
-    *n_stack = n;
+    struct i8 order = i8_order(node->order, order_shift);
+    uint32_t ranked = m8_bits(m8_permute(hit, order)); /* bit r: the child of rank r is hit */
+    struct i8 lanes = i8_compress(order, ranked);
+    int k = __builtin_popcount(ranked);
+    struct i8 refs = i8_permute(i8_load(node->child), lanes);
+    i8_store(stack_ref + *n_stack, refs);
+    f8_store(stack_t + *n_stack, f8_permute(t_entry, lanes));
+    *n_stack += (uint32_t)k - 1;
+    return i8_lane(refs, k - 1);
 }
 
 /* Closest hit below wide reference `root` (a node or a leaf) for t in (t_min, hit->t). */
-static ALWAYS_INLINE void wide_closest(const struct bvh *bvh, uint32_t root,
-                                       const struct wide_ray *wr, struct wide_hit *hit,
-                                       const bool fast)
+static ALWAYS_INLINE void wide_closest(const struct bvh *bvh, uint32_t root, struct wide_ray8 *v,
+                                       struct wide_hit *hit, const bool fast)
 {
-    struct wide_ray8 v;
-    wide_ray8_box(bvh, wr, &v);
     bool woop_ready = false;
-    struct stack_entry stack[WIDE_STACK_SIZE];
+    /* a visit pushes at most 7 entries (and writes 8 lanes) */
+    uint32_t stack_ref[WIDE_STACK_SIZE];
+    float stack_t[WIDE_STACK_SIZE];
     uint32_t n_stack = 0;
     uint32_t ref = root;
     for (;;) {
         if (!(ref & WIDE_LEAF)) {
-            const struct wide_node *node = &v.wide[ref];
+            const struct wide_node *node = &v->wide[ref];
             struct f8 t_entry;
-            uint32_t mask = wide_box_hit(node, &v, fast, hit->t, &t_entry);
+            struct m8 hit_m = wide_box_hit(node, v, fast, hit->t, &t_entry);
+            uint32_t mask = m8_bits(hit_m);
             if (mask) {
                 int c0 = lowest_bit(mask);
                 uint32_t rest = mask & (mask - 1);
-                if (!rest) {
+                if (!rest) { /* one child: no stack */
                     ref = node->child[c0];
                     continue;
                 }
-                float dist[8];
-                f8_store(dist, t_entry);
-                int c1 = lowest_bit(rest);
-                if (!(rest & (rest - 1))) {
+                if (!(rest & (rest - 1))) { /* two: one comparison */
+                    float dist[8];
+                    f8_store(dist, t_entry);
+                    int c1 = lowest_bit(rest);
                     if (dist[c1] < dist[c0]) {
                         int tmp = c0;
                         c0 = c1;
                         c1 = tmp;
                     }
-                    stack[n_stack++] = (struct stack_entry){node->child[c1], dist[c1]};
+                    stack_ref[n_stack] = node->child[c1];
+                    stack_t[n_stack++] = dist[c1];
                     ref = node->child[c0];
                     continue;
                 }
                 assert(n_stack + 8 <= WIDE_STACK_SIZE);
-                push_sorted(stack, &n_stack, node, mask, dist);
-                ref = stack[--n_stack].node_idx;
+                ref = push_ordered(stack_ref, stack_t, &n_stack, node, v->order_shift, hit_m,
+                                   t_entry);
                 continue;
             }
         } else {
             if (!woop_ready) {
-                wide_ray8_woop(wr, &v);
+                wide_ray8_woop(v);
                 woop_ready = true;
             }
             uint32_t first = (ref & ~WIDE_LEAF) >> 3;
             uint32_t n = (ref & 7u) + 1;
             struct woop8_out out;
-            uint32_t hits = wide_leaf_hit(bvh, first, n, &v, hit->t, &out);
+            uint32_t hits = wide_leaf_hit(bvh, first, n, v, hit->t, &out);
             if (hits) {
                 struct f8 t_hits = f8_select(m8_from_bits(hits), out.t, f8_set1(INFINITY));
                 float t_best = f8_hmin(t_hits);
@@ -1029,27 +1215,26 @@ static ALWAYS_INLINE void wide_closest(const struct bvh *bvh, uint32_t root,
             if (n_stack == 0)
                 return;
             n_stack--;
-        } while (stack[n_stack].t_entry > hit->t);
-        ref = stack[n_stack].node_idx;
+        } while (stack_t[n_stack] > hit->t);
+        ref = stack_ref[n_stack];
     }
 }
 
 /* Any hit below `root` for t in (t_min, t_max): children in any order, the first hit ends it
  * (nearest-first order measured no faster for shadow rays, docs/bvh.md). */
-static ALWAYS_INLINE bool wide_any(const struct bvh *bvh, uint32_t root,
-                                   const struct wide_ray *wr, float t_max, const bool fast)
+static ALWAYS_INLINE bool wide_any(const struct bvh *bvh, uint32_t root, struct wide_ray8 *v,
+                                   float t_max, const bool fast)
 {
-    struct wide_ray8 v;
-    wide_ray8_box(bvh, wr, &v);
     bool woop_ready = false;
     uint32_t stack[WIDE_STACK_SIZE];
     uint32_t n_stack = 0;
     uint32_t ref = root;
     for (;;) {
         if (!(ref & WIDE_LEAF)) {
-            const struct wide_node *node = &v.wide[ref];
+            const struct wide_node *node = &v->wide[ref];
             struct f8 t_entry;
-            uint32_t mask = wide_box_hit(node, &v, fast, t_max, &t_entry);
+            struct m8 hit_m = wide_box_hit(node, v, fast, t_max, &t_entry);
+            uint32_t mask = m8_bits(hit_m);
             if (mask) {
                 ref = node->child[lowest_bit(mask)];
                 assert(n_stack + 8 <= WIDE_STACK_SIZE);
@@ -1059,11 +1244,11 @@ static ALWAYS_INLINE bool wide_any(const struct bvh *bvh, uint32_t root,
             }
         } else {
             if (!woop_ready) {
-                wide_ray8_woop(wr, &v);
+                wide_ray8_woop(v);
                 woop_ready = true;
             }
             struct woop8_out out;
-            if (wide_leaf_hit(bvh, (ref & ~WIDE_LEAF) >> 3, (ref & 7u) + 1, &v, t_max, &out))
+            if (wide_leaf_hit(bvh, (ref & ~WIDE_LEAF) >> 3, (ref & 7u) + 1, v, t_max, &out))
                 return true;
         }
         if (n_stack == 0)
@@ -1075,53 +1260,54 @@ static ALWAYS_INLINE bool wide_any(const struct bvh *bvh, uint32_t root,
 /* The specialised copies, one function each (two copies in one function made gcc stop inlining
  * wide_leaf_hit: 8% more instructions on diffuse rays), and the choice between them by the
  * ray's slab form. */
-static void wide_closest_fast(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
+static void wide_closest_fast(const struct bvh *bvh, uint32_t root, struct wide_ray8 *v,
                               struct wide_hit *hit)
 {
-    wide_closest(bvh, root, wr, hit, true);
+    wide_closest(bvh, root, v, hit, true);
 }
 
-static void wide_closest_safe(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
+static void wide_closest_safe(const struct bvh *bvh, uint32_t root, struct wide_ray8 *v,
                               struct wide_hit *hit)
 {
-    wide_closest(bvh, root, wr, hit, false);
+    wide_closest(bvh, root, v, hit, false);
 }
 
-static bool wide_any_fast(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
-                          float t_max)
+static bool wide_any_fast(const struct bvh *bvh, uint32_t root, struct wide_ray8 *v, float t_max)
 {
-    return wide_any(bvh, root, wr, t_max, true);
+    return wide_any(bvh, root, v, t_max, true);
 }
 
-static bool wide_any_safe(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
-                          float t_max)
+static bool wide_any_safe(const struct bvh *bvh, uint32_t root, struct wide_ray8 *v, float t_max)
 {
-    return wide_any(bvh, root, wr, t_max, false);
+    return wide_any(bvh, root, v, t_max, false);
 }
 
-static inline void wide_closest_ray(const struct bvh *bvh, uint32_t root,
-                                    const struct wide_ray *wr, struct wide_hit *hit)
+static inline void wide_closest_ray(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
+                                    struct wide_hit *hit)
 {
+    struct wide_ray8 v;
+    wide_ray8_box(bvh, wr, &v);
     if (wr->fast)
-        wide_closest_fast(bvh, root, wr, hit);
+        wide_closest_fast(bvh, root, &v, hit);
     else
-        wide_closest_safe(bvh, root, wr, hit);
+        wide_closest_safe(bvh, root, &v, hit);
 }
 
 static inline bool wide_any_ray(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
                                 float t_max)
 {
-    return wr->fast ? wide_any_fast(bvh, root, wr, t_max) : wide_any_safe(bvh, root, wr, t_max);
+    struct wide_ray8 v;
+    wide_ray8_box(bvh, wr, &v);
+    return wr->fast ? wide_any_fast(bvh, root, &v, t_max) : wide_any_safe(bvh, root, &v, t_max);
 }
 
-/* Most camera rays of a small object miss it altogether: a scalar test against the tree's box
- * (box_hit, the reference form) lets them return false before any SIMD setup.  Otherwise *wr
- * (which keeps a pointer to *rp) is ready for the traversal. */
-static inline bool wide_ray_begin(const struct bvh *bvh, const struct ray *ray,
-                                  struct ray_pre *rp, struct wide_ray *wr)
+/* Most camera rays of a small object miss it altogether: a test against the tree's box lets
+ * them return before the traversal's setup.  The general setup is scalar: ray_setup_box, the
+ * reference test box_hit, wide_ray_setup; *wr (which keeps a pointer to *rp) is then ready for
+ * wide_closest_ray / wide_any_ray.  Rays with finite constants take wide_ray8_fast first. */
+static inline bool wide_ray_begin(const struct bvh *bvh, const struct ray *ray, struct ray_pre *rp,
+                                  struct wide_ray *wr)
 {
-    if (bvh->n_wide == 0)
-        return false;
     ray_setup_box(ray, rp);
     float t_entry;
     if (!box_hit(&bvh->bounds, rp, ray->t_min, ray->t_max, &t_entry))
@@ -1130,14 +1316,112 @@ static inline bool wide_ray_begin(const struct bvh *bvh, const struct ray *ray,
     return true;
 }
 
+/* The fused path's setup, from the ray straight to struct wide_ray8, on four SSE lanes (x, y, z
+ * and lane 3, which carries t_min and t_max): the operations of ray_setup_box and
+ * wide_ray_setup lane by lane, so every constant is the same bits as theirs, then the tree's
+ * box in the fused form (conservative like wide_box_hit; box_hit is its reference).  About 60
+ * instructions against 150 for the scalar chain, which is most of the cost of a ray that
+ * misses.  Returns false, leaving the ray to the scalar setup, when some 1/d_a or constant is
+ * infinite (the NaN-aware form is needed); otherwise *is_miss says whether the ray misses the
+ * tree's box, and if not *v is ready for wide_closest_fast / wide_any_fast. */
+#if BVH_FUSED_SLABS
+static inline bool wide_ray8_fast(const struct bvh *bvh, const struct ray *ray, struct ray_pre *rp,
+                                  struct wide_ray8 *v, bool *is_miss)
+{
+    const float far_scale = 1.0f + 4.0f * mcpt_gamma(3); /* wide_ray_setup's */
+    const __m128 zero = _mm_setzero_ps();
+    const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
+    __m128 o_t = _mm_loadu_ps(&ray->o.x); /* o.x, o.y, o.z, t_min (struct ray's layout) */
+    __m128 d_t = _mm_loadu_ps(&ray->d.x); /* d.x, d.y, d.z, t_max */
+    /* ray_setup_box: inv_d = 1 / d (+-inf for d = +-0), near plane max_a where inv_d_a < 0 */
+    __m128 d = _mm_blend_ps(d_t, _mm_set1_ps(1.0f), 8);
+    __m128 o = _mm_blend_ps(o_t, zero, 8);
+    __m128 inv_d = _mm_div_ps(_mm_set1_ps(1.0f), d);
+    __m128 is_neg = _mm_cmplt_ps(inv_d, zero);
+    /* wide_ray_setup: c_near = o inv_d + (2^-21 |o inv_d| + FLT_MIN), c_far likewise below */
+    __m128 inv_d_far = _mm_mul_ps(inv_d, _mm_set1_ps(far_scale));
+    __m128 on = _mm_mul_ps(o, inv_d);
+    __m128 of = _mm_mul_ps(o, inv_d_far);
+    __m128 bias = _mm_set1_ps(SLAB_BIAS);
+    __m128 tiny = _mm_set1_ps(FLT_MIN);
+    __m128 c_near = _mm_add_ps(on, _mm_add_ps(_mm_mul_ps(bias, _mm_and_ps(abs_mask, on)), tiny));
+    __m128 c_far = _mm_sub_ps(of, _mm_add_ps(_mm_mul_ps(bias, _mm_and_ps(abs_mask, of)), tiny));
+    /* the fused form needs every constant finite: |x| <= FLT_MAX is false for inf and NaN */
+    __m128 big = _mm_set1_ps(FLT_MAX);
+    __m128 finite = _mm_and_ps(_mm_cmple_ps(_mm_and_ps(abs_mask, inv_d_far), big),
+                               _mm_and_ps(_mm_cmple_ps(_mm_and_ps(abs_mask, c_near), big),
+                                          _mm_cmple_ps(_mm_and_ps(abs_mask, c_far), big)));
+    if ((_mm_movemask_ps(finite) & 7) != 7)
+        return false;
+    /* the tree's box: t_near = near inv_d - c_near, t_far = far inv_d_far - c_far; lane 3 takes
+     * t_min and t_max; hit iff max(t_near) <= min(t_far) */
+    __m128 lo = _mm_loadu_ps(bvh->bounds.min); /* lane 3: left_first, replaced below */
+    __m128 hi = _mm_loadu_ps(bvh->bounds.max);
+    __m128 t_near = _mm_fmsub_ps(_mm_blendv_ps(lo, hi, is_neg), inv_d, c_near);
+    __m128 t_far = _mm_fmsub_ps(_mm_blendv_ps(hi, lo, is_neg), inv_d_far, c_far);
+    t_near = _mm_blend_ps(t_near, o_t, 8);
+    t_far = _mm_blend_ps(t_far, d_t, 8);
+    t_near = _mm_max_ps(t_near, _mm_shuffle_ps(t_near, t_near, _MM_SHUFFLE(1, 0, 3, 2)));
+    t_near = _mm_max_ps(t_near, _mm_shuffle_ps(t_near, t_near, _MM_SHUFFLE(2, 3, 0, 1)));
+    t_far = _mm_min_ps(t_far, _mm_shuffle_ps(t_far, t_far, _MM_SHUFFLE(1, 0, 3, 2)));
+    t_far = _mm_min_ps(t_far, _mm_shuffle_ps(t_far, t_far, _MM_SHUFFLE(2, 3, 0, 1)));
+    *is_miss = !(_mm_cvtss_f32(t_near) <= _mm_cvtss_f32(t_far));
+    if (*is_miss)
+        return true;
+    /* wide_ray8_box: one constant per register */
+    int neg = _mm_movemask_ps(is_neg) & 7;
+    __m256 o8 = _mm256_castps128_ps256(o);
+    __m256 inv_d8 = _mm256_castps128_ps256(inv_d);
+    __m256 inv_d_far8 = _mm256_castps128_ps256(inv_d_far);
+    __m256 c_near8 = _mm256_castps128_ps256(c_near);
+    __m256 c_far8 = _mm256_castps128_ps256(c_far);
+    for (int a = 0; a < 3; a++) {
+        __m256i lane = _mm256_set1_epi32(a);
+        v->o[a].v = _mm256_permutevar8x32_ps(o8, lane);
+        v->inv_d[a].v = _mm256_permutevar8x32_ps(inv_d8, lane);
+        v->inv_d_far[a].v = _mm256_permutevar8x32_ps(inv_d_far8, lane);
+        v->c_near[a].v = _mm256_permutevar8x32_ps(c_near8, lane);
+        v->c_far[a].v = _mm256_permutevar8x32_ps(c_far8, lane);
+        int is_neg_a = neg >> a & 1;
+        v->near_off[a] = (size_t)(2 * a + is_neg_a) * sizeof(float) * BVH_WIDTH;
+        v->far_off[a] = (size_t)(2 * a + 1 - is_neg_a) * sizeof(float) * BVH_WIDTH;
+    }
+    v->t_min = f8_set1(ray->t_min);
+    v->order_shift = 3 * neg;
+    v->wide = bvh->wide;
+    /* what Woop's setup at the first leaf reads */
+    rp->o[0] = ray->o.x;
+    rp->o[1] = ray->o.y;
+    rp->o[2] = ray->o.z;
+    rp->d[0] = ray->d.x;
+    rp->d[1] = ray->d.y;
+    rp->d[2] = ray->d.z;
+    v->rp = rp;
+    return true;
+}
+#endif
+
 bool bvh_wide_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *out)
 {
-    struct ray_pre rp;
-    struct wide_ray wr;
-    if (!wide_ray_begin(bvh, ray, &rp, &wr))
+    if (bvh->n_wide == 0)
         return false;
+    struct ray_pre rp;
     struct wide_hit hit = {ray->t_max, 0.0f, 0.0f, UINT32_MAX};
-    wide_closest_ray(bvh, 0, &wr, &hit);
+#if BVH_FUSED_SLABS
+    struct wide_ray8 v;
+    bool is_miss;
+    if (wide_ray8_fast(bvh, ray, &rp, &v, &is_miss)) {
+        if (is_miss)
+            return false;
+        wide_closest_fast(bvh, 0, &v, &hit);
+    } else
+#endif
+    {
+        struct wide_ray wr;
+        if (!wide_ray_begin(bvh, ray, &rp, &wr))
+            return false;
+        wide_closest_ray(bvh, 0, &wr, &hit);
+    }
     if (hit.tri == UINT32_MAX)
         return false;
     *out = (struct bvh_hit){hit.t, hit.u, hit.v, bvh->wide_prim_idx[hit.tri]};
@@ -1146,7 +1430,15 @@ bool bvh_wide_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh
 
 bool bvh_wide_occluded(const struct bvh *bvh, const struct ray *ray)
 {
+    if (bvh->n_wide == 0)
+        return false;
     struct ray_pre rp;
+#if BVH_FUSED_SLABS
+    struct wide_ray8 v;
+    bool is_miss;
+    if (wide_ray8_fast(bvh, ray, &rp, &v, &is_miss))
+        return !is_miss && wide_any_fast(bvh, 0, &v, ray->t_max);
+#endif
     struct wide_ray wr;
     if (!wide_ray_begin(bvh, ray, &rp, &wr))
         return false;
@@ -1172,7 +1464,7 @@ struct packet_pre {
     struct f8 o[3];
     struct f8 inv_d[3];
     struct f8 inv_d_far[3];
-    struct f8 c_near[3];  /* the fused slab constants of wide_ray_setup, per lane */
+    struct f8 c_near[3]; /* the fused slab constants of wide_ray_setup, per lane */
     struct f8 c_far[3];
     struct m8 is_neg[3];  /* near plane is max */
     struct m8 k_is[3][2]; /* k_is[j][m]: lane's k[j] == m (m = 0, 1; else 2) */
@@ -1186,6 +1478,8 @@ struct packet_pre {
     int far_row[3];
     bool uniform_k;  /* every lane has the same (kx, ky, kz) */
     int k[3];        /* when uniform_k */
+    struct f8 d[3];  /* directions (inactive lanes: the first active ray's) */
+    uint32_t finite; /* lanes whose slab constants are all finite (the fused form applies) */
 };
 
 /* m ? x : (n ? y : z) per lane */
@@ -1222,8 +1516,8 @@ static void packet_setup(const struct bvh_packet *p, uint32_t active, struct pac
         pp->is_neg[a] = f8_lt(pp->inv_d[a], zero);
         struct f8 o_inv = f8_mul(pp->o[a], pp->inv_d[a]);
         struct f8 o_inv_far = f8_mul(pp->o[a], pp->inv_d_far[a]);
-        pp->c_near[a] = f8_add(o_inv, f8_add(f8_mul(f8_set1(SLAB_BIAS), f8_abs(o_inv)),
-                                             f8_set1(FLT_MIN)));
+        pp->c_near[a] = f8_add(o_inv,
+                               f8_add(f8_mul(f8_set1(SLAB_BIAS), f8_abs(o_inv)), f8_set1(FLT_MIN)));
         pp->c_far[a] = f8_sub(o_inv_far, f8_add(f8_mul(f8_set1(SLAB_BIAS), f8_abs(o_inv_far)),
                                                 f8_set1(FLT_MIN)));
         magnitude = f8_add(magnitude, f8_add(f8_add(f8_abs(pp->inv_d[a]), f8_abs(pp->inv_d_far[a])),
@@ -1233,8 +1527,38 @@ static void packet_setup(const struct bvh_packet *p, uint32_t active, struct pac
         pp->near_row[a] = 2 * a + (neg ? 1 : 0);
         pp->far_row[a] = 2 * a + 1 - (neg ? 1 : 0);
     }
-    coherent = coherent && m8_bits(f8_le(magnitude, f8_set1(FLT_MAX))) == all;
+    pp->finite = m8_bits(f8_le(magnitude, f8_set1(FLT_MAX)));
+    coherent = coherent && pp->finite == all;
     pp->coherent = BVH_FUSED_SLABS && coherent;
+    for (int a = 0; a < 3; a++)
+        pp->d[a] = d[a];
+}
+
+/* Which active lanes hit the tree's box (the slab test of box_hit on each lane, NaN-aware),
+ * before Woop's constants are computed: most camera rays of a small object miss it. */
+static uint32_t packet_root_hit(const struct bvh *bvh, const struct packet_pre *pp,
+                                const float t_max[BVH_PACKET_SIZE])
+{
+    struct f8 t0 = pp->t_min;
+    struct f8 t1 = f8_loadu(t_max);
+    for (int a = 0; a < 3; a++) {
+        struct f8 lo = f8_set1(bvh->bounds.min[a]);
+        struct f8 hi = f8_set1(bvh->bounds.max[a]);
+        struct f8 near = f8_select(pp->is_neg[a], hi, lo);
+        struct f8 far = f8_select(pp->is_neg[a], lo, hi);
+        t0 = f8_max_num(t0, f8_mul(f8_sub(near, pp->o[a]), pp->inv_d[a]));
+        t1 = f8_min_num(t1, f8_mul(f8_sub(far, pp->o[a]), pp->inv_d_far[a]));
+    }
+    return m8_bits(f8_le(t0, t1));
+}
+
+/* Woop's constants of every lane (ray_setup_woop's operations, lane by lane), at the packet's
+ * first leaf. */
+static void packet_setup_woop(struct packet_pre *pp)
+{
+    const struct f8 zero = f8_set1(0.0f);
+    const uint32_t all = (1u << BVH_PACKET_SIZE) - 1u;
+    const struct f8 *d = pp->d;
     /* Woop's permutation (ray_setup_woop): kz = argmax |d|, kx, ky the next two, swapped when
      * d[kz] < 0 */
     struct f8 ad0 = f8_abs(d[0]);
@@ -1278,8 +1602,10 @@ static void packet_setup(const struct bvh_packet *p, uint32_t active, struct pac
 /* Lane `lane` of a packet as one ray (bvh_packet_set's inverse). */
 static struct ray packet_lane(const struct bvh_packet *p, int lane)
 {
-    return (struct ray){{p->o[0][lane], p->o[1][lane], p->o[2][lane]}, p->t_min[lane],
-                        {p->d[0][lane], p->d[1][lane], p->d[2][lane]}, p->t_max[lane]};
+    return (struct ray){{p->o[0][lane], p->o[1][lane], p->o[2][lane]},
+                        p->t_min[lane],
+                        {p->d[0][lane], p->d[1][lane], p->d[2][lane]},
+                        p->t_max[lane]};
 }
 
 /* The single-ray constants of lane `lane`, for the rays that leave the packet (*wr keeps a
@@ -1290,6 +1616,37 @@ static void packet_lane_ray(const struct bvh_packet *p, int lane, struct ray_pre
     struct ray r = packet_lane(p, lane);
     ray_setup_box(&r, rp);
     wide_ray_setup(rp, r.t_min, wr);
+}
+
+/* A lane leaving the packet, with finite constants: its single-ray constants for
+ * wide_closest_fast / wide_any_fast are the packet's lane (packet_setup computed them with
+ * wide_ray_setup's operations, so they are the same bits), broadcast, instead of the scalar
+ * setup.  false for the other lanes, which take packet_lane_ray. */
+static inline bool packet_lane_fast(const struct bvh *bvh, const struct bvh_packet *p,
+                                    const struct packet_pre *pp, int lane, struct ray_pre *rp,
+                                    struct wide_ray8 *v)
+{
+    if (!BVH_FUSED_SLABS || !(pp->finite >> lane & 1u))
+        return false;
+    int neg = 0;
+    for (int a = 0; a < 3; a++) {
+        v->o[a] = f8_splat_lane(pp->o[a], lane);
+        v->inv_d[a] = f8_splat_lane(pp->inv_d[a], lane);
+        v->inv_d_far[a] = f8_splat_lane(pp->inv_d_far[a], lane);
+        v->c_near[a] = f8_splat_lane(pp->c_near[a], lane);
+        v->c_far[a] = f8_splat_lane(pp->c_far[a], lane);
+        int is_neg = (int)(m8_bits(pp->is_neg[a]) >> lane & 1u);
+        v->near_off[a] = (size_t)(2 * a + is_neg) * sizeof(float) * BVH_WIDTH;
+        v->far_off[a] = (size_t)(2 * a + 1 - is_neg) * sizeof(float) * BVH_WIDTH;
+        neg |= is_neg << a;
+        rp->o[a] = p->o[a][lane];
+        rp->d[a] = p->d[a][lane];
+    }
+    v->t_min = f8_splat_lane(pp->t_min, lane);
+    v->order_shift = 3 * neg;
+    v->wide = bvh->wide;
+    v->rp = rp;
+    return true;
 }
 
 /* Slab test of child `lane` of node against every ray; returns the mask of rays hitting it.
@@ -1336,9 +1693,9 @@ static inline struct f8 pick_k(const struct packet_pre *pp, int j, struct f8 x, 
 }
 
 /* woop8 of triangle i of the leaf at `first` (n triangles) against the rays in mask. */
-static inline uint32_t packet_tri_hit(const struct bvh *bvh, uint32_t first, uint32_t n,
-                                      uint32_t i, const struct packet_pre *pp, struct f8 t_max,
-                                      uint32_t mask, struct woop8_out *out)
+static inline uint32_t packet_tri_hit(const struct bvh *bvh, uint32_t first, uint32_t n, uint32_t i,
+                                      const struct packet_pre *pp, struct f8 t_max, uint32_t mask,
+                                      struct woop8_out *out)
 {
     const float *base = bvh->leaf_tris + 9 * (size_t)first;
     struct woop8_in in;
@@ -1367,13 +1724,12 @@ struct packet_entry {
     uint32_t ref;  /* wide reference */
     uint32_t mask; /* rays that hit its box */
     float t_entry; /* smallest entry distance among them */
-}; /* 12 bytes */
+};                 /* 12 bytes */
 
 /* The closest-hit packet loop; `coherent` selects packet_box_hit's form (a constant at each
  * call, so there are two specialised copies). */
-static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh,
-                                             const struct bvh_packet *packet, uint32_t active,
-                                             struct packet_pre *pp, float t_hit[8],
+static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh, const struct bvh_packet *packet,
+                                             uint32_t active, struct packet_pre *pp, float t_hit[8],
                                              struct bvh_packet_hit *hit, const bool coherent)
 {
     float u_hit[8];
@@ -1385,6 +1741,7 @@ static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh,
         v_hit[lane] = 0.0f;
     }
     struct f8 t_hit8 = f8_loadu(t_hit);
+    bool woop_ready = false; /* Woop's constants are computed at the first leaf */
     /* a node's entry is pushed at most once per visit of its parent: 7 per level */
     struct packet_entry stack[WIDE_STACK_SIZE];
     uint32_t n_stack = 0;
@@ -1396,10 +1753,15 @@ static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh,
             for (uint32_t bits = cur.mask; bits; bits &= bits - 1) {
                 int lane = lowest_bit(bits);
                 struct ray_pre rp;
-                struct wide_ray wr;
-                packet_lane_ray(packet, lane, &rp, &wr);
                 struct wide_hit h = {t_hit[lane], u_hit[lane], v_hit[lane], tri_hit_idx[lane]};
-                wide_closest_ray(bvh, cur.ref, &wr, &h);
+                struct wide_ray8 v;
+                if (packet_lane_fast(bvh, packet, pp, lane, &rp, &v)) {
+                    wide_closest_fast(bvh, cur.ref, &v, &h);
+                } else {
+                    struct wide_ray wr;
+                    packet_lane_ray(packet, lane, &rp, &wr);
+                    wide_closest_ray(bvh, cur.ref, &wr, &h);
+                }
                 t_hit[lane] = h.t;
                 u_hit[lane] = h.u;
                 v_hit[lane] = h.v;
@@ -1409,10 +1771,10 @@ static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh,
         } else if (!(cur.ref & WIDE_LEAF)) {
             const struct wide_node *node = &bvh->wide[cur.ref];
             const uint32_t base = n_stack;
-            for (uint32_t c = 0; c < node->n_children; c++) {
+            for (uint32_t c = 0; c < BVH_WIDTH && node->child[c] != 0; c++) {
                 struct f8 t_entry;
-                uint32_t mask =
-                    packet_box_hit(node, (int)c, pp, t_hit8, &t_entry, coherent) & cur.mask;
+                uint32_t mask = packet_box_hit(node, (int)c, pp, t_hit8, &t_entry, coherent) &
+                                cur.mask;
                 if (!mask)
                     continue;
                 struct f8 t_in = f8_select(m8_from_bits(mask), t_entry, f8_set1(INFINITY));
@@ -1426,6 +1788,10 @@ static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh,
                 stack[i] = e;
             }
         } else {
+            if (!woop_ready) {
+                packet_setup_woop(pp);
+                woop_ready = true;
+            }
             uint32_t first = (cur.ref & ~WIDE_LEAF) >> 3;
             uint32_t n = (cur.ref & 7u) + 1;
             for (uint32_t i = 0; i < n; i++) {
@@ -1499,6 +1865,9 @@ uint32_t bvh_intersect_packet(const struct bvh *bvh, const struct bvh_packet *pa
     struct packet_pre pp;
     float t_hit[8];
     packet_setup(packet, active, &pp, t_hit);
+    active &= packet_root_hit(bvh, &pp, t_hit);
+    if (!active)
+        return 0;
     return pp.coherent ? packet_closest(bvh, packet, active, &pp, t_hit, hit, true)
                        : packet_closest(bvh, packet, active, &pp, t_hit, hit, false);
 }
@@ -1509,6 +1878,7 @@ static ALWAYS_INLINE uint32_t packet_any(const struct bvh *bvh, const struct bvh
                                          const float t_max[8], const bool coherent)
 {
     const struct f8 t_max8 = f8_loadu(t_max);
+    bool woop_ready = false; /* Woop's constants are computed at the first leaf */
     uint32_t occluded = 0;
     struct packet_entry stack[WIDE_STACK_SIZE];
     uint32_t n_stack = 0;
@@ -1521,21 +1891,32 @@ static ALWAYS_INLINE uint32_t packet_any(const struct bvh *bvh, const struct bvh
             for (uint32_t bits = cur.mask; bits; bits &= bits - 1) {
                 int lane = lowest_bit(bits);
                 struct ray_pre rp;
-                struct wide_ray wr;
-                packet_lane_ray(packet, lane, &rp, &wr);
-                if (wide_any_ray(bvh, cur.ref, &wr, packet->t_max[lane]))
+                struct wide_ray8 v;
+                bool is_occluded;
+                if (packet_lane_fast(bvh, packet, pp, lane, &rp, &v)) {
+                    is_occluded = wide_any_fast(bvh, cur.ref, &v, packet->t_max[lane]);
+                } else {
+                    struct wide_ray wr;
+                    packet_lane_ray(packet, lane, &rp, &wr);
+                    is_occluded = wide_any_ray(bvh, cur.ref, &wr, packet->t_max[lane]);
+                }
+                if (is_occluded)
                     occluded |= 1u << lane;
             }
         } else if (!(cur.ref & WIDE_LEAF)) {
             const struct wide_node *node = &bvh->wide[cur.ref];
-            for (uint32_t c = 0; c < node->n_children; c++) {
+            for (uint32_t c = 0; c < BVH_WIDTH && node->child[c] != 0; c++) {
                 struct f8 t_entry;
-                uint32_t mask =
-                    packet_box_hit(node, (int)c, pp, t_max8, &t_entry, coherent) & cur.mask;
+                uint32_t mask = packet_box_hit(node, (int)c, pp, t_max8, &t_entry, coherent) &
+                                cur.mask;
                 if (mask)
                     stack[n_stack++] = (struct packet_entry){node->child[c], mask, 0.0f};
             }
         } else {
+            if (!woop_ready) {
+                packet_setup_woop(pp);
+                woop_ready = true;
+            }
             uint32_t first = (cur.ref & ~WIDE_LEAF) >> 3;
             uint32_t n = (cur.ref & 7u) + 1;
             for (uint32_t i = 0; i < n && (cur.mask & ~occluded); i++) {
@@ -1567,6 +1948,9 @@ uint32_t bvh_occluded_packet(const struct bvh *bvh, const struct bvh_packet *pac
     struct packet_pre pp;
     float t_max[8];
     packet_setup(packet, active, &pp, t_max);
+    active &= packet_root_hit(bvh, &pp, t_max);
+    if (!active)
+        return 0;
     return pp.coherent ? packet_any(bvh, packet, active, &pp, t_max, true)
                        : packet_any(bvh, packet, active, &pp, t_max, false);
 }
@@ -1599,7 +1983,7 @@ void bvh_wide_brute(const struct bvh *bvh, const struct ray_pre *rp, float t_min
         uint32_t ref = stack[--n_stack];
         if (!(ref & WIDE_LEAF)) {
             const struct wide_node *node = &bvh->wide[ref];
-            for (uint32_t c = node->n_children; c-- > 0;)
+            for (uint32_t c = wide_n_children(node); c-- > 0;)
                 stack[n_stack++] = node->child[c];
             continue;
         }

@@ -8,6 +8,7 @@
  * PBRT 4e, ch. A.5, "Sampling Multidimensional Functions"; Veach 1997, ch. 9 (MIS). */
 #include "sample.h"
 
+#include <assert.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -199,6 +200,7 @@ static float fraction_to_float(uint32_t x) { return (float)(x >> 8) * 0x1p-24f; 
  * (a hash restricted to the next power of two, cycle-walked back into [0, l)). */
 static uint32_t kensler_permute(uint32_t i, uint32_t l, uint32_t p)
 {
+    assert(l > 0); /* the cycle walk ends only in a non-empty range */
     uint32_t w = l - 1;
     w |= w >> 1;
     w |= w >> 2;
@@ -274,7 +276,9 @@ static vec2 stratified_2d(const struct sampler *s, uint32_t dim)
     uint32_t p;
     uint32_t i = strat_position(s, dim, &p);
     uint32_t n_set = s->set_spp > 1 ? s->set_spp : 1;
-    uint32_t m = s->cmj_cols, n = (n_set + m - 1) / m;
+    /* rows n = ceil(N / m), written so that N near 2^32 cannot wrap (n = 0 would never end
+     * kensler_permute's cycle walk) */
+    uint32_t m = s->cmj_cols, n = n_set / m + (n_set % m != 0);
     uint32_t sp = kensler_permute(i, n_set, p * 0x51633e2du);
     uint32_t sx = kensler_permute(sp % m, m, p * 0x68bc21ebu);
     uint32_t sy = kensler_permute(sp / m, n, p * 0x02e5be93u);
@@ -684,6 +688,238 @@ vec2 sample_invert_uniform_triangle(vec2 b)
     /* sqrt(u0) = 1 - b0, u1 = b1 / sqrt(u0) */
     float su0 = 1.0f - b.x;
     return (vec2){su0 * su0, su0 > 0.0f ? b.y / su0 : 0.0f};
+}
+
+/* ---- bilinear and linear densities on [0, 1] ---- */
+
+static float lerpf(float t, float a, float b) { return (1.0f - t) * a + t * b; }
+
+/* x in [0, 1) with density 2 lerp(x, a, b) / (a + b): the root of the quadratic CDF
+ * (a x + (b - a) x^2 / 2) 2 / (a + b) = u in the form that does not cancel,
+ * x = u (a + b) / (a + sqrt(lerp(u, a^2, b^2))) (PBRT 4e, ch. A.5, SampleLinear). */
+static float sample_linear(float u, float a, float b)
+{
+    if (u == 0.0f && a == 0.0f)
+        return 0.0f;
+    float x = u * (a + b) / (a + sqrtf(lerpf(u, a * a, b * b)));
+    return fminf(x, 0x1.fffffep-1f);
+}
+
+/* The CDF of sample_linear at x: u = x (a (2 - x) + b x) / (a + b). */
+static float invert_linear(float x, float a, float b)
+{
+    return x * (a * (2.0f - x) + b * x) / (a + b);
+}
+
+vec2 sample_bilinear(vec2 u, const float w[4])
+{
+    /* y by its marginal (w0 + w1 at y = 0, w2 + w3 at y = 1), then x given y */
+    float y = sample_linear(u.y, w[0] + w[1], w[2] + w[3]);
+    float x = sample_linear(u.x, lerpf(y, w[0], w[2]), lerpf(y, w[1], w[3]));
+    return (vec2){x, y};
+}
+
+float pdf_bilinear(vec2 p, const float w[4])
+{
+    if (p.x < 0.0f || p.x > 1.0f || p.y < 0.0f || p.y > 1.0f)
+        return 0.0f;
+    float sum = w[0] + w[1] + w[2] + w[3];
+    if (sum == 0.0f)
+        return 1.0f; /* all weights 0: sample_linear is the identity */
+    /* pdf = 4 bilerp(p, w) / sum w: the bilinear function over its integral sum w / 4 */
+    float bilerp = (1.0f - p.x) * (1.0f - p.y) * w[0] + p.x * (1.0f - p.y) * w[1] +
+                   (1.0f - p.x) * p.y * w[2] + p.x * p.y * w[3];
+    return 4.0f * bilerp / sum;
+}
+
+vec2 sample_invert_bilinear(vec2 p, const float w[4])
+{
+    return (vec2){invert_linear(p.x, lerpf(p.y, w[0], w[2]), lerpf(p.y, w[1], w[3])),
+                  invert_linear(p.y, w[0] + w[1], w[2] + w[3])};
+}
+
+/* ---- spherical triangles (Arvo 1995) ---- */
+
+/* The angle between unit vectors a and b, precise near 0 and pi (PBRT 4e, ch. 3, "Vectors",
+ * AngleBetween): 2 asin(|b - a| / 2), or pi - 2 asin(|a + b| / 2) past 90 degrees. */
+static float angle_between(vec3 a, vec3 b)
+{
+    if (v3_dot(a, b) < 0.0f)
+        return MCPT_PI - 2.0f * asinf(fminf(1.0f, 0.5f * v3_length(v3_add(a, b))));
+    return 2.0f * asinf(fminf(1.0f, 0.5f * v3_length(v3_sub(b, a))));
+}
+
+/* normalize(v), or false when v is 0 (or not finite). */
+static bool normalize_to(vec3 v, vec3 *out)
+{
+    float len = v3_length(v);
+    if (!(len > 0.0f) || !isfinite(len))
+        return false;
+    *out = v3_scale(v, 1.0f / len);
+    return true;
+}
+
+float sample_spherical_triangle_area(vec3 a, vec3 b, vec3 c)
+{
+    /* Omega = 2 atan2(|a . (b x c)|, 1 + a.b + b.c + c.a) */
+    float num = fabsf(v3_dot(a, v3_cross(b, c)));
+    float den = 1.0f + v3_dot(a, b) + v3_dot(b, c) + v3_dot(c, a);
+    return 2.0f * atan2f(num, den);
+}
+
+bool sample_sph_triangle_init(vec3 a, vec3 b, vec3 c, struct sample_sph_triangle *st)
+{
+    /* the unit normals of the planes of the edges through a: the angle between them is the
+     * interior angle alpha, so cos alpha = n_ab . n_ac and sin alpha = |n_ab x n_ac|, without
+     * a trigonometric function */
+    vec3 n_ab, n_ac;
+    if (!normalize_to(v3_cross(a, b), &n_ab) || !normalize_to(v3_cross(a, c), &n_ac) ||
+        !normalize_to(v3_sub(c, v3_scale(a, v3_dot(c, a))), &st->c_perp))
+        return false;
+    st->a = a;
+    st->b = b;
+    st->c = c;
+    st->cos_alpha = v3_dot(n_ab, n_ac);
+    st->sin_alpha = v3_length(v3_cross(n_ab, n_ac));
+    st->cos_ab = v3_dot(a, b);
+    st->area = sample_spherical_triangle_area(a, b, c);
+    return st->area > 0.0f && st->sin_alpha > 0.0f;
+}
+
+vec3 sample_spherical_triangle(const struct sample_sph_triangle *st, vec2 u)
+{
+    /* Arvo 1995, sec. 3: the sub-triangle a, b, c' of area A' = u0 Omega has
+     *   cos |a c'| = q = ((v t - w s) cos alpha - v) / ((v s + w t) sin alpha),
+     * s = sin(A' - alpha), t = cos(A' - alpha), w = t - cos alpha, v = s + sin alpha cos |a b|;
+     * s and t by the angle-difference formulas, so only A' needs a sine and a cosine */
+    float a_sub = u.x * st->area;
+    float sin_a = sinf(a_sub), cos_a = cosf(a_sub);
+    float s = sin_a * st->cos_alpha - cos_a * st->sin_alpha;
+    float t = cos_a * st->cos_alpha + sin_a * st->sin_alpha;
+    float w = t - st->cos_alpha;
+    float v = s + st->sin_alpha * st->cos_ab;
+    float q = ((v * t - w * s) * st->cos_alpha - v) / ((v * s + w * t) * st->sin_alpha);
+    q = fminf(1.0f, fmaxf(-1.0f, q));
+    vec3 c_sub = v3_add(v3_scale(st->a, q), v3_scale(st->c_perp, sqrtf(fmaxf(0.0f, 1.0f - q * q))));
+    /* on the arc b -> c', 1 - cos theta uniform in [0, 1 - cos |b c'|]; 1 - cos = |x - b|^2 / 2
+     * keeps its digits for a small arc */
+    vec3 d = v3_sub(c_sub, st->b);
+    float one_minus_z = u.y * 0.5f * v3_dot(d, d);
+    float z = 1.0f - one_minus_z;
+    vec3 perp;
+    if (!normalize_to(v3_sub(c_sub, v3_scale(st->b, v3_dot(c_sub, st->b))), &perp))
+        return st->b; /* c' = b: the arc has no length */
+    float sin_theta = sqrtf(fmaxf(0.0f, one_minus_z * (2.0f - one_minus_z)));
+    return v3_normalize(v3_add(v3_scale(st->b, z), v3_scale(perp, sin_theta)));
+}
+
+float pdf_spherical_triangle(const struct sample_sph_triangle *st) { return 1.0f / st->area; }
+
+vec2 sample_invert_spherical_triangle(const struct sample_sph_triangle *st, vec3 w)
+{
+    /* c' lies on the great circle through b and w and on the arc a -> c: along the line where
+     * their planes meet, (b x w) x (c x a), on the side of a + c */
+    vec3 c_sub;
+    if (!normalize_to(v3_cross(v3_cross(st->b, w), v3_cross(st->c, st->a)), &c_sub))
+        return (vec2){0.0f, 0.0f}; /* w = b: every u0 maps there */
+    if (v3_dot(c_sub, v3_add(st->a, st->c)) < 0.0f)
+        c_sub = v3_neg(c_sub);
+    /* u0 = area(a, b, c') / Omega; u1 = (1 - w.b) / (1 - c'.b) = |w - b|^2 / |c' - b|^2 */
+    float u0 = sample_spherical_triangle_area(st->a, st->b, c_sub) / st->area;
+    vec3 dw = v3_sub(w, st->b), dc = v3_sub(c_sub, st->b);
+    float dc2 = v3_dot(dc, dc);
+    float u1 = dc2 > 0.0f ? v3_dot(dw, dw) / dc2 : 0.0f;
+    return (vec2){fminf(1.0f, fmaxf(0.0f, u0)), fminf(1.0f, fmaxf(0.0f, u1))};
+}
+
+/* ---- spherical rectangles (Urena, Fajardo & King 2013) ---- */
+
+/* Solid angle of the rectangle [x0, xa] x [y0, y1] at z = z0 seen from the origin: two
+ * spherical triangles (Van Oosterom & Strackee 1983). */
+static float rect_solid_angle(float x0, float xa, float y0, float y1, float z0)
+{
+    vec3 v00 = v3_normalize(v3(x0, y0, z0)), v10 = v3_normalize(v3(xa, y0, z0));
+    vec3 v11 = v3_normalize(v3(xa, y1, z0)), v01 = v3_normalize(v3(x0, y1, z0));
+    return sample_spherical_triangle_area(v00, v10, v11) +
+           sample_spherical_triangle_area(v00, v11, v01);
+}
+
+bool sample_sph_rect_init(vec3 o, vec3 corner, vec3 e1, vec3 e2, struct sample_sph_rect *sr)
+{
+    float len1 = v3_length(e1), len2 = v3_length(e2);
+    if (!(len1 > 0.0f && len2 > 0.0f) || fabsf(v3_dot(e1, e2)) > 1e-5f * len1 * len2)
+        return false;
+    /* the frame of the paper, sec. 3: x, y along the edges, the rectangle at z0 < 0 */
+    sr->o = o;
+    sr->x = v3_scale(e1, 1.0f / len1);
+    sr->y = v3_normalize(v3_sub(e2, v3_scale(sr->x, v3_dot(e2, sr->x))));
+    sr->z = v3_cross(sr->x, sr->y);
+    vec3 d = v3_sub(corner, o);
+    sr->z0 = v3_dot(d, sr->z);
+    if (sr->z0 > 0.0f) {
+        sr->z = v3_neg(sr->z);
+        sr->z0 = -sr->z0;
+    }
+    if (!(sr->z0 < 0.0f))
+        return false; /* o lies in the rectangle's plane */
+    sr->x0 = v3_dot(d, sr->x);
+    sr->y0 = v3_dot(d, sr->y);
+    sr->x1 = sr->x0 + len1;
+    sr->y1 = sr->y0 + len2;
+    /* the planes through o and each edge, and the interior angles gamma_i between them */
+    vec3 v00 = v3(sr->x0, sr->y0, sr->z0), v10 = v3(sr->x1, sr->y0, sr->z0);
+    vec3 v11 = v3(sr->x1, sr->y1, sr->z0), v01 = v3(sr->x0, sr->y1, sr->z0);
+    vec3 n0, n1, n2, n3;
+    if (!normalize_to(v3_cross(v00, v10), &n0) || !normalize_to(v3_cross(v10, v11), &n1) ||
+        !normalize_to(v3_cross(v11, v01), &n2) || !normalize_to(v3_cross(v01, v00), &n3))
+        return false;
+    float g2 = angle_between(v3_neg(n2), n3), g3 = angle_between(v3_neg(n3), n0);
+    sr->b0 = n0.z;
+    sr->b1 = n2.z;
+    sr->k = g2 + g3;
+    /* S = g0 + g1 + g2 + g3 - 2 pi cancels for a small rectangle: two triangles instead */
+    sr->area = rect_solid_angle(sr->x0, sr->x1, sr->y0, sr->y1, sr->z0);
+    return sr->area > 0.0f && isfinite(sr->area);
+}
+
+vec3 sample_spherical_rectangle(const struct sample_sph_rect *sr, vec2 u)
+{
+    /* Urena et al. 2013, sec. 4.1: the sub-rectangle angle au = u0 S - gamma2 - gamma3 gives
+     * fu = (cos au b0 - b1) / sin au, cu = sign(fu) / sqrt(fu^2 + b0^2) (the cosine of the
+     * angle of the plane x = xu), xu = -cu z0 / sqrt(1 - cu^2) */
+    float au = u.x * sr->area - sr->k;
+    float fu = (cosf(au) * sr->b0 - sr->b1) / sinf(au);
+    float cu = copysignf(1.0f / sqrtf(fu * fu + sr->b0 * sr->b0), fu);
+    cu = fminf(0x1.fffffep-1f, fmaxf(-0x1.fffffep-1f, cu));
+    float xu = -(cu * sr->z0) / sqrtf(fmaxf(0.0f, 1.0f - cu * cu));
+    xu = fminf(sr->x1, fmaxf(sr->x0, xu));
+    /* sec. 4.2: along x = xu, h = y / sqrt(d^2 + y^2) (the sine of the elevation) is uniform
+     * in solid angle, d = sqrt(xu^2 + z0^2) */
+    float dd = sqrtf(xu * xu + sr->z0 * sr->z0);
+    float h0 = sr->y0 / sqrtf(dd * dd + sr->y0 * sr->y0);
+    float h1 = sr->y1 / sqrtf(dd * dd + sr->y1 * sr->y1);
+    float hv = lerpf(u.y, h0, h1), hv2 = hv * hv;
+    float yv = hv2 < 1.0f - 1e-6f ? hv * dd / sqrtf(1.0f - hv2) : sr->y1;
+    yv = fminf(sr->y1, fmaxf(sr->y0, yv));
+    return v3_add(sr->o, v3_add(v3_add(v3_scale(sr->x, xu), v3_scale(sr->y, yv)),
+                                v3_scale(sr->z, sr->z0)));
+}
+
+float pdf_spherical_rectangle(const struct sample_sph_rect *sr) { return 1.0f / sr->area; }
+
+vec2 sample_invert_spherical_rectangle(const struct sample_sph_rect *sr, vec3 p)
+{
+    /* u0 = S(x0 .. xu) / S, the sub-rectangle's share; u1 = (h - h0) / (h1 - h0) */
+    vec3 d = v3_sub(p, sr->o);
+    float xu = fminf(sr->x1, fmaxf(sr->x0, v3_dot(d, sr->x)));
+    float yv = fminf(sr->y1, fmaxf(sr->y0, v3_dot(d, sr->y)));
+    float u0 = xu > sr->x0 ? rect_solid_angle(sr->x0, xu, sr->y0, sr->y1, sr->z0) / sr->area : 0.0f;
+    float dd2 = xu * xu + sr->z0 * sr->z0;
+    float h0 = sr->y0 / sqrtf(dd2 + sr->y0 * sr->y0);
+    float h1 = sr->y1 / sqrtf(dd2 + sr->y1 * sr->y1);
+    float h = yv / sqrtf(dd2 + yv * yv);
+    float u1 = h1 != h0 ? (h - h0) / (h1 - h0) : 0.0f;
+    return (vec2){fminf(1.0f, fmaxf(0.0f, u0)), fminf(1.0f, fmaxf(0.0f, u1))};
 }
 
 /* ---- discrete distributions: the alias method ---- */

@@ -249,6 +249,76 @@ vec2 sample_invert_uniform_cone(vec3 w, const struct sample_cone *cone);
 vec2 sample_uniform_triangle(vec2 u);
 vec2 sample_invert_uniform_triangle(vec2 b);
 
+/* A bilinear density on [0, 1]^2 with the weights w[0..3] >= 0 at its corners (0,0), (1,0),
+ * (0,1), (1,1): pdf(p) = 4 bilerp(p, w) / sum w, per unit area; y from its marginal, then x
+ * from its conditional, each a linear density (PBRT 4e, ch. A.5, "Sampling Multidimensional
+ * Functions", SampleBilinear).  The light samplers warp their uniforms by it so that the
+ * directions follow the cosine at the receiver (shape.c). */
+vec2 sample_bilinear(vec2 u, const float w[4]);
+float pdf_bilinear(vec2 p, const float w[4]);
+vec2 sample_invert_bilinear(vec2 p, const float w[4]);
+
+/* ---- spherical polygons: directions uniform in the solid angle that a triangle or a rectangle
+ * subtends from a point (light sampling, shape.c) ---- */
+
+/* Solid angle (sr) of the spherical triangle with unit vertices a, b, c: Van Oosterom & Strackee
+ * 1983, "The Solid Angle of a Plane Triangle", tan(Omega / 2) = |a . (b x c)| /
+ * (1 + a.b + b.c + c.a), which keeps its precision for small triangles where the angle excess
+ * alpha + beta + gamma - pi cancels. */
+float sample_spherical_triangle_area(vec3 a, vec3 b, vec3 c);
+
+/* A spherical triangle prepared for Arvo's map (Arvo 1995, "Stratified Sampling of Spherical
+ * Triangles", SIGGRAPH 95; PBRT 4e, ch. 6, "Triangles"): u0 picks the sub-triangle a, b, c' of
+ * area u0 Omega (c' on the arc a -> c), u1 a point on the arc b -> c' with 1 - cos uniform. */
+struct sample_sph_triangle {
+    vec3 a; /* unit vertices */
+    vec3 b;
+    vec3 c;
+    vec3 c_perp;     /* unit: c's part orthogonal to a, so the arc a -> c is a cos + c_perp sin */
+    float area;      /* Omega, sr */
+    float cos_alpha; /* cos and sin of the interior angle alpha at a */
+    float sin_alpha;
+    float cos_ab; /* a . b: cos of the arc a -> b */
+};                /* 64 bytes */
+/* Prepares the triangle of unit vertices a, b, c; false when it is degenerate (two vertices
+ * equal or opposite, or a zero area). */
+bool sample_sph_triangle_init(vec3 a, vec3 b, vec3 c, struct sample_sph_triangle *st);
+/* A unit direction uniform in the spherical triangle, pdf 1 / Omega per steradian. */
+vec3 sample_spherical_triangle(const struct sample_sph_triangle *st, vec2 u);
+float pdf_spherical_triangle(const struct sample_sph_triangle *st);
+/* The u that maps to the unit direction w inside the triangle (Arvo's inverse: c' where the
+ * great circle through b and w meets the arc a -> c). */
+vec2 sample_invert_spherical_triangle(const struct sample_sph_triangle *st, vec3 w);
+
+/* A rectangle corner + s e1 + t e2 (s, t in [0, 1], e1 orthogonal to e2) seen from the point o,
+ * prepared for the map of Urena, Fajardo & King 2013, "An Area-Preserving Parametrization for
+ * Spherical Rectangles" (EGSR): u0 picks the sub-rectangle [x0, xu] x [y0, y1] of solid angle
+ * u0 S, u1 the height along the line x = xu, uniform in solid angle. */
+struct sample_sph_rect {
+    vec3 o; /* the reference point */
+    vec3 x; /* unit frame: x along e1, y along e2, z away from the rectangle's side */
+    vec3 y;
+    vec3 z;
+    float x0; /* the rectangle in that frame: [x0, x1] x [y0, y1] at z = z0 < 0 */
+    float x1;
+    float y0;
+    float y1;
+    float z0;
+    float b0; /* z components of the unit normals of the planes (o, v00, v10), (o, v11, v01) */
+    float b1;
+    float k;    /* gamma2 + gamma3: the sub-rectangle's angle is au = u0 S - k (mod 2 pi) */
+    float area; /* S, sr */
+};              /* 88 bytes */
+/* Prepares the rectangle; false when o lies in its plane, the edges are not orthogonal (to
+ * 1e-4 of their lengths' product) or the solid angle is 0. */
+bool sample_sph_rect_init(vec3 o, vec3 corner, vec3 e1, vec3 e2, struct sample_sph_rect *sr);
+/* The POINT on the rectangle whose direction from o is uniform in solid angle, pdf 1 / S per
+ * steradian. */
+vec3 sample_spherical_rectangle(const struct sample_sph_rect *sr, vec2 u);
+float pdf_spherical_rectangle(const struct sample_sph_rect *sr);
+/* The u that maps to the point p of the rectangle. */
+vec2 sample_invert_spherical_rectangle(const struct sample_sph_rect *sr, vec3 p);
+
 /* ---- discrete distributions ---- */
 
 /* Walker's alias method with Vose's O(n) construction: O(1) picks of index i with probability

@@ -124,6 +124,8 @@ static vec3 radiance(const struct trace_scene *ts, const struct trace_options *o
     const struct scene *scene = ts->scene;
     const uint32_t n_ls = opt->light_samples ? opt->light_samples : 1;
     const uint32_t rr_depth = opt->rr_depth ? opt->rr_depth : TRACE_RR_DEPTH_DEFAULT;
+    const float rr_threshold = opt->rr_threshold > 0.0f ? opt->rr_threshold
+                                                        : TRACE_RR_THRESHOLD_DEFAULT;
     /* inf (TRACE_DEPTH_INFINITE) and anything deeper stop at the cap, which also keeps the
      * bounce dimensions below sample.h's SAMPLE_DIM_LIGHT_EXTRA */
     uint32_t max_bounces = opt->max_depth < TRACE_DEPTH_CAP ? opt->max_depth : TRACE_DEPTH_CAP;
@@ -204,10 +206,12 @@ static vec3 radiance(const struct trace_scene *ts, const struct trace_options *o
         ray = spawn_ray(&hr.sf, wi_world);
 
         /* Russian roulette after bounce rr_depth: continue with probability p, beta /= p;
-         * p = min(1, max(beta) eta^2) by throughput, or the fixed --rr p */
+         * p = min(1, max(beta) eta^2 / threshold) by throughput (a survivor below the threshold
+         * carries max(beta) eta^2 = threshold on), or the fixed --rr p */
         if (n_bounces >= rr_depth) {
-            float p = opt->rr_prob > 0.0f ? opt->rr_prob
-                                          : fminf(1.0f, v3_max_comp(beta) * eta_scale);
+            float p = opt->rr_prob > 0.0f
+                          ? opt->rr_prob
+                          : fminf(1.0f, v3_max_comp(beta) * eta_scale / rr_threshold);
             if (p < 1.0f) {
                 sample_set_dim(sampler, dim0 + SAMPLE_BOUNCE_ROULETTE);
                 if (!(sample_1d(sampler) < p))
@@ -254,24 +258,93 @@ bool trace_adaptive_stop(double s1, double s2, uint64_t n, double tolerance, dou
     return 1.96 * 1.96 * sigma2 / dn <= bound * bound;
 }
 
-/* Adaptive sampling: whether pixel px, at a test point (min_spp + k batch samples taken), has
- * met the stopping rule.  It reads only the pixel's own sums, so the decision is the same
- * whichever thread, call or resumed run makes it. */
+uint32_t trace_pilot_spp(double s1, double s2, uint64_t n, double tolerance, double floor_lum,
+                         uint32_t min_spp, uint32_t max_spp, uint32_t batch)
+{
+    if (n == 0 || min_spp >= max_spp)
+        return max_spp;
+    /* N = (1.96 sigma / (T max(mu, floor)))^2, the n at which the stop rule's I reaches T mu */
+    double dn = (double)n;
+    double mu = s1 / dn;
+    double sigma2 = fmax(0.0, s2 / dn - mu * mu);
+    double bound = tolerance * fmax(mu, floor_lum);
+    double need = bound > 0.0 ? 1.96 * 1.96 * sigma2 / (bound * bound) : (double)max_spp;
+    if (!(need < (double)max_spp)) /* also NaN */
+        return max_spp;
+    uint32_t b = batch ? batch : 1;
+    uint64_t n_spp = ((uint64_t)ceil(need) + b - 1) / b * b; /* whole batches */
+    if (n_spp < min_spp)
+        n_spp = min_spp;
+    return n_spp < max_spp ? (uint32_t)n_spp : max_spp;
+}
+
+/* Adaptive sampling, the stop rule: whether pixel px, at a test point (min_spp + k batch
+ * samples taken), has met the stopping rule.  It reads only the pixel's own sums, so the
+ * decision is the same whichever thread, call or resumed run makes it. */
 static bool adaptive_converged(const struct trace_options *opt, const struct film_pixel *px)
 {
     uint32_t taken = px->n + px->n_dropped;
     uint32_t batch = opt->batch ? opt->batch : 1;
-    if (!opt->adaptive || taken < opt->min_spp || (taken - opt->min_spp) % batch != 0)
+    if (!opt->adaptive || opt->adaptive_rule != RENDER_ADAPTIVE_STOP || taken < opt->min_spp ||
+        (taken - opt->min_spp) % batch != 0)
         return false;
     return trace_adaptive_stop(film_sum_lum(px), px->sum_lum_sq, px->n, opt->tolerance,
                                opt->adaptive_floor);
 }
 
+/* The tag hashed into the seed of the pilots' stream ("pilot" in ASCII). */
+static const uint64_t PILOT_SEED_TAG = 0x70696c6f74ull;
+
+/* Adaptive sampling, the pilot rule (two-stage sampling, Kirk & Arvo 1991, "Unbiased Sampling
+ * Techniques for Image Synthesis", SIGGRAPH 91): the samples pixel (x, y) gets.  A pilot of
+ * pilot_spp samples from a stream of its own (the seed hashed with PILOT_SEED_TAG, so its
+ * scrambles and its values are independent of the image's) estimates mu and sigma of the
+ * pixel's luminance, and trace_pilot_spp turns them into N.  The pilot is then discarded: the
+ * pixel's estimate is the mean of its N image samples, and since N depends on the pilot alone,
+ * which is independent of them, E[estimate | N] = E[one sample] = the pixel's value.  The stop
+ * rule's estimate is biased because one set of samples both decides and estimates.  The count
+ * is a pure function of (seed, pixel), the same for every call; opt->pilot_target keeps it. */
+static uint32_t pilot_target(const struct render_job *job, struct worker *w, uint32_t x, uint32_t y,
+                             uint64_t *n_rays)
+{
+    const struct trace_options *opt = job->opt;
+    uint32_t pixel_idx = y * (uint32_t)job->film->width + x;
+    if (opt->pilot_target && opt->pilot_target[pixel_idx])
+        return opt->pilot_target[pixel_idx];
+    struct sampler sampler;
+    sample_start_pixel(&sampler, opt->sampler, sample_hash64(opt->seed ^ PILOT_SEED_TAG), pixel_idx,
+                       job->set_spp);
+    double s1 = 0.0, s2 = 0.0;
+    uint64_t n = 0;
+    uint32_t n_pilot = opt->pilot_spp ? opt->pilot_spp : TRACE_ADAPTIVE_PILOT_SPP;
+    for (uint32_t i = 0; i < n_pilot; i++) {
+        sample_start_index(&sampler, i);
+        vec2 u_pixel = sample_2d(&sampler);
+        vec2 u_lens = sample_2d(&sampler);
+        struct ray ray = camera_ray(&job->ts->camera, (float)x + u_pixel.x, (float)y + u_pixel.y,
+                                    u_lens);
+        vec3 L = trace_radiance(job->ts, opt, ray, &sampler, n_rays);
+        w->result.n_pilot++;
+        if (!v3_is_finite(L))
+            continue; /* as in the film: not counted */
+        double lum = 0.2126 * L.x + 0.7152 * L.y + 0.0722 * L.z;
+        s1 += lum;
+        s2 += lum * lum;
+        n++;
+    }
+    uint32_t max_spp = opt->max_spp ? opt->max_spp : opt->spp;
+    uint32_t target = trace_pilot_spp(s1, s2, n, opt->tolerance, opt->adaptive_floor, opt->min_spp,
+                                      max_spp, opt->batch);
+    if (opt->pilot_target)
+        opt->pilot_target[pixel_idx] = target;
+    return target;
+}
+
 /* How many samples the pixel may take, from `taken`, before its next adaptive test point
- * (min_spp + k batch): a batch of samples never steps over one. */
+ * (min_spp + k batch) of the stop rule: a batch of samples never steps over one. */
 static uint32_t samples_to_test(const struct trace_options *opt, uint32_t taken)
 {
-    if (!opt->adaptive)
+    if (!opt->adaptive || opt->adaptive_rule != RENDER_ADAPTIVE_STOP)
         return UINT32_MAX;
     if (taken < opt->min_spp)
         return opt->min_spp - taken;
@@ -290,12 +363,21 @@ static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, u
     uint32_t pixel_idx = y * (uint32_t)film->width + x;
     struct film_pixel *px = &film->pixels[pixel_idx];
     uint64_t done = 0;
-    uint64_t skipped = 0; /* samples an adaptive stop saved, counted as progress */
+    uint64_t skipped = 0; /* samples adaptive sampling saved, counted as progress */
     uint64_t n_rays = 0;  /* kept here, added to the worker's count once per pixel */
+    uint32_t spp = opt->spp;
+    if (opt->adaptive && opt->adaptive_rule == RENDER_ADAPTIVE_PILOT &&
+        px->n + px->n_dropped < opt->spp) {
+        uint32_t target = pilot_target(job, w, x, y, &n_rays);
+        if (target < spp) {
+            skipped = spp - (px->n + px->n_dropped > target ? px->n + px->n_dropped : target);
+            spp = target;
+        }
+    }
     struct sampler samplers[TRACE_PACKET];
     uint32_t n_started = 1; /* samplers started on the pixel: copies of the first */
     sample_start_pixel(&samplers[0], opt->sampler, opt->seed, pixel_idx, job->set_spp);
-    while (px->n + px->n_dropped < opt->spp) {
+    while (px->n + px->n_dropped < spp) {
         if (opt->cancel && atomic_load_explicit(opt->cancel, memory_order_relaxed)) {
             w->result.cancelled = true;
             break;
@@ -305,7 +387,7 @@ static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, u
             break;
         }
         uint32_t taken = px->n + px->n_dropped;
-        uint32_t n = opt->spp - taken;
+        uint32_t n = spp - taken;
         uint32_t to_test = samples_to_test(opt, taken);
         n = n < to_test ? n : to_test;
         n = n < TRACE_PACKET ? n : TRACE_PACKET;
@@ -377,6 +459,7 @@ void trace_result_add(struct trace_result *sum, const struct trace_result *r)
         sum->first_bad_sample = r->first_bad_sample;
     }
     sum->n_samples += r->n_samples;
+    sum->n_pilot += r->n_pilot;
     sum->n_rays += r->n_rays;
     sum->n_nonfinite += r->n_nonfinite;
     sum->cancelled |= r->cancelled;

@@ -73,8 +73,8 @@ bool bench_mesh_torus(uint64_t n_tris, struct bench_mesh *mesh)
                                0.04 * sin(61.0 * u + 3.0 * v) * cos(29.0 * v) +
                                0.01 * sin(499.0 * u) * sin(251.0 * v));
             double ring = 1.0 + r * cos(v);
-            mesh->positions[i * b + j] =
-                v3((float)(ring * cos(u)), (float)(r * sin(v)), (float)(ring * sin(u)));
+            mesh->positions[i * b + j] = v3((float)(ring * cos(u)), (float)(r * sin(v)),
+                                            (float)(ring * sin(u)));
         }
     }
     size_t k = 0;

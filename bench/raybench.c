@@ -87,7 +87,7 @@ static struct bvh *timed_build(const struct bench_mesh *mesh, int n_threads, uns
                                int build_runs, double *build_ms)
 {
     double times[64];
-    struct bvh_build_options bo = {n_threads, layouts};
+    struct bvh_build_options bo = {n_threads, layouts, BVH_QUALITY_DEFAULT};
     struct bvh *bvh = bvh_build_with(mesh->positions, mesh->indices, mesh->n_tris, &bo);
     int n = build_runs < 64 ? build_runs : 64;
     for (int r = 0; r < n && bvh; r++) {
@@ -154,9 +154,9 @@ static const char *kind_name(uint32_t kind)
 }
 
 /* Traces one ray set and prints its figures; the JSON line last. */
-static bool run_set(const struct options *opt, const struct bench_mesh *mesh,
-                    const struct bvh *bvh, double build_ms_1t, double build_ms_mt,
-                    const char *set_name, const struct bench_rays *rays)
+static bool run_set(const struct options *opt, const struct bench_mesh *mesh, const struct bvh *bvh,
+                    double build_ms_1t, double build_ms_mt, const char *set_name,
+                    const struct bench_rays *rays)
 {
     struct bvh_stats st = bvh_get_stats(bvh);
     double bytes_per_tri = mesh->n_tris ? (double)st.bytes / (double)mesh->n_tris : 0.0;
@@ -222,9 +222,8 @@ static bool run_set(const struct options *opt, const struct bench_mesh *mesh,
     printf("{\"model\":\"%s\",\"rays_file\":\"%s\",\"triangles\":%u,\"build_ms\":%.3f,"
            "\"build_ms_mt\":%.3f,\"bytes_per_tri\":%.2f,\"sah_cost\":%.4f,\"kind\":\"%s\","
            "\"rays\":%llu,\"hits\":%llu,",
-           opt->model, set_name, mesh->n_tris, build_ms_1t, build_ms_mt, bytes_per_tri,
-           st.sah_cost, kind_name(rays->kind), (unsigned long long)rays->n,
-           (unsigned long long)single.sum.hits);
+           opt->model, set_name, mesh->n_tris, build_ms_1t, build_ms_mt, bytes_per_tri, st.sah_cost,
+           kind_name(rays->kind), (unsigned long long)rays->n, (unsigned long long)single.sum.hits);
     if (rays->kind == BENCH_KIND_CLOSEST)
         printf("\"t_sum\":%.6e,\"prim_sum\":%llu,", single.sum.t_sum,
                (unsigned long long)single.sum.prim_sum);
@@ -234,9 +233,8 @@ static bool run_set(const struct options *opt, const struct bench_mesh *mesh,
            single.mrays_1t_wall, single.mrays_mt);
     if (opt->packets)
         printf("\"mrays_1t_packet\":%.4f,", packet.mrays_1t);
-    printf("\"threads\":%d,\"layout\":\"%s\",\"simd\":\"%s\",\"load_avg\":%.2f}\n",
-           opt->threads, opt->layout == BVH_LAYOUT_WIDE ? "wide" : "binary", bvh_simd_name(),
-           bench_loadavg());
+    printf("\"threads\":%d,\"layout\":\"%s\",\"simd\":\"%s\",\"load_avg\":%.2f}\n", opt->threads,
+           opt->layout == BVH_LAYOUT_WIDE ? "wide" : "binary", bvh_simd_name(), bench_loadavg());
     fflush(stdout);
     return true;
 }
@@ -262,28 +260,49 @@ static int parse_int(const char *arg, const char *what, int lo)
 
 int main(int argc, char **argv)
 {
-    struct options opt = {.threads = bench_n_cpus(), .runs = 5, .build_runs = -1, .only_set = -1,
-                          .layout = BVH_LAYOUT_WIDE, .subset = 1000};
+    struct options opt = {.threads = bench_n_cpus(),
+                          .runs = 5,
+                          .build_runs = -1,
+                          .only_set = -1,
+                          .layout = BVH_LAYOUT_WIDE,
+                          .subset = 1000};
     static const struct option long_opts[] = {
-        {"gen", required_argument, NULL, 'g'},      {"sets", no_argument, NULL, 'S'},
-        {"threads", required_argument, NULL, 't'},  {"runs", required_argument, NULL, 'r'},
+        {"gen", required_argument, NULL, 'g'},        {"sets", no_argument, NULL, 'S'},
+        {"threads", required_argument, NULL, 't'},    {"runs", required_argument, NULL, 'r'},
         {"build-runs", required_argument, NULL, 'b'}, {"packets", no_argument, NULL, 'p'},
-        {"layout", required_argument, NULL, 'l'},   {"no-bvh", no_argument, NULL, 'n'},
-        {"subset", required_argument, NULL, 'k'},   {"help", no_argument, NULL, 'h'},
-        {"set", required_argument, NULL, 's'},
-        {NULL, 0, NULL, 0}};
+        {"layout", required_argument, NULL, 'l'},     {"no-bvh", no_argument, NULL, 'n'},
+        {"subset", required_argument, NULL, 'k'},     {"help", no_argument, NULL, 'h'},
+        {"set", required_argument, NULL, 's'},        {NULL, 0, NULL, 0}};
     int c;
     while ((c = getopt_long(argc, argv, "o:h", long_opts, NULL)) != -1) {
         switch (c) {
-        case 'g': opt.gen_set = optarg; break;
-        case 'o': opt.out_path = optarg; break;
-        case 'S': opt.sets = true; break;
-        case 't': opt.threads = parse_int(optarg, "--threads", 1); break;
-        case 'r': opt.runs = parse_int(optarg, "--runs", 1); break;
-        case 'b': opt.build_runs = parse_int(optarg, "--build-runs", 0); break;
-        case 'p': opt.packets = true; break;
-        case 'n': opt.no_bvh = true; break;
-        case 'k': opt.subset = (uint64_t)parse_int(optarg, "--subset", 1); break;
+        case 'g':
+            opt.gen_set = optarg;
+            break;
+        case 'o':
+            opt.out_path = optarg;
+            break;
+        case 'S':
+            opt.sets = true;
+            break;
+        case 't':
+            opt.threads = parse_int(optarg, "--threads", 1);
+            break;
+        case 'r':
+            opt.runs = parse_int(optarg, "--runs", 1);
+            break;
+        case 'b':
+            opt.build_runs = parse_int(optarg, "--build-runs", 0);
+            break;
+        case 'p':
+            opt.packets = true;
+            break;
+        case 'n':
+            opt.no_bvh = true;
+            break;
+        case 'k':
+            opt.subset = (uint64_t)parse_int(optarg, "--subset", 1);
+            break;
         case 's':
             if ((opt.only_set = parse_set(optarg)) < 0) {
                 fprintf(stderr, "raybench: expected --set primary, diffuse or shadow, got '%s'\n",
@@ -301,8 +320,12 @@ int main(int argc, char **argv)
                 return 2;
             }
             break;
-        case 'h': fputs(usage, stdout); return 0;
-        default: fputs(usage, stderr); return 2;
+        case 'h':
+            fputs(usage, stdout);
+            return 0;
+        default:
+            fputs(usage, stderr);
+            return 2;
         }
     }
     if (opt.build_runs < 0)

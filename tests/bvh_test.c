@@ -42,8 +42,8 @@ Test(bvh, single_triangle_hit_inside)
     vec3 p0 = tri_vertex(&m, 0, 0);
     vec3 n = v3_normalize(
         v3_cross(v3_sub(tri_vertex(&m, 0, 1), p0), v3_sub(tri_vertex(&m, 0, 2), p0)));
-    const vec3 dirs[6] = {v3(1, 0, 0), v3(-1, 0, 0), v3(0, 1, 0),
-                          v3(0, -1, 0), v3(0, 0, 1), v3(0, 0, -1)};
+    const vec3 dirs[6] = {v3(1, 0, 0),  v3(-1, 0, 0), v3(0, 1, 0),
+                          v3(0, -1, 0), v3(0, 0, 1),  v3(0, 0, -1)};
     const float barys[4][2] = {{0.2f, 0.3f}, {0.7f, 0.1f}, {0.05f, 0.9f}, {1.0f / 3, 1.0f / 3}};
     struct rng r = {1};
     int n_rays = 0;
@@ -78,7 +78,10 @@ Test(bvh, single_triangle_miss_outside)
     vec3 p0 = tri_vertex(&m, 0, 0);
     vec3 e1 = v3_sub(tri_vertex(&m, 0, 1), p0);
     vec3 n = v3_normalize(v3_cross(e1, v3_sub(tri_vertex(&m, 0, 2), p0)));
-    const float outside[5][2] = {{-0.05f, 0.5f}, {0.5f, -0.05f}, {0.6f, 0.45f}, {1.1f, 0.1f},
+    const float outside[5][2] = {{-0.05f, 0.5f},
+                                 {0.5f, -0.05f},
+                                 {0.6f, 0.45f},
+                                 {1.1f, 0.1f},
                                  {-0.2f, -0.2f}};
     struct bvh_hit hit;
     for (int j = 0; j < 5; j++) {
@@ -188,8 +191,8 @@ Test(bvh, shared_edge_and_vertex_never_missed)
             n_tri_hits += bvh_intersect(one, &ray, &h);
             bvh_free(one);
         }
-        cr_assert_geq(n_tri_hits, 1, "ray through (%a, %a, 0) from (%a %a %a) slips through", s,
-                      s, o.x, o.y, o.z);
+        cr_assert_geq(n_tri_hits, 1, "ray through (%a, %a, 0) from (%a %a %a) slips through", s, s,
+                      o.x, o.y, o.z);
         struct bvh_hit hit;
         cr_assert(bvh_intersect(bvh, &ray, &hit));
         cr_assert_float_eq(hit.t, 1.0f, 1e-5f);
@@ -383,7 +386,7 @@ Test(bvh, identical_centroids)
         struct bvh_stats st = bvh_get_stats(bvh);
         cr_assert_eq(st.n_tris, 1000u);
         cr_assert_eq(st.n_nodes, 2 * st.n_leaves - 1);
-        cr_assert_geq(st.n_leaves, 2u); /* 1000 triangles are not one leaf */
+        cr_assert_geq(st.n_leaves, 2u);   /* 1000 triangles are not one leaf */
         cr_assert_leq(st.max_depth, 12u); /* about log2(1000 / leaf size) */
         struct rng r = {6};
         int n_hits = 0;
@@ -406,9 +409,9 @@ Test(bvh, identical_centroids)
 Test(bvh, zero_area_triangles_never_hit)
 {
     struct mesh m = {0};
-    mesh_add_tri_pos(&m, v3(0, 0, 0), v3(1, 1, 1), v3(2, 2, 2));            /* collinear */
+    mesh_add_tri_pos(&m, v3(0, 0, 0), v3(1, 1, 1), v3(2, 2, 2));             /* collinear */
     mesh_add_tri_pos(&m, v3(0.5f, 0, 0), v3(0.5f, 0, 0), v3(0.5f, 1, 0.5f)); /* repeated */
-    mesh_add_tri_pos(&m, v3(1, 0, 1), v3(1, 0, 1), v3(1, 0, 1));            /* a point */
+    mesh_add_tri_pos(&m, v3(1, 0, 1), v3(1, 0, 1), v3(1, 0, 1));             /* a point */
     /* p, 2 p, 4 p: collinear exactly, since scaling by 2 is exact */
     mesh_add_tri_pos(&m, v3(0.1f, 0.3f, 0.7f), v3(0.2f, 0.6f, 1.4f), v3(0.4f, 1.2f, 2.8f));
     mesh_add_tri_pos(&m, v3(3, 0, 0), v3(4, 0, 0), v3(3, 1, 0)); /* the one real triangle */
@@ -556,8 +559,8 @@ Test(bvh, ray_from_surface_with_t_min_zero)
         if (bvh_intersect(bvh, &ray, &hit) && hit.prim_idx == prim) {
             /* the origin is within rounding of the plane: |t (w . n)| is its distance */
             vec3 p0 = tri_vertex(&m, prim, 0);
-            vec3 n = v3_normalize(v3_cross(v3_sub(tri_vertex(&m, prim, 1), p0),
-                                           v3_sub(tri_vertex(&m, prim, 2), p0)));
+            vec3 n = v3_normalize(
+                v3_cross(v3_sub(tri_vertex(&m, prim, 1), p0), v3_sub(tri_vertex(&m, prim, 2), p0)));
             cr_assert_lt(fabsf(hit.t * v3_dot(w, n)), 1e-6f, "self hit off the plane: t %g", hit.t);
             n_self++;
         }
@@ -677,10 +680,9 @@ Test(bvh, offset_origin_on_mesh)
 /* ---- watertightness on a closed mesh ----------------------------------------------------------
  * Woop et al. 2013: rays aimed exactly at the mesh's vertices and edge midpoints, from the
  * centre, from off-centre points inside and from outside, never escape. */
-static void probe_watertight(vec3 centre, float radius, int levels)
+static void probe_watertight_mesh(const struct mesh *mesh, vec3 centre, float radius)
 {
-    struct mesh m = {0};
-    make_icosphere(&m, levels, centre, radius);
+    struct mesh m = *mesh;
     check_closed(&m);
     struct bvh *bvh = build(&m);
     /* targets: every vertex once, every edge midpoint once (edge a-b with a < b) */
@@ -719,6 +721,15 @@ static void probe_watertight(vec3 centre, float radius, int levels)
     cr_assert_gt(n_rays, 5 * (int)n_targets);
     free(targets);
     bvh_free(bvh);
+}
+
+/* The icosphere of `levels` subdivisions, centre and radius: convex, so a ray from inside first
+ * meets the target it is aimed at. */
+static void probe_watertight(vec3 centre, float radius, int levels)
+{
+    struct mesh m = {0};
+    make_icosphere(&m, levels, centre, radius);
+    probe_watertight_mesh(&m, centre, radius);
     mesh_free(&m);
 }
 
@@ -844,7 +855,8 @@ Test(bvh, build_is_independent_of_thread_count)
     for (int i = 0; i < 2000; i++)
         rays[i] = make_ray(rng_in_box(&r, -2, 2), rng_dir(&r), 0.0f, INFINITY);
     for (int n_threads = 2; n_threads <= 3; n_threads++) {
-        struct bvh_build_options opt = {n_threads, BVH_LAYOUT_BINARY | BVH_LAYOUT_WIDE};
+        struct bvh_build_options opt = {n_threads, BVH_LAYOUT_BINARY | BVH_LAYOUT_WIDE,
+                                        BVH_QUALITY_DEFAULT};
         struct bvh *bvh = bvh_build_with(m.positions, m.indices, m.n_tris, &opt);
         cr_assert_not_null(bvh);
         struct bvh_stats st = bvh_get_stats(bvh);
@@ -853,6 +865,7 @@ Test(bvh, build_is_independent_of_thread_count)
         cr_assert_eq(st.n_leaves, st_ref.n_leaves);
         cr_assert_eq(st.max_depth, st_ref.max_depth);
         cr_assert_eq(st.sah_cost, st_ref.sah_cost);
+        cr_assert_eq(st.n_refs, st_ref.n_refs);
         cr_assert_eq(st.n_wide_nodes, st_ref.n_wide_nodes);
         cr_assert_eq(st.n_wide_leaves, st_ref.n_wide_leaves);
         cr_assert_eq(st.bytes, st_ref.bytes);
@@ -871,5 +884,110 @@ Test(bvh, build_is_independent_of_thread_count)
         bvh_free(bvh);
     }
     bvh_free(ref);
+    mesh_free(&m);
+}
+
+/* ---- spatial splits (Stich, Friedrich, Dietrich 2009) ----------------------------------------
+ * A spatial split cuts triangles: each part keeps the triangle, with a box that must contain the
+ * part of it on its side of the plane (bvh.c, "Spatial splits").  A box that lost a sliver of
+ * its triangle would let rays through that part; these tests aim rays at the long triangles
+ * such splits cut. */
+
+/* n long thin triangles ("sticks", length 1.5, width 0.02, random directions) in [-1, 1]^3:
+ * object splits leave their boxes overlapping, so spatial splits cut them. */
+static void make_sticks(struct mesh *m, uint32_t n, uint64_t seed)
+{
+    struct rng r = {seed};
+    for (uint32_t i = 0; i < n; i++) {
+        vec3 c = rng_in_box(&r, -1.0f, 1.0f);
+        vec3 d = v3_scale(rng_dir(&r), 0.75f);
+        vec3 w = v3_scale(rng_dir(&r), 0.02f);
+        mesh_add_tri_pos(m, v3_sub(c, d), v3_add(c, d), v3_add(v3_sub(c, d), w));
+    }
+}
+
+/* bvh.h: BVH_QUALITY_SPATIAL (the default) gives the same hits as brute force and as a binned
+ * build, with copies of cut triangles (n_refs > n_tris) within the 25% budget. */
+Test(bvh, spatial_splits_keep_every_hit)
+{
+    struct mesh m = {0};
+    make_sticks(&m, 600, 60);
+    make_soup(&m, 3000, 61);
+    struct bvh *bvh = build(&m);
+    struct bvh_stats st = bvh_get_stats(bvh);
+    cr_assert_gt(st.n_refs, st.n_tris, "no triangle was cut");
+    cr_assert_leq(st.n_refs, st.n_tris + st.n_tris / 4);
+    struct bvh_build_options opt = {1, BVH_LAYOUT_WIDE, BVH_QUALITY_BINNED};
+    struct bvh *binned = bvh_build_with(m.positions, m.indices, m.n_tris, &opt);
+    cr_assert_not_null(binned);
+    cr_assert_eq(bvh_get_stats(binned).n_refs, m.n_tris);
+    struct rng r = {62};
+    int n_hits = 0;
+    for (int i = 0; i < 6000; i++) {
+        struct ray ray;
+        if (i % 3 == 0) {
+            ray = make_ray(rng_in_box(&r, -2, 2), rng_dir(&r), 0.0f, INFINITY);
+        } else { /* aimed at a stick: its middle is where planes cut it */
+            uint32_t prim = (uint32_t)(rng_next(&r) % 600);
+            float b1;
+            float b2;
+            rng_bary(&r, &b1, &b2);
+            vec3 o = rng_in_box(&r, -3, 3);
+            ray = make_ray(o, v3_sub(tri_point(&m, prim, b1, b2), o), 0.0f, INFINITY);
+        }
+        bool is_hit = expect_matches_brute(&m, bvh, &ray);
+        n_hits += is_hit;
+        struct bvh_hit a;
+        struct bvh_hit b;
+        cr_assert_eq(bvh_intersect(binned, &ray, &b), is_hit, "binned build disagrees, ray %d", i);
+        if (is_hit) {
+            bvh_intersect(bvh, &ray, &a);
+            cr_assert(same_bits(a.t, b.t), "ray %d: t %a (spatial) vs %a (binned)", i, a.t, b.t);
+        }
+    }
+    cr_assert_gt(n_hits, 3500);
+    bvh_free(binned);
+    bvh_free(bvh);
+    mesh_free(&m);
+}
+
+/* A closed tube of long thin side triangles (length 20, radius 0.5, 48 sides, fan caps) along
+ * the diagonal (1, 1, 1), centred at the origin: the side triangles' boxes are long cubes that
+ * all overlap, and spatial splits cut them many times.  Rays aimed exactly at every vertex and
+ * edge midpoint, from inside and outside, never escape (Woop et al. 2013's watertightness
+ * survives the cut boxes). */
+static vec3 tube_point(float x, float y, float z)
+{
+    vec3 a = v3_normalize(v3(1, 1, 1));
+    vec3 u = v3_normalize(v3(1, -1, 0));
+    vec3 w = v3_cross(a, u);
+    return v3_add(v3_add(v3_scale(a, x), v3_scale(u, y)), v3_scale(w, z));
+}
+
+Test(bvh, spatial_splits_stay_watertight)
+{
+    enum { SIDES = 48 };
+    struct mesh m = {0};
+    uint32_t ring[2][SIDES];
+    for (int end = 0; end < 2; end++) {
+        for (int i = 0; i < SIDES; i++) {
+            float phi = 2.0f * MCPT_PI * (float)i / (float)SIDES;
+            ring[end][i] = mesh_add_vertex(&m, tube_point(end ? 10.0f : -10.0f, 0.5f * cosf(phi),
+                                                          0.5f * sinf(phi)));
+        }
+    }
+    uint32_t cap[2] = {mesh_add_vertex(&m, tube_point(-10.0f, 0, 0)),
+                       mesh_add_vertex(&m, tube_point(10.0f, 0, 0))};
+    for (int i = 0; i < SIDES; i++) {
+        int j = (i + 1) % SIDES;
+        mesh_add_tri(&m, ring[0][i], ring[0][j], ring[1][j]);
+        mesh_add_tri(&m, ring[0][i], ring[1][j], ring[1][i]);
+        mesh_add_tri(&m, cap[0], ring[0][j], ring[0][i]);
+        mesh_add_tri(&m, cap[1], ring[1][i], ring[1][j]);
+    }
+    struct bvh *bvh = build(&m);
+    cr_assert_gt(bvh_get_stats(bvh).n_refs, m.n_tris, "no triangle was cut");
+    bvh_free(bvh);
+    probe_watertight_mesh(&m, v3(0, 0, 0), 0.5f);
     mesh_free(&m);
 }

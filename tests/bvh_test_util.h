@@ -251,7 +251,7 @@ static inline void make_icosphere(struct mesh *m, int levels, vec3 centre, float
 /* Both layouts, so that every test below checks the reference and the fast one. */
 static inline struct bvh *build(const struct mesh *m)
 {
-    struct bvh_build_options opt = {1, BVH_LAYOUT_BINARY | BVH_LAYOUT_WIDE};
+    struct bvh_build_options opt = {1, BVH_LAYOUT_BINARY | BVH_LAYOUT_WIDE, BVH_QUALITY_DEFAULT};
     struct bvh *bvh = bvh_build_with(m->positions, m->indices, m->n_tris, &opt);
     cr_assert_not_null(bvh);
     cr_assert_eq(bvh_layouts(bvh), m->n_tris ? BVH_LAYOUT_BINARY | BVH_LAYOUT_WIDE : 0u);

@@ -124,7 +124,8 @@ Test(bvh_wide, packets_match_single_rays)
             } else if (kind == 1) { /* shadow rays from a small patch to an area light */
                 vec3 o = v3_add(patch, v3_scale(rng_in_box(&r, -1, 1), 0.02f));
                 vec3 to = v3_sub(v3_add(light, v3(rng_range(&r, -0.5f, 0.5f), 0,
-                                                  rng_range(&r, -0.5f, 0.5f))), o);
+                                                  rng_range(&r, -0.5f, 0.5f))),
+                                 o);
                 float dist = v3_length(to);
                 rays[lane] = make_ray(o, v3_scale(to, 1.0f / dist), 0.0f, 0.999f * dist);
             } else if (kind == 2) { /* incoherent */
@@ -149,7 +150,6 @@ Test(bvh_wide, packets_match_single_rays)
     bvh_free(bvh);
     mesh_free(&m);
 }
-
 
 /* ---- the conversion and the fused slab test ------------------------------------------------------ */
 
@@ -197,7 +197,6 @@ Test(bvh_wide, depth_cap_keeps_oversized_leaves)
     bvh_free(bvh);
     mesh_free(&m);
 }
-
 
 /* bvh_wide.c, "Wide traversal, one ray": the fused slab test b inv_d - c biases c by the rounding
  * error of o inv_d, which is large when the origin is far from the coordinate origin and the
