@@ -37,7 +37,7 @@ LIB_OBJS := $(LIB_SRCS:%.c=$(BUILD)/%.o)
 TEST_OBJS := $(TEST_SRCS:%.c=$(BUILD)/%.o)
 
 .PHONY: all test check-sanitize check-valgrind fuzz clean sobol-table ggx-table gallery install \
-        uninstall bench bench-embree
+        uninstall bench bench-embree bench-render bench-cycles
 all: mcpt
 
 # The flags stamp: $(BUILD)/flags.stamp holds the command objects were compiled with, and every
@@ -115,8 +115,11 @@ $(FUZZ_BUILD)/%.o: %.c $(FUZZ_STAMP)
 $(FUZZ_BUILD)/fuzz_%: fuzz/fuzz_%.c $(FUZZ_LIB_OBJS) $(FUZZ_STAMP)
 	$(FUZZ_CC) $(FUZZ_CFLAGS) -fsanitize=fuzzer -o $@ $(filter %.c %.o,$^) $(LDLIBS_ALL)
 
-fuzz: $(FUZZ_BUILD)/fuzz_scene $(FUZZ_BUILD)/fuzz_obj
-	fuzz/run.sh $(FUZZ_SECONDS) $(FUZZ_BUILD)
+# the objects are kept between builds (a pattern rule's prerequisites are otherwise removed)
+.SECONDARY: $(FUZZ_LIB_OBJS)
+FUZZ_HARNESSES := scene obj checkpoint partial
+fuzz: $(FUZZ_HARNESSES:%=$(FUZZ_BUILD)/fuzz_%)
+	fuzz/run.sh $(FUZZ_SECONDS) $(FUZZ_BUILD) $(FUZZ_HARNESSES)
 
 # Regenerates the checked-in sobol_matrices.h from Joe & Kuo's direction numbers (only when the
 # table should change; mcpt never reads the direction file).
@@ -192,6 +195,14 @@ BENCH_CFLAGS = $(filter-out -MMD -MP,$(CFLAGS_ALL))
 bench/raybench: bench/raybench.c bench/bench.c bench/bench.h $(BENCH_OBJS) $(FLAGS_STAMP)
 	$(CC) $(BENCH_CFLAGS) -o $@ bench/raybench.c bench/bench.c $(BENCH_OBJS) -lpthread -lm
 
+# bench/raydump: the rays of a render as ray files for raybench (links the renderer)
+bench/raydump: bench/raydump.c bench/bench.c bench/bench.h $(LIB_OBJS) $(FLAGS_STAMP)
+	$(CC) $(BENCH_CFLAGS) -o $@ bench/raydump.c bench/bench.c $(LIB_OBJS) $(LDLIBS_ALL)
+
+# bench/packetbench: a render with camera packets against one with single camera rays
+bench/packetbench: bench/packetbench.c bench/bench.c bench/bench.h $(LIB_OBJS) $(FLAGS_STAMP)
+	$(CC) $(BENCH_CFLAGS) -o $@ bench/packetbench.c bench/bench.c $(LIB_OBJS) $(LDLIBS_ALL)
+
 bench/embree_bench: bench/embree_bench.c bench/bench.c bench/bench.h $(BENCH_OBJS) $(FLAGS_STAMP)
 	$(CC) $(BENCH_CFLAGS) $(EMBREE_CFLAGS) -o $@ bench/embree_bench.c bench/bench.c $(BENCH_OBJS) \
 	    $(EMBREE_LIBS) -lpthread -lm
@@ -219,7 +230,44 @@ bench-embree:
 	@echo "bench-embree: Embree 3 not found (Debian: apt-get install libembree-dev); skipped"
 endif
 
+# `make bench-render` (scripts/bench_render.py): per scene (cornell-box, bunny, glass-balls at
+# reduced size) Msamples/s, Mrays/s, MSE against bench/ref/SCENE.exr, efficiency, and the
+# render's rays/s as a fraction of raybench's on the scene's own rays (bench/raydump), for this
+# tree's mcpt and for a baseline built from commit BENCH_BASE (default: where issue 13 began;
+# empty: no baseline), interleaved over BENCH_RENDER_RUNS rounds.
+BENCH_BASE ?= 1ca94b3
+BENCH_RENDER_RUNS ?= 5
+BENCH_THREADS ?= 1
+BENCH_BASE_DIR := $(BUILD)/bench-base/$(BENCH_BASE)
+bench-render: mcpt bench/raybench bench/raydump bench/packetbench $(if $(BENCH_BASE),$(BENCH_BASE_DIR)/mcpt)
+	python3 scripts/bench_render.py --mcpt ./mcpt --runs $(BENCH_RENDER_RUNS) \
+	    --threads $(BENCH_THREADS) $(if $(BENCH_BASE),--base $(BENCH_BASE_DIR)/mcpt)
+
+# the baseline: `git archive` of BENCH_BASE, built in its own folder with its own Makefile
+$(BUILD)/bench-base/%/mcpt:
+	rm -rf $(BUILD)/bench-base/$*
+	mkdir -p $(BUILD)/bench-base/$*
+	git archive $* | tar -x -C $(BUILD)/bench-base/$*
+	$(MAKE) -C $(BUILD)/bench-base/$* mcpt
+
+# `make bench-cycles` (scripts/bench_cycles.py): the equal-error time ratio mcpt/Cycles on the
+# Cornell box at 256x256, both renderers in the same run.  Only where Blender is installed;
+# nothing depends on it.  CYCLES_REF: the 16384-spp Cycles reference, made on first use.
+BLENDER ?= blender
+CYCLES_REF ?= bench/ref/cornell256-cycles16384.exr
+BENCH_CYCLES_RUNS ?= 3
+BLENDER_FOUND := $(shell command -v $(BLENDER) 2>/dev/null)
+ifneq ($(BLENDER_FOUND),)
+bench-cycles: mcpt
+	python3 scripts/bench_cycles.py --mcpt ./mcpt --blender $(BLENDER) --ref $(CYCLES_REF) \
+	    --runs $(BENCH_CYCLES_RUNS)
+else
+bench-cycles:
+	@echo "bench-cycles: Blender not found (Debian: apt-get install blender); skipped"
+endif
+
 clean:
-	rm -rf build build-san build-fuzz build-vg mcpt bench/raybench bench/embree_bench
+	rm -rf build build-san build-fuzz build-vg mcpt bench/raybench bench/embree_bench bench/raydump \
+	    bench/packetbench
 
 -include $(wildcard $(BUILD)/*.d $(BUILD)/tests/*.d $(FUZZ_BUILD)/*.d)

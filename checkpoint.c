@@ -1,12 +1,13 @@
 /* checkpoint.c - an interrupted render on disk, to be resumed bit-identically: its film's raw
  * pixel records and the settings of the run, written atomically (file.h), checksummed with
  * FNV-1a 64 (Fowler, Noll, Vo), and checked field by field before a resumed run trusts it.
- * Also the scene hash that ties a checkpoint to its scene file, and the comparison of a
- * resumed run's settings with the saved ones.  Format: docs/reliability.md. */
+ * Also the comparison of a resumed run's settings with the saved ones (the scene by the hash
+ * of its bytes, scene.file_hash).  Format: docs/reliability.md. */
 #include "checkpoint.h"
 
 #include <errno.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include "file.h"
 #include "sample.h"
@@ -18,45 +19,7 @@
  *   | u64 FNV-1a 64 of every byte before it. */
 
 static const char CKPT_MAGIC[8] = {'M', 'C', 'P', 'T', 'C', 'K', 'P', 'T'};
-#define CKPT_BYTE_ORDER 0x01020304u      /* reads back as 0x04030201 on the other byte order */
-#define FNV_OFFSET 0xcbf29ce484222325ull /* FNV-1a 64 (Fowler, Noll, Vo): offset basis */
-#define FNV_PRIME 0x100000001b3ull       /* FNV-1a 64 prime */
-
-static uint64_t fnv1a(uint64_t h, const void *data, size_t n_bytes)
-{
-    const unsigned char *p = data;
-    for (size_t i = 0; i < n_bytes; i++) {
-        h ^= p[i];
-        h *= FNV_PRIME;
-    }
-    return h;
-}
-
-bool checkpoint_hash_stream(FILE *f, const char *name, uint64_t *hash, struct mcpt_error *err)
-{
-    uint64_t h = FNV_OFFSET;
-    unsigned char buf[65536];
-    size_t n;
-    while ((n = fread(buf, 1, sizeof buf, f)) > 0)
-        h = fnv1a(h, buf, n);
-    bool ok = !ferror(f);
-    if (!ok)
-        mcpt_error_runtime(err, name, "expected a readable file, got a read error");
-    *hash = h;
-    return ok;
-}
-
-bool checkpoint_hash_file(const char *path, uint64_t *hash, struct mcpt_error *err)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        mcpt_error_set(err, path, 0, 0, "expected a readable file, got '%s'", strerror(errno));
-        return false;
-    }
-    bool ok = checkpoint_hash_stream(f, path, hash, err);
-    fclose(f);
-    return ok;
-}
+#define CKPT_BYTE_ORDER 0x01020304u /* reads back as 0x04030201 on the other byte order */
 
 /* A checkpoint being written or read: the running checksum of the bytes so far. */
 struct ckpt_file {
@@ -70,7 +33,7 @@ static void put(struct ckpt_file *cf, const void *data, size_t n_bytes)
 {
     if (cf->ok && fwrite(data, 1, n_bytes, cf->f) != n_bytes)
         cf->ok = false;
-    cf->hash = fnv1a(cf->hash, data, n_bytes);
+    cf->hash = file_fnv1a64(cf->hash, data, n_bytes);
     cf->n_bytes += n_bytes;
 }
 
@@ -82,7 +45,7 @@ static bool get(struct ckpt_file *cf, void *data, size_t n_bytes)
     if (cf->ok && fread(data, 1, n_bytes, cf->f) != n_bytes)
         cf->ok = false;
     if (cf->ok) {
-        cf->hash = fnv1a(cf->hash, data, n_bytes);
+        cf->hash = file_fnv1a64(cf->hash, data, n_bytes);
         cf->n_bytes += n_bytes;
     }
     return cf->ok;
@@ -106,7 +69,7 @@ bool checkpoint_save(const char *path, const struct film *film, const struct che
                      struct mcpt_error *err)
 {
     struct file_atomic af;
-    struct ckpt_file cf = {.hash = FNV_OFFSET, .ok = true};
+    struct ckpt_file cf = {.hash = FILE_FNV_OFFSET, .ok = true};
     if (!file_atomic_open(&af, path, err) || !(cf.f = file_atomic_stream(&af, err)))
         return false;
     size_t n_pixels = (size_t)film->width * (size_t)film->height;
@@ -186,6 +149,18 @@ static bool read_header(struct ckpt_file *cf, const char *path, uint64_t size_by
                        *width, *height);
         return false;
     }
+    if (info->spp < 1 || (uint64_t)info->sample_offset + info->spp > UINT32_MAX) {
+        mcpt_error_set(err, path, 0, 0,
+                       "expected a target of 1 or more samples per pixel whose indices (from "
+                       "the offset %u) stay below 2^32, got %u",
+                       info->sample_offset, info->spp);
+        return false;
+    }
+    if (info->sampler >= SAMPLER_COUNT) {
+        mcpt_error_set(err, path, 0, 0, "expected a sampler number below %d, got %u", SAMPLER_COUNT,
+                       info->sampler);
+        return false;
+    }
     if (n_path >= CHECKPOINT_PATH_BYTES) {
         mcpt_error_set(err, path, 0, 0, "expected a scene path of at most %d bytes, got %u",
                        CHECKPOINT_PATH_BYTES - 1, n_path);
@@ -211,17 +186,21 @@ bool checkpoint_load(const char *path, struct film *film, struct checkpoint_info
 {
     memset(film, 0, sizeof *film);
     memset(info, 0, sizeof *info);
-    struct ckpt_file cf = {.hash = FNV_OFFSET, .ok = true};
+    struct ckpt_file cf = {.hash = FILE_FNV_OFFSET, .ok = true};
     struct stat st;
     uint32_t width, height;
-    cf.f = fopen(path, "rb");
+    const char *not_regular;
+    int fd = file_open_input(path, false, &not_regular); /* a FIFO must not block */
+    if (fd < 0 && not_regular) {
+        mcpt_error_set(err, path, 0, 0, "expected a checkpoint file, got %s", not_regular);
+        goto fail;
+    }
+    cf.f = fd >= 0 ? fdopen(fd, "rb") : NULL;
     if (!cf.f || fstat(fileno(cf.f), &st) != 0) {
         mcpt_error_set(err, path, 0, 0, "expected a readable checkpoint, got '%s'",
                        strerror(errno));
-        goto fail;
-    }
-    if (!S_ISREG(st.st_mode)) {
-        mcpt_error_set(err, path, 0, 0, "expected a checkpoint file, got a directory or device");
+        if (fd >= 0 && !cf.f)
+            close(fd);
         goto fail;
     }
     if (!read_header(&cf, path, (uint64_t)st.st_size, info, &width, &height, err))
@@ -249,14 +228,24 @@ bool checkpoint_load(const char *path, struct film *film, struct checkpoint_info
                        (unsigned long long)expect_hash, (unsigned long long)hash);
         goto fail;
     }
+    /* a valid checksum says the bytes are as written, not that a writer made them: every
+     * value is checked as the renderer would have left it */
     for (uint64_t i = 0; i < n_pixels; i++) {
         const struct film_pixel *p = &film->pixels[i];
-        if ((uint64_t)p->n + p->n_dropped > info->spp) {
+        const char *problem = film_pixel_problem(p, info->spp);
+        unsigned long long x = i % width, y = i / width;
+        if (problem && (uint64_t)p->n + p->n_dropped > info->spp) {
             mcpt_error_set(err, path, 0, 0,
                            "expected at most %u samples in a pixel (the spp), "
                            "got %llu at pixel %llu,%llu",
-                           info->spp, (unsigned long long)p->n + p->n_dropped,
-                           (unsigned long long)(i % width), (unsigned long long)(i / width));
+                           info->spp, (unsigned long long)p->n + p->n_dropped, x, y);
+            goto fail;
+        }
+        if (problem) {
+            mcpt_error_set(err, path, 0, 0,
+                           "expected pixel sums that %u samples can give, got %s at pixel "
+                           "%llu,%llu",
+                           p->n, problem, x, y);
             goto fail;
         }
     }
@@ -278,7 +267,8 @@ bool checkpoint_matches(const char *path, const struct checkpoint_info *saved,
     if (saved->scene_hash != run->scene_hash) {
         mcpt_error_set(err, path, 0, 0,
                        "expected the scene the checkpoint was made from "
-                       "('%.200s', FNV-1a %016llx), got a file with hash %016llx",
+                       "('%.200s', FNV-1a %016llx), got files with hash %016llx (the scene, or "
+                       "a mesh or MTL file it loads, changed)",
                        saved->scene_path, (unsigned long long)saved->scene_hash,
                        (unsigned long long)run->scene_hash);
         return false;

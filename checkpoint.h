@@ -8,13 +8,14 @@
 
 #include "film.h"
 
-#define CHECKPOINT_VERSION 1u
+#define CHECKPOINT_VERSION 2u      /* 2: the scene hash covers the meshes and MTL files too */
 #define CHECKPOINT_PATH_BYTES 1024 /* scene path stored for messages, incl. NUL */
 #define CHECKPOINT_ARGS_BYTES 4096 /* the run's options, NUL-separated words */
 
 /* The render parameters a resumed run must reproduce exactly. */
 struct checkpoint_info {
-    uint64_t scene_hash;    /* FNV-1a 64 of the scene file's bytes (checkpoint_hash_file) */
+    uint64_t scene_hash;    /* FNV-1a 64 of the scene file's bytes, then of every mesh and MTL
+                               file it loads, in load order (main.c) */
     uint64_t seed;          /* render seed */
     uint32_t spp;           /* target samples per pixel */
     uint32_t max_depth;     /* most bounces, TRACE_DEPTH_INFINITE allowed */
@@ -25,15 +26,6 @@ struct checkpoint_info {
     char args[CHECKPOINT_ARGS_BYTES];       /* options of the run, each word NUL-ended */
 };
 
-/* FNV-1a 64 (Fowler, Noll, Vo) of the bytes of the file at path: how a checkpoint recognises
- * the scene it was made from.  False with *err (file = path) when it cannot be read: bad input
- * when it cannot be opened, a runtime error on a read error. */
-bool checkpoint_hash_file(const char *path, uint64_t *hash, struct mcpt_error *err);
-
-/* The same hash of what is left of the open stream f, read to its end (not closed); a read
- * error is a runtime error naming name. */
-bool checkpoint_hash_stream(FILE *f, const char *name, uint64_t *hash, struct mcpt_error *err);
-
 /* Writes film and info to path atomically (file.h), so a reader sees the old file or the new
  * one, never a mix.  Layout: magic "MCPTCKPT", version, byte-order mark, pixel record size,
  * film size, info, the raw pixel records, then an FNV-1a 64 checksum of everything before it.
@@ -43,10 +35,14 @@ bool checkpoint_save(const char *path, const struct film *film, const struct che
                      struct mcpt_error *err);
 
 /* Reads a checkpoint written by checkpoint_save into a new film (free with film_free) and
- * *info.  Every field is checked (magic, version, byte order, record size, film size against
- * memory, string lengths, per-pixel counts at most spp, exact file length, checksum); on any
+ * *info.  The file must be a regular one (a FIFO is refused without blocking).  Every field is
+ * checked (magic, version, byte order, record size, film size against memory, spp >= 1 with
+ * sample indices below 2^32, the sampler, string lengths, exact file length, checksum), then
+ * every pixel's values as a render leaves them (film_pixel_problem: counts at most spp, finite
+ * sums, squares >= 0 and consistent with the sums): a valid checksum proves no writer.  On any
  * mismatch returns false with *film zeroed and *err naming path and what was expected (bad
- * input; a runtime error when the film cannot be allocated). */
+ * input; a runtime error when the film cannot be allocated).  The stored options are only
+ * checked to be NUL-ended words; main.c checks them as options. */
 bool checkpoint_load(const char *path, struct film *film, struct checkpoint_info *info,
                      struct mcpt_error *err);
 

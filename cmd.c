@@ -10,6 +10,7 @@
 #include "cmd.h"
 
 #include <errno.h>
+#include <float.h>
 #include <getopt.h>
 #include <stdlib.h>
 #include <strings.h>
@@ -78,12 +79,14 @@ static bool option_error(const char *subcommand, int c, const char *name, struct
 /* ---- mcpt compare A.exr REF.exr [--heatmap ERR.png] [--json] ---- */
 
 static const char COMPARE_USAGE[] =
-    "usage: mcpt compare A.exr REF.exr [--heatmap ERR.png] [--json]\n"
+    "usage: mcpt compare A.exr REF.exr [--heatmap ERR.png] [--json] [--max-ref-luminance L]\n"
     "Prints MSE, RMSE, relMSE, pbrt's MRSE, MAE, PSNR and the bias of A against REF; when REF\n"
     "has variance.R/G/B channels, also its noise floor and the MSE with REF's noise removed.\n"
     "See docs/convergence.md.\n"
-    "  --heatmap ERR.png   false-colour map of the per-pixel relative squared error\n"
-    "  --json              print one JSON object instead of text\n";
+    "  --heatmap ERR.png        false-colour map of the per-pixel relative squared error\n"
+    "  --json                   print one JSON object instead of text\n"
+    "  --max-ref-luminance L    compare only the pixels whose luminance in REF is <= L\n"
+    "                           (e.g. 1 leaves out a lamp seen directly)\n";
 
 /* Reads path and points img at its R, G, B (and variance) channels. */
 static bool read_image(const char *path, struct image *exr, struct stats_image *img,
@@ -94,15 +97,17 @@ static bool read_image(const char *path, struct image *exr, struct stats_image *
 
 static int run_compare(int argc, char **argv)
 {
-    enum { OPT_HEATMAP = 256, OPT_JSON };
+    enum { OPT_HEATMAP = 256, OPT_JSON, OPT_MAX_LUM };
     static const struct option long_opts[] = {
         {"heatmap", required_argument, NULL, OPT_HEATMAP},
         {"json", no_argument, NULL, OPT_JSON},
+        {"max-ref-luminance", required_argument, NULL, OPT_MAX_LUM},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
     const char *heatmap = NULL;
     bool json = false;
+    float max_lum = INFINITY;
     struct mcpt_error err = {0};
     opterr = 0;
     optind = 0;
@@ -115,6 +120,13 @@ static int run_compare(int argc, char **argv)
             break;
         case OPT_JSON:
             json = true;
+            break;
+        case OPT_MAX_LUM:
+            ok = cmd_parse_float(optarg, 0.0f, FLT_MAX, &max_lum) ||
+                 cmd_usage_error(&err,
+                                 "expected a luminance >= 0 after --max-ref-luminance, "
+                                 "got '%s'",
+                                 optarg);
             break;
         case 'h':
             fputs(COMPARE_USAGE, stdout);
@@ -133,8 +145,15 @@ static int run_compare(int argc, char **argv)
     struct image a_exr = {0}, ref_exr = {0};
     struct stats_image a, ref;
     struct stats_metrics m;
-    bool ok = read_image(a_path, &a_exr, &a, &err) && read_image(ref_path, &ref_exr, &ref, &err);
-    if (ok && !stats_compare(&a, &ref, &m, &err)) {
+    struct output_file files[3] = {{.role = "the heat map (--heatmap)"},
+                                   {.role = "the image A"},
+                                   {.role = "the reference"}};
+    const char *paths[3] = {heatmap, a_path, ref_path};
+    for (int k = 0; k < 3; k++)
+        snprintf(files[k].path, sizeof files[k].path, "%s", paths[k] ? paths[k] : "");
+    bool ok = (!heatmap || output_check(files, 1, files + 1, 2, &err)) &&
+              read_image(a_path, &a_exr, &a, &err) && read_image(ref_path, &ref_exr, &ref, &err);
+    if (ok && !stats_compare_where(&a, &ref, max_lum, &m, &err)) {
         snprintf(err.file, sizeof err.file, "%s", ref_path);
         ok = false;
     }
@@ -353,6 +372,33 @@ static void print_merge(int n_parts, const struct film *film, const struct parti
     printf("%s\n", paths->png);
 }
 
+/* The merged image and its preview may overwrite no part and must be creatable. */
+static bool check_merge_outputs(const struct output_paths *paths, char **parts, int n_parts,
+                                struct mcpt_error *err)
+{
+    struct output_file *files = malloc(sizeof *files * ((size_t)n_parts + 2));
+    if (!files) {
+        mcpt_error_runtime(err, NULL, "out of memory checking the output files");
+        return false;
+    }
+    int n_out = 0; /* the EXR and its preview, or the PNG alone */
+    if (paths->exr[0]) {
+        snprintf(files[n_out].path, sizeof files[0].path, "%s", paths->exr);
+        files[n_out++].role = "the merged image (-o)";
+    }
+    if (paths->png[0]) {
+        snprintf(files[n_out].path, sizeof files[0].path, "%s", paths->png);
+        files[n_out++].role = paths->exr[0] ? "its PNG preview" : "the merged image (-o)";
+    }
+    for (int k = 0; k < n_parts; k++) {
+        snprintf(files[n_out + k].path, sizeof files[0].path, "%s", parts[k]);
+        files[n_out + k].role = "a part";
+    }
+    bool ok = output_check(files, n_out, files + n_out, n_parts, err);
+    free(files);
+    return ok;
+}
+
 static int run_merge(int argc, char **argv)
 {
     enum { OPT_PARTIAL = 256, OPT_NO_PREVIEW, OPT_QUIET };
@@ -414,7 +460,7 @@ static int run_merge(int argc, char **argv)
                              keep_partial ? "--partial" : "--no-preview", out);
     struct film film = {0};
     struct partial_info info;
-    ok = ok &&
+    ok = ok && check_merge_outputs(&paths, argv + optind, argc - optind, &err) &&
          partial_merge_files((const char *const *)argv + optind, argc - optind, &film, &info, &err);
     /* the whole render is an ordinary image, unless asked to stay mergeable */
     bool is_plain = ok && partial_is_whole(&info) && !keep_partial;

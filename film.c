@@ -6,16 +6,46 @@
 #include "film.h"
 
 #include <float.h>
+#include <math.h>
 #include <stdlib.h>
+#include <sys/resource.h>
 #include <unistd.h>
+
+/* What is left of limit (bytes, or RLIM_INFINITY) once used bytes are taken. */
+static size_t left_of(rlim_t limit, unsigned long long used)
+{
+    if (limit == RLIM_INFINITY)
+        return SIZE_MAX;
+    return (unsigned long long)limit > used ? (size_t)((unsigned long long)limit - used) : 0;
+}
+
+size_t film_memory_free_bytes(void)
+{
+    long page_bytes = sysconf(_SC_PAGESIZE);
+    unsigned long long vm_pages = 0, data_pages = 0; /* statm: size ... data (pages) */
+    FILE *f = fopen("/proc/self/statm", "r");
+    if (!f || fscanf(f, "%llu %*u %*u %*u %*u %llu", &vm_pages, &data_pages) != 2)
+        vm_pages = data_pages = 0;
+    if (f)
+        fclose(f);
+    unsigned long long page = page_bytes > 0 ? (unsigned long long)page_bytes : 4096;
+    size_t free_bytes = SIZE_MAX;
+    struct rlimit lim;
+    if (getrlimit(RLIMIT_AS, &lim) == 0 && left_of(lim.rlim_cur, vm_pages * page) < free_bytes)
+        free_bytes = left_of(lim.rlim_cur, vm_pages * page);
+    if (getrlimit(RLIMIT_DATA, &lim) == 0 && left_of(lim.rlim_cur, data_pages * page) < free_bytes)
+        free_bytes = left_of(lim.rlim_cur, data_pages * page);
+    return free_bytes;
+}
 
 size_t film_max_bytes(void)
 {
     long pages = sysconf(_SC_PHYS_PAGES);
     long page_bytes = sysconf(_SC_PAGESIZE);
-    if (pages <= 0 || page_bytes <= 0)
-        return (size_t)1 << 32; /* unknown: allow 4 GiB */
-    return (size_t)pages / 2 * (size_t)page_bytes;
+    size_t half_ram = pages <= 0 || page_bytes <= 0 ? (size_t)1 << 32 /* unknown: allow 4 GiB */
+                                                    : (size_t)pages / 2 * (size_t)page_bytes;
+    size_t free_bytes = film_memory_free_bytes();
+    return half_ram < free_bytes ? half_ram : free_bytes;
 }
 
 bool film_init(struct film *film, int width, int height, struct mcpt_error *err)
@@ -50,6 +80,36 @@ void film_free(struct film *film)
 {
     free(film->pixels);
     memset(film, 0, sizeof *film);
+}
+
+/* Whether sum and sum_sq can be the sum and sum of squares of n finite float samples. */
+static const char *sums_problem(double sum, double sum_sq, double n)
+{
+    /* rounding: each of the n additions errs by at most half an ulp, so both sums are within a
+     * relative n * 2^-53 of the exact ones; 1e-6 covers n up to 2^32 with room */
+    const double slack = 1.0 + 1e-6;
+    const double max_sample = FLT_MAX;
+    if (!(fabs(sum) <= n * max_sample))
+        return "a sum that is not finite or exceeds the count times the largest float";
+    if (!(sum_sq >= 0.0 && sum_sq <= n * max_sample * max_sample))
+        return "a sum of squares below 0, not finite or beyond the count's reach";
+    if (sum * sum > n * sum_sq * slack)
+        return "a sum whose square exceeds the count times the sum of squares";
+    return NULL;
+}
+
+const char *film_pixel_problem(const struct film_pixel *p, uint64_t max_samples)
+{
+    if ((uint64_t)p->n + p->n_dropped > max_samples)
+        return "more samples than the render takes";
+    double n = (double)p->n;
+    for (int c = 0; c < 3; c++) {
+        const char *problem = sums_problem(p->sum[c], p->sum_sq[c], n);
+        if (problem)
+            return problem;
+    }
+    /* the luminance's sum is the luminance of the RGB sums (film_sum_lum) */
+    return sums_problem(film_sum_lum(p), p->sum_lum_sq, n);
 }
 
 double film_mean(const struct film_pixel *p, int c)

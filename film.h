@@ -26,8 +26,15 @@ struct film {
     struct film_pixel *pixels; /* row-major, y = 0 at the top */
 };
 
-/* Largest film the program will allocate, in bytes, given this machine's physical memory
- * (half of it).  film_init refuses anything larger with a clear message. */
+/* Bytes this process may still allocate under its resource limits: RLIMIT_AS less the address
+ * space in use, RLIMIT_DATA less the data in use (Linux's /proc/self/statm; where it cannot be
+ * read, the whole limit), SIZE_MAX when neither limit is set.  A limit set by `ulimit -v` or a
+ * batch system is met as a failed malloc, so a long job checks it before it starts. */
+size_t film_memory_free_bytes(void);
+
+/* Largest film the program will allocate, in bytes: half this machine's physical memory, and
+ * no more than film_memory_free_bytes.  film_init refuses anything larger with a clear
+ * message. */
 size_t film_max_bytes(void);
 
 /* Allocates a zeroed film.  Fails (err: file/line unset) with a bad-input error saying how
@@ -57,6 +64,14 @@ static inline double film_sum_lum(const struct film_pixel *p)
 {
     return 0.2126 * p->sum[0] + 0.7152 * p->sum[1] + 0.0722 * p->sum[2];
 }
+
+/* Whether pixel p holds what finite samples could have summed to, for readers of saved films
+ * (checkpoint.c, partial.c).  With n = p->n: n + n_dropped <= max_samples; an empty pixel is
+ * all zeros; each sum |sum| <= n FLT_MAX and sum of squares in [0, n FLT_MAX^2] (so finite,
+ * as a sample above FLT_MAX is dropped); and per channel and for the luminance the
+ * Cauchy-Schwarz bound sum^2 <= n sum_sq, up to rounding.  Returns NULL when it does, else
+ * what is wrong, for a message ("a sum of squares below 0", ...). */
+const char *film_pixel_problem(const struct film_pixel *p, uint64_t max_samples);
 
 /* Mean of pixel p, channel c; 0 for an empty pixel. */
 double film_mean(const struct film_pixel *p, int c);

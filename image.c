@@ -76,8 +76,26 @@ static void exr_stream_error(exr_const_context_t ctxt, exr_result_t code, const 
     if (exr_get_user_data(ctxt, &user) != EXR_ERR_SUCCESS || !user)
         return;
     struct exr_stream *s = user;
-    if (!s->first_msg[0])
-        snprintf(s->first_msg, sizeof s->first_msg, "%s", msg ? msg : "unknown error");
+    if (s->first_msg[0])
+        return;
+    snprintf(s->first_msg, sizeof s->first_msg, "%s", msg ? msg : "unknown error");
+    /* the library quotes names read from the file: its bytes must not reach the terminal as
+     * line breaks or escape sequences (the error is one line) */
+    for (char *c = s->first_msg; *c; c++)
+        if ((unsigned char)*c < 0x20 || (unsigned char)*c >= 0x7f)
+            *c = '?';
+}
+
+/* The error handler of a write context.  It must not read the context's user data:
+ * exr_get_user_data takes the context's lock, which the library holds while it reports a
+ * write error, so exr_stream_error would wait for itself forever (a full disk hung mcpt).
+ * exr_stream_write records its errno itself; the library's messages are dropped, and
+ * exr_error_set falls back to the text of the result code. */
+static void exr_write_error(exr_const_context_t ctxt, exr_result_t code, const char *msg)
+{
+    (void)ctxt;
+    (void)code;
+    (void)msg;
 }
 
 static int64_t exr_stream_read(exr_const_context_t ctxt, void *user, void *buffer, uint64_t sz,
@@ -197,7 +215,7 @@ static bool exr_encode(int fd, const char *path, const struct image *img, struct
     exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
     init.user_data = &s;
     init.write_fn = exr_stream_write;
-    init.error_handler_fn = exr_stream_error;
+    init.error_handler_fn = exr_write_error;
     init.zip_level = 1; /* deflate level: half the time of the default 6 for about 1% larger
                            files of noisy float data */
 
@@ -278,16 +296,20 @@ fail:
     return false;
 }
 
+bool image_encode_exr(struct file_atomic *af, const struct image *img, struct mcpt_error *err)
+{
+    if (!image_is_writable(af->path, img, err) || !exr_encode(af->fd, af->path, img, err)) {
+        file_atomic_abort(af);
+        return false;
+    }
+    return file_atomic_finish(af, err);
+}
+
 bool image_write_exr(const char *path, const struct image *img, struct mcpt_error *err)
 {
     struct file_atomic af;
-    if (!image_is_writable(path, img, err) || !file_atomic_open(&af, path, err))
-        return false;
-    if (!exr_encode(af.fd, path, img, err)) {
-        file_atomic_abort(&af);
-        return false;
-    }
-    return file_atomic_commit(&af, err);
+    return image_is_writable(path, img, err) && file_atomic_open(&af, path, err) &&
+           image_encode_exr(&af, img, err) && file_atomic_rename(&af, err);
 }
 
 /* ---- EXR reading ----------------------------------------------------------------------------- */
@@ -373,9 +395,14 @@ static exr_result_t decode_part(exr_context_t ctxt, exr_storage_t storage,
 }
 
 /* Checks the header of part 0 and allocates img's channels; false with *err filled. */
+/* Decoded bytes a file may claim per byte it holds: deflate (ZIP), the compression mcpt writes,
+ * packs at most 1032:1; anything beyond a margin over that is a header that lies. */
+#define EXR_MAX_RATIO 2048
+#define EXR_MIN_CLAIM_BYTES ((uint64_t)64 << 20) /* small files may claim this much */
+
 static bool image_alloc_from_header(const char *path, exr_storage_t storage,
                                     const exr_attr_box2i_t *dw, const exr_attr_chlist_t *chlist,
-                                    struct image *img, struct mcpt_error *err)
+                                    int64_t file_bytes, struct image *img, struct mcpt_error *err)
 {
     if (storage != EXR_STORAGE_SCANLINE && storage != EXR_STORAGE_TILED) {
         mcpt_error_set(err, path, 0, 0, "expected a scanline or tiled image, got deep data");
@@ -394,6 +421,19 @@ static bool image_alloc_from_header(const char *path, exr_storage_t storage,
                        chlist->num_channels);
         return false;
     }
+    /* checked before allocating: a header of a few bytes claimed gigabytes */
+    uint64_t claim_bytes = (uint64_t)width * (uint64_t)height * sizeof(float);
+    uint64_t most_bytes = (uint64_t)file_bytes * EXR_MAX_RATIO;
+    if (claim_bytes > (EXR_MIN_CLAIM_BYTES > most_bytes ? EXR_MIN_CLAIM_BYTES : most_bytes) /
+                          (uint64_t)chlist->num_channels) {
+        mcpt_error_set(err, path, 0, 0,
+                       "expected pixels its %lld bytes can hold, got a header of %lldx%lld pixels "
+                       "and %d channels (%.0f MiB)",
+                       (long long)file_bytes, (long long)width, (long long)height,
+                       chlist->num_channels,
+                       (double)claim_bytes * chlist->num_channels / 1048576.0);
+        return false;
+    }
     img->width = (int)width;
     img->height = (int)height;
     for (int c = 0; c < chlist->num_channels; c++) {
@@ -403,13 +443,16 @@ static bool image_alloc_from_header(const char *path, exr_storage_t storage,
                            sizeof img->names[c] - 1, (int)e->name.length);
             return false;
         }
-        if (e->x_sampling != 1 || e->y_sampling != 1) {
-            mcpt_error_set(err, path, 0, 0, "expected channel '%s' sampled 1 1, got %d %d",
-                           e->name.str, (int)e->x_sampling, (int)e->y_sampling);
-            return false;
-        }
         memcpy(img->names[c], e->name.str, (size_t)e->name.length);
         img->names[c][e->name.length] = '\0';
+        for (char *ch = img->names[c]; *ch; ch++) /* names reach messages: one line, no escapes */
+            if ((unsigned char)*ch < 0x20 || *ch == 0x7f)
+                *ch = '?';
+        if (e->x_sampling != 1 || e->y_sampling != 1) {
+            mcpt_error_set(err, path, 0, 0, "expected channel '%s' sampled 1 1, got %d %d",
+                           img->names[c], (int)e->x_sampling, (int)e->y_sampling);
+            return false;
+        }
         /* calloc: a chunk the file lacks reads as 0, never as stale memory */
         img->data[c] = calloc((size_t)width * (size_t)height, sizeof(float));
         if (!img->data[c]) {
@@ -457,18 +500,11 @@ bool image_read_exr(const char *path, struct image *img, struct mcpt_error *err)
     struct stat st;
 
     memset(img, 0, sizeof *img);
-    s.fd = open(path, O_RDONLY | O_CLOEXEC);
-    if (s.fd < 0) {
-        mcpt_error_set(err, path, 0, 0, "cannot open: %s", strerror(errno));
+    s.fd = file_open_regular(path, err); /* never blocks on a FIFO */
+    if (s.fd < 0)
         return false;
-    }
     if (fstat(s.fd, &st) != 0) {
         mcpt_error_set(err, path, 0, 0, "cannot open: %s", strerror(errno));
-        goto fail;
-    }
-    if (!S_ISREG(st.st_mode)) {
-        mcpt_error_set(err, path, 0, 0, "cannot open: %s",
-                       S_ISDIR(st.st_mode) ? strerror(EISDIR) : "not a regular file");
         goto fail;
     }
     s.size_bytes = (int64_t)st.st_size;
@@ -490,7 +526,7 @@ bool image_read_exr(const char *path, struct image *img, struct mcpt_error *err)
         exr_error_set(err, path, "cannot read OpenEXR header", &s, rv);
         goto fail;
     }
-    if (!image_alloc_from_header(path, storage, &dw, chlist, img, err))
+    if (!image_alloc_from_header(path, storage, &dw, chlist, s.size_bytes, img, err))
         goto fail;
     read_string_attrs(ctxt, img);
     exr_attr_chromaticities_t chroma;
@@ -615,23 +651,31 @@ static bool png_encode(struct png_sink *sink, int width, int height, const uint8
     return true;
 }
 
+/* Encodes rgb8 into the open temporary af and finishes it (not renamed); on failure removes
+ * it. */
+static bool png_encode_atomic(struct file_atomic *af, int width, int height, const uint8_t *rgb8,
+                              bool is_srgb, struct mcpt_error *err)
+{
+    struct png_sink sink = {.fd = af->fd};
+    if (!png_encode(&sink, width, height, rgb8, is_srgb)) {
+        if (sink.io_errno)
+            mcpt_error_runtime(err, af->path, "cannot write: %s", strerror(sink.io_errno));
+        else
+            mcpt_error_runtime(err, af->path, "cannot write PNG: %s", sink.msg);
+        file_atomic_abort(af);
+        return false;
+    }
+    return file_atomic_finish(af, err);
+}
+
 /* Writes rgb8 atomically to path. */
 static bool png_write_atomic(const char *path, int width, int height, const uint8_t *rgb8,
                              bool is_srgb, struct mcpt_error *err)
 {
     struct file_atomic af;
-    if (!file_atomic_open(&af, path, err))
-        return false;
-    struct png_sink sink = {.fd = af.fd};
-    if (!png_encode(&sink, width, height, rgb8, is_srgb)) {
-        if (sink.io_errno)
-            mcpt_error_runtime(err, path, "cannot write: %s", strerror(sink.io_errno));
-        else
-            mcpt_error_runtime(err, path, "cannot write PNG: %s", sink.msg);
-        file_atomic_abort(&af);
-        return false;
-    }
-    return file_atomic_commit(&af, err);
+    return file_atomic_open(&af, path, err) &&
+           png_encode_atomic(&af, width, height, rgb8, is_srgb, err) &&
+           file_atomic_rename(&af, err);
 }
 
 /* Checks the size and that width * height * 3 bytes fit in size_t. */
@@ -733,15 +777,18 @@ void image_tonemap_rgb(enum image_tonemap t, const double rgb[3], double out[3])
     }
 }
 
-bool image_write_png_srgb(const char *path, int width, int height, const float *rgb,
-                          const struct image_look *look, struct mcpt_error *err)
+bool image_encode_png_srgb(struct file_atomic *af, int width, int height, const float *rgb,
+                           const struct image_look *look, struct mcpt_error *err)
 {
-    if (!png_size_is_valid(path, width, height, err))
+    if (!png_size_is_valid(af->path, width, height, err)) {
+        file_atomic_abort(af);
         return false;
+    }
     size_t n_pixels = (size_t)width * (size_t)height;
     uint8_t *rgb8 = malloc(n_pixels * 3);
     if (!rgb8) {
-        mcpt_error_runtime(err, path, "cannot write: %s", strerror(ENOMEM));
+        mcpt_error_runtime(err, af->path, "cannot write: %s", strerror(ENOMEM));
+        file_atomic_abort(af);
         return false;
     }
     struct image_srgb srgb;
@@ -756,7 +803,16 @@ bool image_write_png_srgb(const char *path, int width, int height, const float *
         for (int c = 0; c < 3; c++)
             rgb8[3 * i + c] = image_srgb8(&srgb, d[c]);
     }
-    bool ok = png_write_atomic(path, width, height, rgb8, true, err);
+    bool ok = png_encode_atomic(af, width, height, rgb8, true, err);
     free(rgb8);
     return ok;
+}
+
+bool image_write_png_srgb(const char *path, int width, int height, const float *rgb,
+                          const struct image_look *look, struct mcpt_error *err)
+{
+    struct file_atomic af;
+    return png_size_is_valid(path, width, height, err) && file_atomic_open(&af, path, err) &&
+           image_encode_png_srgb(&af, width, height, rgb, look, err) &&
+           file_atomic_rename(&af, err);
 }

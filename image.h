@@ -44,6 +44,14 @@ struct image {
  * 0) on an I/O failure. */
 bool image_write_exr(const char *path, const struct image *img, struct mcpt_error *err);
 
+struct file_atomic; /* file.h */
+
+/* image_write_exr into af, a temporary open for writing (file_atomic_open), which is then
+ * finished (flushed and synced) but not renamed: the caller renames it together with the
+ * other files of a set, so a reader never sees one new file beside an old other.  On failure
+ * the temporary is removed and *err filled (file = af->path). */
+bool image_encode_exr(struct file_atomic *af, const struct image *img, struct mcpt_error *err);
+
 /* Reads every channel of a scanline or tiled EXR (half, float or uint channels are converted
  * to float), the first IMAGE_MAX_ATTRS string attributes of its header that fit (name of
  * at most 31 bytes, value of at most IMAGE_ATTR_BYTES - 1; others are skipped, and so are the
@@ -97,6 +105,10 @@ void image_tonemap_rgb(enum image_tonemap t, const double rgb[3], double out[3])
  * clamp. */
 bool image_write_png_srgb(const char *path, int width, int height, const float *rgb,
                           const struct image_look *look, struct mcpt_error *err);
+
+/* image_write_png_srgb into the temporary af, finished but not renamed (image_encode_exr). */
+bool image_encode_png_srgb(struct file_atomic *af, int width, int height, const float *rgb,
+                           const struct image_look *look, struct mcpt_error *err);
 
 /* Writes an 8-bit PNG of rgb8 (interleaved, 3 bytes a pixel) as is. */
 bool image_write_png_rgb8(const char *path, int width, int height, const uint8_t *rgb8,

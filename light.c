@@ -18,6 +18,7 @@ struct light_table {
     uint32_t *tri_light;           /* light index of each triangle, or LIGHT_NONE */
     uint32_t *quad_light;          /* light index of each quad, or LIGHT_NONE */
     uint32_t *sphere_light;        /* light index of each sphere, or LIGHT_NONE */
+    bool by_solid_angle;           /* triangles and quads by solid angle (render light-sampling) */
 };
 
 vec3 light_sky_radiance(const struct sky *sky, vec3 d)
@@ -160,6 +161,7 @@ struct light_table *light_table_build(const struct scene *scene, struct mcpt_err
     if (!lt)
         goto oom;
     lt->scene = scene;
+    lt->by_solid_angle = scene->render.light_sampling == RENDER_LIGHT_SOLID_ANGLE;
     /* the scene's lights, then the sky if it shines */
     bool has_sky = scene->sky.kind != SKY_NONE && sky_power(&scene->sky, 1.0) > 0.0;
     lt->n_lights = scene->n_lights + (has_sky ? 1u : 0u);
@@ -287,6 +289,14 @@ static bool sample_point(const struct light *l, const struct surface *ref, struc
     return true;
 }
 
+/* Whether the point p_ref lies behind the plane (normal n, through p0) of a flat emitter of
+ * material m that emits on its front side only: then no point of it sends light to p_ref
+ * (mat_emission), and sampling one would be wasted. */
+static bool is_behind(const struct material *m, vec3 n, vec3 p0, vec3 p_ref)
+{
+    return !m->two_sided_emission && v3_dot(n, v3_sub(p_ref, p0)) <= 0.0f;
+}
+
 bool light_sample(const struct light_table *lt, uint32_t light_idx, const struct surface *ref,
                   vec3 n_sky, vec2 u, struct light_sample *ls)
 {
@@ -306,14 +316,23 @@ bool light_sample(const struct light_table *lt, uint32_t light_idx, const struct
     case LIGHT_TRIANGLE: {
         vec3 p[3];
         triangle_corners(scene, l->prim_idx, p);
-        ok = shape_triangle_sample(p, ref, u, &ss);
         mat_idx = scene->tris[l->prim_idx].mat_idx;
+        vec3 n = v3_cross(v3_sub(p[1], p[0]), v3_sub(p[2], p[0]));
+        if (is_behind(&scene->materials[mat_idx], n, p[0], ref->p))
+            return false;
+        ok = lt->by_solid_angle ? shape_triangle_sample_solid_angle(p, ref, u, &ss)
+                                : shape_triangle_sample(p, ref, u, &ss);
         break;
     }
-    case LIGHT_QUAD:
-        ok = shape_quad_sample(&scene->quads[l->prim_idx], ref, u, &ss);
-        mat_idx = scene->quads[l->prim_idx].mat_idx;
+    case LIGHT_QUAD: {
+        const struct quad *q = &scene->quads[l->prim_idx];
+        mat_idx = q->mat_idx;
+        if (is_behind(&scene->materials[mat_idx], v3_cross(q->e1, q->e2), q->corner, ref->p))
+            return false;
+        ok = lt->by_solid_angle ? shape_quad_sample_solid_angle(q, ref, u, &ss)
+                                : shape_quad_sample(q, ref, u, &ss);
         break;
+    }
     case LIGHT_SPHERE:
         ok = shape_sphere_sample(&scene->spheres[l->prim_idx], ref, u, &ss);
         mat_idx = scene->spheres[l->prim_idx].mat_idx;
@@ -347,10 +366,14 @@ float light_pdf(const struct light_table *lt, uint32_t light_idx, const struct s
     case LIGHT_TRIANGLE: {
         vec3 p[3];
         triangle_corners(scene, l->prim_idx, p);
-        return shape_triangle_pdf(p, ref, on, wi);
+        return lt->by_solid_angle ? shape_triangle_pdf_solid_angle(p, ref, on, wi)
+                                  : shape_triangle_pdf(p, ref, on, wi);
     }
-    case LIGHT_QUAD:
-        return shape_quad_pdf(&scene->quads[l->prim_idx], ref, on, wi);
+    case LIGHT_QUAD: {
+        const struct quad *q = &scene->quads[l->prim_idx];
+        return lt->by_solid_angle ? shape_quad_pdf_solid_angle(q, ref, on, wi)
+                                  : shape_quad_pdf(q, ref, on, wi);
+    }
     case LIGHT_SPHERE:
         return shape_sphere_pdf(&scene->spheres[l->prim_idx], ref, on, wi);
     case LIGHT_POINT:

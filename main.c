@@ -7,11 +7,15 @@
  * written by output.c; an interrupted render's checkpoint is checkpoint.c's.  This file holds
  * the run's options and state, the render passes (snapshots, curves, previews), the progress
  * line and the signal handler, and is the only one that may exit. */
+#include <ctype.h>
 #include <errno.h>
 #include <getopt.h>
+#include <stdarg.h>
 #include <signal.h>
 #include <stdlib.h>
 #include <sys/ioctl.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -46,20 +50,30 @@ static const char USAGE[] =
     "      --light-samples N  shadow rays per path vertex, each to a light picked by power\n"
     "                         (1..1024, default 1)\n"
     "      --split S          full (default), direct (bounces 0-1) or indirect (bounces > 1)\n"
+    "      --light-sampling M area (default) or solid-angle: how triangle and quad lights\n"
+    "                         are sampled (Arvo 1995; Urena et al. 2013)\n"
     "      --rr P             Russian roulette: throughput (default: continue with probability\n"
-    "                         max beta) or a fixed continuation probability P in (0, 1]\n"
+    "                         max beta / threshold) or a fixed continuation probability P in\n"
+    "                         (0, 1]\n"
+    "      --rr-threshold B   throughput below which roulette plays (default 0.25; PBRT's 1)\n"
     "      --rr-depth D       bounces before roulette may end a path (1..1024, default 2)\n"
     "      --threads N        render threads (default: all cores)\n"
     "      --seed S           random seed, 0..2^64-1 (default 0)\n"
     "      --sampler K        independent, stratified or sobol (default: scene, else sobol);\n"
     "                         see docs/sampling.md\n"
-    "      --adaptive         adaptive sampling: a pixel stops when the 95% interval of its\n"
-    "                         mean luminance, 1.96 sigma/sqrt(n), is <= T max(mean, floor)\n"
+    "      --adaptive         adaptive sampling: each pixel gets the samples that bring the\n"
+    "                         95% interval of its mean luminance, 1.96 sigma/sqrt(n), to\n"
+    "                         T max(mean, floor) (docs/sampling.md)\n"
+    "      --adaptive-rule R  pilot (default: sigma from a discarded pilot; unbiased) or stop\n"
+    "                         (stop when the pixel's own interval is narrow; biased low)\n"
     "      --tolerance T      adaptive: relative tolerance (default 0.05)\n"
     "      --adaptive-floor F adaptive: luminance below which T applies absolutely\n"
     "                         (default 0.01)\n"
-    "      --batch B          adaptive: samples between tests (default 32)\n"
-    "      --min-spp N        adaptive: samples before the first test (default 64, >= 2)\n"
+    "      --pilot-spp P      adaptive pilot: samples of the pilot (default 16, >= 2)\n"
+    "      --batch B          adaptive: samples between tests, or pilot counts rounded up to\n"
+    "                         whole batches (default 32)\n"
+    "      --min-spp N        adaptive: samples before the first test, or the least a pixel\n"
+    "                         gets by the pilot (default 64, >= 2)\n"
     "      --max-spp N        adaptive: most samples per pixel (default: the spp)\n"
     "      --heatmap PNG      write a false-colour map of the samples per pixel with a legend\n"
     "                         (adaptive default: OUT.samples.png)\n"
@@ -74,10 +88,15 @@ static const char USAGE[] =
 /* the help is two strings: C11 compilers need only accept 4095 bytes in one */
 static const char USAGE_MORE[] =
     "      --checkpoint CKPT  where an interrupted render saves its state (default OUT.exr.ckpt)\n"
+    "      --checkpoint-every S  save the checkpoint every S seconds while rendering too, so\n"
+    "                         that kill -9 or a power cut loses at most S s (default 60; 0: only\n"
+    "                         on SIGINT/SIGTERM)\n"
     "      --resume CKPT      continue the interrupted render saved in CKPT to its target spp,\n"
     "                         with its options (later options override; render settings must\n"
     "                         match); the result is bit-identical to an uninterrupted run;\n"
     "                         SCENE may be left out (the checkpoint names it)\n"
+    "      --restart          discard the checkpoint of an interrupted render of the same\n"
+    "                         output (without it, a render refuses to start over one)\n"
     "      --sample-range A:B render only sample indices A..B-1 of every pixel of the --spp\n"
     "                         render (0 <= A < B <= spp); the EXR carries the sums that\n"
     "                         mcpt merge adds up (docs/distributed.md)\n"
@@ -110,6 +129,9 @@ struct options {
     bool has_sampler;
     enum sampler_kind sampler;
     bool adaptive;
+    bool has_adaptive_rule;
+    enum render_adaptive_rule adaptive_rule;
+    uint32_t pilot_spp;   /* 0: from the scene, else the default */
     float tolerance;      /* 0: from the scene, else the default */
     float adaptive_floor; /* < 0: from the scene, else the default */
     uint32_t batch;       /* 0: from the scene, else the default (likewise the next two) */
@@ -124,6 +146,7 @@ struct options {
     bool no_preview;            /* --no-preview: no PNG beside the EXR */
     bool quiet;
     const char *checkpoint_path; /* NULL: OUT.exr.ckpt */
+    double checkpoint_every;     /* --checkpoint-every S, seconds of wall time; 0: never */
     bool snapshots;              /* --snapshots pow2 */
     const char *reference_path;  /* --reference REF.exr, or NULL */
     const char *curve_path;      /* --curve CSV, or NULL */
@@ -134,11 +157,15 @@ struct options {
     enum render_direct direct;
     bool has_split;
     enum render_split split;
+    bool has_light_sampling;
+    enum render_light_sampling light_sampling;
     bool has_rr;
     float rr_prob;                    /* 0: throughput-based */
     uint32_t light_samples;           /* --light-samples N; 0: from the scene, else 1 */
     uint32_t rr_depth;                /* --rr-depth D; 0: from the scene, else the default */
+    float rr_threshold;               /* --rr-threshold B; 0: from the scene, else the default */
     const char *resume_path;          /* --resume CKPT, or NULL */
+    bool restart;                     /* --restart: discard an existing checkpoint */
     bool has_range;                   /* --sample-range A:B given */
     struct partial_range range;       /* its sample indices */
     bool is_done;                     /* --help or --version answered: nothing to render */
@@ -173,6 +200,7 @@ struct convergence {
 /* Everything one render holds, from parse to report; run_free releases it. */
 struct run {
     struct options o;
+    const char *argv0;            /* the program as invoked, for the commands we suggest */
     struct checkpoint_info saved; /* --resume: the interrupted run's settings and options */
     struct scene scene;
     bool has_scene;          /* scene loaded (run_free frees it) */
@@ -181,13 +209,19 @@ struct run {
     struct film film;
     struct trace_scene *ts;
     struct trace_options topt; /* the render's settings: options, else the scene's */
+    uint32_t *pilot_target;    /* adaptive pilot: each pixel's sample count (topt.pilot_target) */
     struct partial_info part;  /* --sample-range: what the EXR records */
     struct convergence cv;
     struct progress prog;
     struct trace_result res;
     double t_build_s; /* trace_prepare: BVH, camera, light table */
     double t_render_s;
-    int signal; /* SIGINT or SIGTERM, when it stopped the render */
+    double t_cpu_s;               /* CPU time of the render, all threads (SIGSTOP stops it) */
+    double t_checkpoint;          /* now_seconds() of the last periodic checkpoint, or 0 */
+    bool is_checkpoint_failed;    /* a periodic checkpoint could not be written: warned once */
+    bool has_periodic_checkpoint; /* one was written: the checkpoint file is this run's */
+    bool is_preview_failed;       /* a --preview-every preview could not be written: warned */
+    int signal;                   /* SIGINT or SIGTERM, when it stopped the render */
 };
 
 /* The parsers' warnings (file:line:col: warning: ...), one line each, unless --quiet. */
@@ -240,6 +274,8 @@ enum {
     OPT_VERSION,
     OPT_CHECKPOINT,
     OPT_RESUME,
+    OPT_RESTART,
+    OPT_CHECKPOINT_EVERY,
     OPT_SAMPLER = 512,
     OPT_ADAPTIVE,
     OPT_TOLERANCE,
@@ -248,6 +284,8 @@ enum {
     OPT_MIN_SPP,
     OPT_MAX_SPP,
     OPT_HEATMAP,
+    OPT_ADAPTIVE_RULE,
+    OPT_PILOT_SPP,
     OPT_SNAPSHOTS = 768,
     OPT_REFERENCE,
     OPT_CURVE,
@@ -259,6 +297,8 @@ enum {
     OPT_SPLIT,
     OPT_RR,
     OPT_RR_DEPTH,
+    OPT_LIGHT_SAMPLING,
+    OPT_RR_THRESHOLD,
     OPT_SAMPLE_RANGE = 1280,
     OPT_TONEMAP = 1536,
     OPT_SCALE,
@@ -272,12 +312,16 @@ static const struct option LONG_OPTS[] = {
     {"direct", required_argument, NULL, OPT_DIRECT},
     {"light-samples", required_argument, NULL, OPT_LIGHT_SAMPLES},
     {"split", required_argument, NULL, OPT_SPLIT},
+    {"light-sampling", required_argument, NULL, OPT_LIGHT_SAMPLING},
     {"rr", required_argument, NULL, OPT_RR},
     {"rr-depth", required_argument, NULL, OPT_RR_DEPTH},
+    {"rr-threshold", required_argument, NULL, OPT_RR_THRESHOLD},
     {"threads", required_argument, NULL, OPT_THREADS},
     {"seed", required_argument, NULL, OPT_SEED},
     {"sampler", required_argument, NULL, OPT_SAMPLER},
     {"adaptive", no_argument, NULL, OPT_ADAPTIVE},
+    {"adaptive-rule", required_argument, NULL, OPT_ADAPTIVE_RULE},
+    {"pilot-spp", required_argument, NULL, OPT_PILOT_SPP},
     {"tolerance", required_argument, NULL, OPT_TOLERANCE},
     {"adaptive-floor", required_argument, NULL, OPT_ADAPTIVE_FLOOR},
     {"batch", required_argument, NULL, OPT_BATCH},
@@ -292,6 +336,8 @@ static const struct option LONG_OPTS[] = {
     {"version", no_argument, NULL, OPT_VERSION},
     {"checkpoint", required_argument, NULL, OPT_CHECKPOINT},
     {"resume", required_argument, NULL, OPT_RESUME},
+    {"restart", no_argument, NULL, OPT_RESTART},
+    {"checkpoint-every", required_argument, NULL, OPT_CHECKPOINT_EVERY},
     {"snapshots", required_argument, NULL, OPT_SNAPSHOTS},
     {"reference", required_argument, NULL, OPT_REFERENCE},
     {"curve", required_argument, NULL, OPT_CURVE},
@@ -366,6 +412,14 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
         return scene_split_parse(optarg, &o->split) ||
                cmd_usage_error(err, "expected --split to be full, direct or indirect, got '%s'",
                                optarg);
+    case OPT_RR_THRESHOLD:
+        return (cmd_parse_float(optarg, 0.0f, 1e6f, &o->rr_threshold) && o->rr_threshold > 0.0f) ||
+               cmd_usage_error(err, "expected --rr-threshold to be a number > 0, got '%s'", optarg);
+    case OPT_LIGHT_SAMPLING:
+        o->has_light_sampling = true;
+        return scene_light_sampling_parse(optarg, &o->light_sampling) ||
+               cmd_usage_error(err, "expected --light-sampling to be area or solid-angle, got '%s'",
+                               optarg);
     case OPT_RR:
         o->has_rr = true;
         o->rr_prob = 0.0f;
@@ -409,6 +463,11 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
     case OPT_ADAPTIVE:
         o->adaptive = true;
         return true;
+    case OPT_ADAPTIVE_RULE:
+        o->has_adaptive_rule = true;
+        return scene_adaptive_rule_parse(optarg, &o->adaptive_rule) ||
+               cmd_usage_error(err, "expected --adaptive-rule to be pilot or stop, got '%s'",
+                               optarg);
     case OPT_TOLERANCE:
         return (cmd_parse_float(optarg, 0.0f, 1e6f, &o->tolerance) && o->tolerance > 0.0f) ||
                cmd_usage_error(err, "expected --tolerance to be a number > 0, got '%s'", optarg);
@@ -418,17 +477,22 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
                                optarg);
     case OPT_BATCH:
     case OPT_MIN_SPP:
-    case OPT_MAX_SPP: {
+    case OPT_MAX_SPP:
+    case OPT_PILOT_SPP: {
         const char *what = c == OPT_BATCH     ? "--batch"
                            : c == OPT_MIN_SPP ? "--min-spp"
-                                              : "--max-spp";
-        uint64_t lo = c == OPT_MIN_SPP ? 2 : 1; /* one sample has no spread */
+                           : c == OPT_MAX_SPP ? "--max-spp"
+                                              : "--pilot-spp";
+        uint64_t lo = c == OPT_MIN_SPP || c == OPT_PILOT_SPP ? 2 : 1; /* one sample: no spread */
         if (!cmd_parse_u64(optarg, lo, UINT32_MAX, &v))
             return cmd_usage_error(err,
                                    "expected %s to be an integer in %llu..4294967295, got "
                                    "'%s'",
                                    what, (unsigned long long)lo, optarg);
-        *(c == OPT_BATCH ? &o->batch : c == OPT_MIN_SPP ? &o->min_spp : &o->max_spp) = (uint32_t)v;
+        *(c == OPT_BATCH     ? &o->batch
+          : c == OPT_MIN_SPP ? &o->min_spp
+          : c == OPT_MAX_SPP ? &o->max_spp
+                             : &o->pilot_spp) = (uint32_t)v;
         return true;
     }
     case OPT_HEATMAP:
@@ -448,6 +512,19 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
     case OPT_QUIET:
         o->quiet = true;
         return true;
+    case OPT_RESTART:
+        o->restart = true;
+        return true;
+    case OPT_CHECKPOINT_EVERY: {
+        float s;
+        if (!cmd_parse_float(optarg, 0.0f, 1e9f, &s))
+            return cmd_usage_error(err,
+                                   "expected --checkpoint-every to be seconds in 0..1e9 (0: "
+                                   "never), got '%s'",
+                                   optarg);
+        o->checkpoint_every = s;
+        return true;
+    }
     case OPT_TONEMAP:
         return image_tonemap_parse(optarg, &o->tonemap) ||
                cmd_usage_error(err, "expected --tonemap to be clamp, reinhard or aces, got '%s'",
@@ -520,12 +597,14 @@ static bool parse_args(int argc, char **argv, struct options *o, struct mcpt_err
     memset(o, 0, sizeof *o);
     o->adaptive_floor = -1.0f;
     o->n_seeds = 1;
+    o->checkpoint_every = 60.0; /* issue 15: kill -9 loses at most a minute */
     long n_cpus = sysconf(_SC_NPROCESSORS_ONLN);
     o->n_threads = n_cpus > 0 ? (int)n_cpus : 1;
     opterr = 0;
     optind = 0; /* glibc: a fresh scan (parse_args runs twice with --resume) */
     for (int c; (c = getopt_long(argc, argv, ":o:h", LONG_OPTS, NULL)) != -1;) {
-        if (c != OPT_RESUME && !record_option(o, c, optarg))
+        /* --resume and --restart are this run's, not the render's: a checkpoint omits them */
+        if (c != OPT_RESUME && c != OPT_RESTART && !record_option(o, c, optarg))
             return cmd_usage_error(err, "expected options of at most %d bytes in all, got more",
                                    CHECKPOINT_ARGS_BYTES);
         if (!apply_option(o, c, argv[optind - 1], err))
@@ -544,10 +623,41 @@ static bool parse_args(int argc, char **argv, struct options *o, struct mcpt_err
 /* --resume: loads the checkpoint's film and settings, then parses its stored options followed
  * by this command line (later words win), so the run goes on as the interrupted one did unless
  * told otherwise; the scene is the checkpoint's unless one is named. */
+/* Whether every stored word of the checkpoint at path is an option as record_option writes
+ * it: "--name" for an option without a value, "--name=value" for one with, and a name that a
+ * render records (not --help, --version, --resume or --restart).  False with *err (bad input,
+ * file = path) naming the first other word, which parse_args would otherwise blame on the
+ * command line. */
+static bool check_stored_options(const char *path, const struct checkpoint_info *ck,
+                                 struct mcpt_error *err)
+{
+    for (uint32_t i = 0; i < ck->args_bytes; i += (uint32_t)strlen(ck->args + i) + 1) {
+        const char *word = ck->args + i;
+        const char *eq = strchr(word, '=');
+        size_t n_name = eq ? (size_t)(eq - word) - 2 : strlen(word) - 2;
+        bool ok = false;
+        for (int k = 0; LONG_OPTS[k].name && strncmp(word, "--", 2) == 0; k++) {
+            const struct option *opt = &LONG_OPTS[k];
+            if (strlen(opt->name) == n_name && strncmp(word + 2, opt->name, n_name) == 0)
+                ok = (opt->has_arg == required_argument) == (eq != NULL) && opt->val != 'h' &&
+                     opt->val != OPT_VERSION && opt->val != OPT_RESUME && opt->val != OPT_RESTART;
+        }
+        if (!ok) {
+            mcpt_error_set(err, path, 0, 0,
+                           "expected stored options '--name' or '--name=value' of a render, got "
+                           "'%.100s'",
+                           word);
+            return false;
+        }
+    }
+    return true;
+}
+
 static bool resume_options(int argc, char **argv, struct run *run, struct mcpt_error *err)
 {
     struct checkpoint_info *ck = &run->saved;
-    if (!checkpoint_load(run->o.resume_path, &run->film, ck, err))
+    if (!checkpoint_load(run->o.resume_path, &run->film, ck, err) ||
+        !check_stored_options(run->o.resume_path, ck, err))
         return false;
     char **words = malloc(sizeof(char *) * ((size_t)ck->args_bytes + (size_t)argc + 1));
     if (!words) {
@@ -561,7 +671,17 @@ static bool resume_options(int argc, char **argv, struct run *run, struct mcpt_e
     for (int i = 1; i < argc; i++)
         words[n++] = argv[i];
     words[n] = NULL;
+    int n_stored = n - argc;                    /* words 1 .. n_stored are the checkpoint's */
+    const char *ckpt_path = run->o.resume_path; /* parse_args clears run->o first */
     bool ok = parse_args(n, words, &run->o, err);
+    if (!ok && optind - 1 <= n_stored) { /* a stored value (--spp=0): the checkpoint's fault */
+        char *hint = strstr(err->msg, " (see mcpt --help)");
+        if (hint)
+            *hint = '\0';
+        snprintf(err->file, sizeof err->file, "%s", ckpt_path);
+        size_t len = strlen(err->msg);
+        snprintf(err->msg + len, sizeof err->msg - len, " (a stored option)");
+    }
     free(words); /* run->o points into ck and argv, not into words */
     if (ok && !run->o.scene_path)
         run->o.scene_path = ck->scene_path;
@@ -571,6 +691,7 @@ static bool resume_options(int argc, char **argv, struct run *run, struct mcpt_e
 /* parse: the command line, after the interrupted run's options when it says --resume. */
 static bool parse(int argc, char **argv, struct run *run, struct mcpt_error *err)
 {
+    run->argv0 = argv[0];
     if (!parse_args(argc, argv, &run->o, err))
         return false;
     return run->o.is_done || !run->o.resume_path || resume_options(argc, argv, run, err);
@@ -594,36 +715,15 @@ static bool load_reference(const char *path, const struct film *film, struct con
     return true;
 }
 
-/* The scene and the FNV-1a hash of its bytes (a checkpoint or a partial render records it).
- * The scene "-" is standard input, copied once to a temporary file so that it can be both
- * hashed and parsed; it is named <stdin> in messages, and its meshes are found relative to the
- * working directory. */
+/* The scene; "-" is standard input, read once as it comes (the loader hashes the bytes it
+ * reads), named <stdin> in messages, its meshes found relative to the working directory. */
 static bool load_scene(struct run *run, struct mcpt_error *err)
 {
     const char *path = run->o.scene_path;
-    if (strcmp(path, "-") != 0) {
+    if (strcmp(path, "-") == 0)
+        run->has_scene = scene_load_stream(stdin, STDIN_NAME, &run->scene, err);
+    else
         run->has_scene = scene_load(path, &run->scene, err);
-        return run->has_scene && checkpoint_hash_file(path, &run->scene_hash, err);
-    }
-    FILE *tmp = tmpfile();
-    if (!tmp) {
-        mcpt_error_runtime(err, STDIN_NAME, "cannot make a temporary copy: %s", strerror(errno));
-        return false;
-    }
-    char buf[65536];
-    size_t n;
-    bool ok = true;
-    while (ok && (n = fread(buf, 1, sizeof buf, stdin)) > 0)
-        ok = fwrite(buf, 1, n, tmp) == n;
-    if (ferror(stdin) || !ok || fflush(tmp) != 0) {
-        mcpt_error_runtime(err, STDIN_NAME, "cannot %s: %s", ok ? "read" : "copy", strerror(errno));
-        ok = false;
-    }
-    rewind(tmp);
-    ok = ok && checkpoint_hash_stream(tmp, STDIN_NAME, &run->scene_hash, err);
-    rewind(tmp);
-    run->has_scene = ok && scene_load_stream(tmp, STDIN_NAME, &run->scene, err);
-    fclose(tmp);
     return run->has_scene;
 }
 
@@ -668,6 +768,13 @@ static bool load(struct run *run, struct mcpt_error *err)
     if (!load_scene(run, err))
         return false;
     print_scene_warnings(&run->scene, o->quiet);
+    /* a checkpoint names its scene by the bytes of the scene file (as read: a pipe or standard
+     * input cannot be read again) and of every mesh and MTL file it loaded, so an edited OBJ is
+     * noticed */
+    run->scene_hash = run->scene.file_hash;
+    for (uint32_t i = 0; i < run->scene.n_loaded; i++)
+        if (!file_hash_file(run->scene.loaded_paths[i], &run->scene_hash, err))
+            return false;
     bool is_stdin = strcmp(o->scene_path, "-") == 0; /* outputs named stdin.exr, ... */
     if (!film_size(o, &run->scene, err) ||
         !output_paths_init(&run->out, is_stdin ? "stdin" : o->scene_path, o->output,
@@ -700,9 +807,21 @@ static double now_seconds(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-/* build: the BVH, the camera and the light table (trace_prepare), timed for the report. */
+/* CPU time of the process, all threads, in seconds: time stopped (SIGSTOP, a suspended job)
+ * or waiting does not count, as it does in wall time. */
+static double cpu_seconds(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* build: the BVH, the camera and the light table (trace_prepare), timed for the report.  The
+ * light table samples as --light-sampling says, else as the scene's render statement. */
 static bool build(struct run *run, struct mcpt_error *err)
 {
+    if (run->o.has_light_sampling)
+        run->scene.render.light_sampling = run->o.light_sampling;
     double t0 = now_seconds();
     run->ts = trace_prepare(&run->scene, run->o.n_threads, err);
     run->t_build_s = now_seconds() - t0;
@@ -718,13 +837,23 @@ static bool sampling_options(const struct options *o, const struct render_settin
 {
     topt->adaptive = o->adaptive || r->adaptive;
     if (!topt->adaptive) {
-        if (o->tolerance || o->adaptive_floor >= 0.0f || o->batch || o->min_spp || o->max_spp)
-            return cmd_usage_error(err,
-                                   "expected --adaptive (or the scene's render "
-                                   "adaptive=true) with --tolerance, --adaptive-floor, --batch, "
-                                   "--min-spp or --max-spp, got none");
+        if (o->tolerance || o->adaptive_floor >= 0.0f || o->batch || o->min_spp || o->max_spp ||
+            o->has_adaptive_rule || o->pilot_spp)
+            return cmd_usage_error(err, "expected --adaptive (or the scene's render "
+                                        "adaptive=true) with --adaptive-rule, --tolerance, "
+                                        "--adaptive-floor, --pilot-spp, --batch, --min-spp or "
+                                        "--max-spp, got none");
         return true;
     }
+    topt->adaptive_rule = o->has_adaptive_rule   ? o->adaptive_rule
+                          : r->has_adaptive_rule ? r->adaptive_rule
+                                                 : RENDER_ADAPTIVE_PILOT;
+    if (topt->adaptive_rule != RENDER_ADAPTIVE_PILOT && o->pilot_spp)
+        return cmd_usage_error(err, "expected --adaptive-rule pilot with --pilot-spp, got %s",
+                               scene_adaptive_rule_name(topt->adaptive_rule));
+    topt->pilot_spp = o->pilot_spp   ? o->pilot_spp
+                      : r->pilot_spp ? r->pilot_spp
+                                     : TRACE_ADAPTIVE_PILOT_SPP;
     topt->spp = o->max_spp ? o->max_spp : r->max_spp ? r->max_spp : topt->spp;
     topt->tolerance = o->tolerance   ? o->tolerance
                       : r->tolerance ? r->tolerance
@@ -740,6 +869,7 @@ static bool sampling_options(const struct options *o, const struct render_settin
                                "expected --min-spp <= the most samples per pixel (%u), got "
                                "%u",
                                topt->spp, topt->min_spp);
+    topt->max_spp = topt->spp;
     return true;
 }
 
@@ -748,8 +878,10 @@ static bool sampling_options(const struct options *o, const struct render_settin
  * disjoint ranges hold exactly the whole render's samples), and fills *info with the range and
  * every setting the parts of one render must share. */
 static bool sample_range_options(const struct options *o, bool measuring, uint64_t scene_hash,
-                                 const struct film *film, struct trace_options *topt,
-                                 struct partial_info *info, struct mcpt_error *err)
+                                 const struct film *film,
+                                 enum render_light_sampling scene_light_sampling,
+                                 struct trace_options *topt, struct partial_info *info,
+                                 struct mcpt_error *err)
 {
     if (topt->adaptive)
         return cmd_usage_error(err, "expected no adaptive sampling with --sample-range (where a "
@@ -767,12 +899,15 @@ static bool sample_range_options(const struct options *o, bool measuring, uint64
     info->ranges[0] = o->range;
     snprintf(info->render, sizeof info->render,
              "scene=%016llx film=%dx%d spp=%u seed=%llu sampler=%s max-depth=%u direct=%s "
-             "light-samples=%u split=%s rr=%.9g rr-depth=%u",
+             "light-samples=%u split=%s rr=%.9g rr-depth=%u rr-threshold=%.9g "
+             "light-sampling=%s",
              (unsigned long long)scene_hash, film->width, film->height, topt->spp,
              (unsigned long long)topt->seed, sample_sampler_name(topt->sampler), topt->max_depth,
              scene_direct_name(topt->direct), topt->light_samples ? topt->light_samples : 1u,
              scene_split_name(topt->split), (double)topt->rr_prob,
-             topt->rr_depth ? topt->rr_depth : TRACE_RR_DEPTH_DEFAULT);
+             topt->rr_depth ? topt->rr_depth : TRACE_RR_DEPTH_DEFAULT,
+             (double)(topt->rr_threshold > 0.0f ? topt->rr_threshold : TRACE_RR_THRESHOLD_DEFAULT),
+             scene_light_sampling_name(scene_light_sampling));
     topt->sampler_spp = topt->spp; /* the whole render's stratified sets */
     topt->sample_offset = o->range.begin;
     topt->spp = o->range.end - o->range.begin;
@@ -829,13 +964,162 @@ static bool render_options(struct run *run, struct mcpt_error *err)
         .split = o->has_split ? o->split : r->split,
         .rr_prob = o->has_rr ? o->rr_prob : r->rr_prob,
         .rr_depth = o->rr_depth ? o->rr_depth : r->rr_depth,
+        .rr_threshold = o->rr_threshold > 0.0f ? o->rr_threshold : r->rr_threshold,
     };
     if (!sampling_options(o, r, &run->topt, err))
         return false;
-    if (o->has_range && !sample_range_options(o, run->cv.measuring, run->scene_hash, &run->film,
-                                              &run->topt, &run->part, err))
+    if (run->topt.adaptive && run->topt.adaptive_rule == RENDER_ADAPTIVE_PILOT) {
+        /* the pilot's counts, kept between passes (render_seed clears them for each seed) */
+        run->pilot_target = calloc((size_t)run->film.width * (size_t)run->film.height,
+                                   sizeof *run->pilot_target);
+        if (!run->pilot_target) {
+            mcpt_error_runtime(err, NULL, "out of memory for the adaptive pilot's counts");
+            return false;
+        }
+        run->topt.pilot_target = run->pilot_target;
+    }
+    if (o->has_range &&
+        !sample_range_options(o, run->cv.measuring, run->scene_hash, &run->film,
+                              run->scene.render.light_sampling, &run->topt, &run->part, err))
         return false;
     return !o->resume_path || resume_matches(run, err);
+}
+
+/* ---- render: the checks before it ---- */
+
+/* word as a shell reads it back: as it is when it holds only characters no shell treats
+ * specially, else in single quotes (a quote inside as '\''). */
+static void shell_word(const char *word, char *out, size_t out_bytes)
+{
+    bool is_plain = *word != '\0';
+    for (const char *c = word; *c; c++)
+        is_plain = is_plain && (isalnum((unsigned char)*c) || strchr("_./:=+,@%-", *c));
+    if (is_plain) {
+        snprintf(out, out_bytes, "%s", word);
+        return;
+    }
+    size_t n = 0;
+    if (n + 1 < out_bytes)
+        out[n++] = '\'';
+    for (const char *c = word; *c && n + 5 < out_bytes; c++) {
+        if (*c == '\'') {
+            memcpy(out + n, "'\\''", 4);
+            n += 4;
+        } else {
+            out[n++] = *c;
+        }
+    }
+    if (n + 1 < out_bytes)
+        out[n++] = '\'';
+    out[n < out_bytes ? n : out_bytes - 1] = '\0';
+}
+
+/* The command that continues the render saved at ckpt: the program as it was invoked
+ * (./mcpt, mcpt, a full path), the scene and --resume. */
+static void resume_command(const struct run *run, const char *ckpt, char *out, size_t out_bytes)
+{
+    char prog[FILE_PATH_BYTES], scene[FILE_PATH_BYTES], path[FILE_PATH_BYTES];
+    shell_word(run->argv0, prog, sizeof prog);
+    shell_word(run->o.scene_path, scene, sizeof scene);
+    shell_word(ckpt, path, sizeof path);
+    snprintf(out, out_bytes, "%s %s --resume %s", prog, scene, path);
+}
+
+/* Bytes a thread's stack takes: pthread's default, RLIMIT_STACK (glibc), else 8 MiB. */
+static size_t thread_stack_bytes(void)
+{
+    struct rlimit lim;
+    if (getrlimit(RLIMIT_STACK, &lim) == 0 && lim.rlim_cur != RLIM_INFINITY && lim.rlim_cur > 0 &&
+        lim.rlim_cur < ((rlim_t)1 << 30))
+        return (size_t)lim.rlim_cur;
+    return (size_t)8 << 20;
+}
+
+/* Before the render, the memory all of it will need beyond what is allocated now (the film,
+ * the scene, the BVH): the render threads' stacks, a measured run's curve planes (7 floats a
+ * pixel) and second film (--seeds), and the writes' peak (output_peak_bytes), against what the
+ * process may still allocate (film_memory_free_bytes: ulimit -v, RLIMIT_DATA).  A render that
+ * would run out when writing its image is refused now (bad input: a smaller film, fewer
+ * threads or a larger limit fixes it). */
+static bool check_memory(const struct run *run, struct mcpt_error *err)
+{
+    const struct film *film = &run->film;
+    double n_pixels = (double)film->width * (double)film->height;
+    double threads = (double)run->o.n_threads * (double)thread_stack_bytes();
+    double measuring = !run->cv.measuring
+                           ? 0.0
+                           : n_pixels * (7.0 * sizeof(float) + (run->o.n_seeds > 1 ? 64.0 : 0.0));
+    double writes = (double)output_peak_bytes(film->width, film->height, run->o.has_range);
+    double need = threads + measuring + writes;
+    size_t free_bytes = film_memory_free_bytes();
+    if (need <= (double)free_bytes)
+        return true;
+    mcpt_error_set(err, run->o.scene_path, 0, 0,
+                   "expected a render that fits in this process's memory limit (%.0f MiB left "
+                   "beside the %.0f MiB film), got a %dx%d film needing %.0f MiB more (writing "
+                   "the image %.0f, %d threads %.0f, measuring %.0f)",
+                   (double)free_bytes / 1048576.0, n_pixels * 64.0 / 1048576.0, film->width,
+                   film->height, need / 1048576.0, writes / 1048576.0, run->o.n_threads,
+                   threads / 1048576.0, measuring / 1048576.0);
+    return false;
+}
+
+/* Before the render, what would make it fail late or do harm: no output may be an input (the
+ * scene, the meshes and MTL files it loaded, the reference, the checkpoint resumed from unless
+ * it is the one to rewrite) or another output, every output must be creatable (output_check), and a checkpoint left by an
+ * interrupted render of this output is not overwritten unless --restart says so (it is then
+ * removed here). */
+static bool check_outputs(struct run *run, struct mcpt_error *err)
+{
+    const struct options *o = &run->o;
+    size_t n_files = OUTPUT_MAX_FILES + 3 + (size_t)run->scene.n_loaded;
+    struct output_file *files = malloc(sizeof *files * n_files);
+    if (!files) {
+        mcpt_error_runtime(err, NULL, "out of memory checking the output files");
+        return false;
+    }
+    bool measuring = run->cv.measuring;
+    int n_out = output_list(&run->out, measuring ? o->curve_path : NULL, measuring && o->snapshots,
+                            run->topt.spp, files, err);
+    struct output_file *in = files + (n_out > 0 ? n_out : 0);
+    int n_in = 0;
+    struct file_id ckpt_id, resume_id;
+    bool is_resumed_here = o->resume_path && file_id_of(run->out.checkpoint, &ckpt_id) &&
+                           file_id_of(o->resume_path, &resume_id) &&
+                           file_id_same(&ckpt_id, &resume_id);
+    bool is_stdin = strcmp(o->scene_path, "-") == 0; /* /dev/stdin: the file it was given */
+    const char *in_paths[3] = {is_stdin ? "/dev/stdin" : o->scene_path,
+                               measuring ? o->reference_path : NULL,
+                               is_resumed_here ? NULL : o->resume_path};
+    static const char *in_roles[3] = {"the scene file", "the reference (--reference)",
+                                      "the checkpoint of --resume"};
+    for (int k = 0; k < 3; k++)
+        if (in_paths[k]) {
+            snprintf(in[n_in].path, sizeof in[n_in].path, "%s", in_paths[k]);
+            in[n_in++].role = in_roles[k];
+        }
+    for (uint32_t i = 0; i < run->scene.n_loaded; i++) {
+        snprintf(in[n_in].path, sizeof in[n_in].path, "%s", run->scene.loaded_paths[i]);
+        in[n_in++].role = "a file the scene loads";
+    }
+    bool ok = n_out > 0 && output_check(files, n_out, in, n_in, err);
+    free(files);
+    if (!ok)
+        return false;
+    struct stat st;
+    if (is_resumed_here || stat(run->out.checkpoint, &st) != 0)
+        return true;
+    if (o->restart) {
+        unlink(run->out.checkpoint); /* the user discards the interrupted render */
+        return true;
+    }
+    char cmd[3 * FILE_PATH_BYTES + 16];
+    resume_command(run, run->out.checkpoint, cmd, sizeof cmd);
+    mcpt_error_set(err, run->out.checkpoint, 0, 0,
+                   "expected no checkpoint of an interrupted render here, got one: continue it "
+                   "with '%.600s', or discard it with --restart",
+                   cmd);
+    return false;
 }
 
 /* ---- render: progress, signals, passes ---- */
@@ -969,8 +1253,12 @@ _Static_assert(ATOMIC_INT_LOCK_FREE == 2, "the signal handler needs a lock-free 
 
 static void on_signal(int sig)
 {
-    if (atomic_exchange(&g_cancel, 1) != 0)
-        _exit(128 + sig); /* the second signal: leave at once (files are renamed into place) */
+    if (atomic_exchange(&g_cancel, 1) != 0) {
+        /* the second signal: leave at once, removing the temporaries being written (a
+         * checkpoint's is the film's size); finished files were renamed into place whole */
+        file_remove_temporaries_now();
+        _exit(128 + sig);
+    }
     g_signal = sig;
 }
 
@@ -1033,6 +1321,37 @@ static bool measure(struct run *run, const struct film *f, uint64_t seed, uint32
            output_write_snapshot(&run->out, f, spp, run->topt.spp, &meta, &look, err);
 }
 
+/* The fewest samples any pixel of f has taken (kept or dropped). */
+static uint32_t least_count(const struct film *f)
+{
+    size_t n_pixels = (size_t)f->width * (size_t)f->height;
+    uint32_t least = UINT32_MAX;
+    for (size_t i = 0; i < n_pixels; i++) {
+        uint32_t n = f->pixels[i].n + f->pixels[i].n_dropped;
+        least = n < least ? n : least;
+    }
+    return n_pixels ? least : 0;
+}
+
+/* A checkpoint between passes (--checkpoint-every), so that kill -9 loses at most that long:
+ * written atomically like the one of an interrupt.  One that cannot be written is a warning,
+ * printed once; the render goes on. */
+static void save_periodic_checkpoint(struct run *run, const struct film *f)
+{
+    struct checkpoint_info info;
+    struct mcpt_error err = {0};
+    checkpoint_info_of(run, &info);
+    run->t_checkpoint = now_seconds();
+    if (checkpoint_save(run->out.checkpoint, f, &info, &err)) {
+        run->has_periodic_checkpoint = true;
+        return;
+    }
+    if (!run->is_checkpoint_failed)
+        fprintf(stderr, "%s: warning: %s (the render goes on; it is tried again every %g s)\n",
+                err.file, err.msg, run->o.checkpoint_every);
+    run->is_checkpoint_failed = true;
+}
+
 /* Renders seed number k of the run (seed topt.seed + k) into f, in passes: each trace_render
  * call continues every pixel from its count, so the final film is bit-identical to one call.
  * Between passes the film is measured at 1, 2, 4, ... spp and, for the first seed, the preview
@@ -1042,15 +1361,27 @@ static bool render_seed(struct run *run, struct film *f, uint32_t k, struct mcpt
     const struct options *o = &run->o;
     uint32_t spp_final = run->topt.spp;
     bool is_previewed = o->preview_every > 0.0 && k == 0;
+    bool is_checkpointed = o->checkpoint_every > 0.0 && k == 0;
     struct trace_options pass = run->topt;
     pass.seed = run->topt.seed + k;
+    if (pass.pilot_target) /* another seed, another pilot */
+        memset(pass.pilot_target, 0,
+               sizeof *pass.pilot_target * (size_t)f->width * (size_t)f->height);
     if (!pass.adaptive && !pass.sampler_spp)
         pass.sampler_spp = spp_final; /* the strata of the final spp in every pass */
     double seconds = 0.0, seconds_per_spp = 0.0, t_preview = now_seconds();
-    for (uint32_t done_spp = 0; done_spp < spp_final;) {
+    run->t_checkpoint = now_seconds();
+    /* a resumed film starts where its least advanced pixel is */
+    for (uint32_t done_spp = k == 0 ? least_count(f) : 0; done_spp < spp_final;) {
         uint32_t next = run->cv.measuring ? stats_next_pow2(done_spp, spp_final) : spp_final;
-        if (is_previewed) {
-            double step = seconds_per_spp > 0.0 ? o->preview_every / seconds_per_spp : 1.0;
+        /* the pass ends when the next preview or checkpoint is due */
+        double due_s = INFINITY, now = now_seconds();
+        if (is_previewed)
+            due_s = fmin(due_s, t_preview + o->preview_every - now);
+        if (is_checkpointed)
+            due_s = fmin(due_s, run->t_checkpoint + o->checkpoint_every - now);
+        if (due_s < INFINITY) {
+            double step = seconds_per_spp > 0.0 ? due_s / seconds_per_spp : 1.0;
             if (step < (double)(next - done_spp))
                 next = done_spp + (step >= 1.0 ? (uint32_t)step : 1u);
         }
@@ -1061,7 +1392,8 @@ static bool render_seed(struct run *run, struct film *f, uint32_t k, struct mcpt
             return false;
         double dt = now_seconds() - t0;
         seconds += dt;
-        seconds_per_spp = dt / (double)(next - done_spp);
+        if (r.n_samples > 0)
+            seconds_per_spp = dt / (double)(next - done_spp);
         run->prog.base += r.n_samples;
         trace_result_add(&run->res, &r);
         if (r.cancelled)
@@ -1071,11 +1403,20 @@ static bool render_seed(struct run *run, struct film *f, uint32_t k, struct mcpt
             !measure(run, f, pass.seed, done_spp, seconds, k == 0, err))
             return false;
         if (is_previewed && done_spp < spp_final && now_seconds() - t_preview >= o->preview_every) {
+            /* a preview that cannot be written (a full disk) must not cost the render */
             struct image_look look = look_of(o);
-            if (!output_write_preview(&run->out, f, &look, err))
-                return false;
+            struct mcpt_error preview_err = {0};
+            if (!output_write_preview(&run->out, f, &look, &preview_err) &&
+                !run->is_preview_failed) {
+                fprintf(stderr, "%s: warning: %s (the render goes on)\n", preview_err.file,
+                        preview_err.msg);
+                run->is_preview_failed = true;
+            }
             t_preview = now_seconds();
         }
+        if (is_checkpointed && done_spp < spp_final &&
+            now_seconds() - run->t_checkpoint >= o->checkpoint_every)
+            save_periodic_checkpoint(run, f);
     }
     return true;
 }
@@ -1087,7 +1428,7 @@ static bool render_passes(struct run *run, struct mcpt_error *err)
 {
     const struct options *o = &run->o;
     memset(&run->res, 0, sizeof run->res);
-    if (!run->cv.measuring && !(o->preview_every > 0.0))
+    if (!run->cv.measuring && !(o->preview_every > 0.0) && !(o->checkpoint_every > 0.0))
         return trace_render(run->ts, &run->topt, &run->film, &run->res, err);
     uint32_t n_seeds = run->cv.measuring ? o->n_seeds : 1;
     struct progress *prog = &run->prog;
@@ -1119,7 +1460,7 @@ static bool render_passes(struct run *run, struct mcpt_error *err)
 static bool render(struct run *run, struct mcpt_error *err)
 {
     const struct options *o = &run->o;
-    if (!render_options(run, err))
+    if (!render_options(run, err) || !check_memory(run, err) || !check_outputs(run, err))
         return false;
     run->cv.sheet.seed = run->topt.seed; /* the contact sheet shows the first seed's images */
     run->cv.sheet.n_seeds = o->n_seeds;
@@ -1140,9 +1481,11 @@ static bool render(struct run *run, struct mcpt_error *err)
                                   .width = run->film.width,
                                   .height = run->film.height};
     stats_curve_init(&run->cv.curve, &info);
+    double t_cpu0 = cpu_seconds();
     if (!render_passes(run, err))
         return false;
     run->t_render_s = now_seconds() - run->prog.t_start;
+    run->t_cpu_s = cpu_seconds() - t_cpu0;
     if (run->res.cancelled) {
         run->signal = g_signal ? g_signal : SIGINT;
         if (run->prog.is_tty && !o->quiet)
@@ -1153,6 +1496,41 @@ static bool render(struct run *run, struct mcpt_error *err)
 
 /* ---- write ---- */
 
+/* Appends fmt's text to err's message, as far as it fits. */
+static void append_msg(struct mcpt_error *err, const char *fmt, ...)
+{
+    size_t len = strnlen(err->msg, sizeof err->msg);
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(err->msg + len, sizeof err->msg - len, fmt, ap);
+    va_end(ap);
+}
+
+/* An interrupted render: the checkpoint, then the partial image, each written whatever became
+ * of the other (a checkpoint's folder removed meanwhile still leaves the partial image).
+ * False with *err (the first failure, saying what was written) when either failed. */
+static bool write_interrupted(struct run *run, struct mcpt_error *err)
+{
+    const struct options *o = &run->o;
+    struct checkpoint_info info;
+    checkpoint_info_of(run, &info);
+    struct mcpt_error image_err = {0};
+    bool is_checkpoint_saved = checkpoint_save(run->out.checkpoint, &run->film, &info, err);
+    struct image_look look = look_of(o);
+    struct output_meta meta = meta_of(run, run->t_render_s);
+    bool is_image_written = output_write_image(&run->out, &run->film,
+                                               o->has_range ? &run->part : NULL, &meta, &look,
+                                               is_checkpoint_saved ? err : &image_err);
+    if (is_checkpoint_saved)
+        return is_image_written;
+    append_msg(err,
+               is_image_written ? "; the partial image %.60s was written, but the render "
+                                  "cannot be resumed"
+                                : "; nor could the partial image %.60s be written",
+               output_image_path(&run->out));
+    return false;
+}
+
 /* write: an interrupted render saves its checkpoint first, then the partial image; a finished
  * one its image, the sample-count map and the convergence files, and removes the checkpoint it
  * was resumed from.  An interrupted render with no new sample writes nothing. */
@@ -1162,19 +1540,22 @@ static bool write_outputs(struct run *run, struct mcpt_error *err)
     bool is_cancelled = run->res.cancelled;
     if (is_cancelled && run->res.n_samples == 0)
         return true;
-    if (is_cancelled) {
-        struct checkpoint_info info;
-        checkpoint_info_of(run, &info);
-        if (!checkpoint_save(run->out.checkpoint, &run->film, &info, err))
-            return false;
-    }
+    if (is_cancelled)
+        return write_interrupted(run, err);
     struct image_look look = look_of(o);
     struct output_meta meta = meta_of(run, run->t_render_s);
     if (!output_write_image(&run->out, &run->film, o->has_range ? &run->part : NULL, &meta, &look,
-                            err))
+                            err)) {
+        if (run->has_periodic_checkpoint)
+            append_msg(err, "; the checkpoint %.60s has the render as of %.0f s before its end",
+                       run->out.checkpoint, now_seconds() - run->t_checkpoint);
         return false;
-    if (o->resume_path && !is_cancelled)
-        unlink(o->resume_path); /* done: the checkpoint has served */
+    }
+    /* done: the checkpoints have served */
+    if (run->has_periodic_checkpoint)
+        unlink(run->out.checkpoint);
+    if (o->resume_path)
+        unlink(o->resume_path);
     if (!output_write_heatmap(&run->out, &run->film, err))
         return false;
     if (!run->cv.measuring || is_cancelled)
@@ -1189,27 +1570,50 @@ static bool write_outputs(struct run *run, struct mcpt_error *err)
 
 /* ---- report ---- */
 
-/* Where an adaptive render's samples went: mean, least and most per pixel, the share of pixels
- * at the maximum. */
-static void report_adaptive(const struct run *run)
+/* Where a render's samples went: mean, least and most per pixel, the share of pixels at the
+ * maximum. */
+struct spp_spread {
+    double mean;
+    uint32_t lo;
+    uint32_t hi;
+    double share_at_max; /* fraction of pixels with spp samples */
+};
+
+static struct spp_spread spp_spread_of(const struct film *film, uint32_t spp)
 {
-    const struct film *film = &run->film;
-    const struct trace_options *topt = &run->topt;
     size_t n_pixels = (size_t)film->width * (size_t)film->height, n_at_max = 0;
     uint64_t total = 0;
-    uint32_t lo = UINT32_MAX, hi = 0;
+    struct spp_spread sp = {.lo = UINT32_MAX};
     for (size_t i = 0; i < n_pixels; i++) {
         uint32_t n = film->pixels[i].n + film->pixels[i].n_dropped;
         total += n;
-        lo = n < lo ? n : lo;
-        hi = n > hi ? n : hi;
-        n_at_max += n >= topt->spp;
+        sp.lo = n < sp.lo ? n : sp.lo;
+        sp.hi = n > sp.hi ? n : sp.hi;
+        n_at_max += n >= spp;
     }
-    printf("mcpt: adaptive (T %g, floor %g, batch %u, %u..%u spp): mean %.1f spp, least %u, most "
-           "%u, %.1f%% of pixels at the maximum; sample map %s\n",
-           topt->tolerance, topt->adaptive_floor, topt->batch, topt->min_spp, topt->spp,
-           (double)total / (double)n_pixels, lo, hi, 100.0 * (double)n_at_max / (double)n_pixels,
-           run->out.heatmap);
+    sp.mean = (double)total / (double)n_pixels;
+    sp.share_at_max = (double)n_at_max / (double)n_pixels;
+    return sp;
+}
+
+/* An adaptive render's rule and settings, the share of pixels at the maximum and the map. */
+static void report_adaptive(const struct run *run)
+{
+    const struct trace_options *topt = &run->topt;
+    struct spp_spread sp = spp_spread_of(&run->film, topt->spp);
+    if (topt->adaptive_rule == RENDER_ADAPTIVE_PILOT)
+        printf("mcpt: adaptive, pilot rule (T %g, floor %g, pilot %u spp, batch %u, %u..%u "
+               "spp): %.1f%% of pixels at the maximum; %.1f pilot samples a pixel, not in the "
+               "image; sample map %s\n",
+               topt->tolerance, topt->adaptive_floor, topt->pilot_spp, topt->batch, topt->min_spp,
+               topt->spp, 100.0 * sp.share_at_max,
+               (double)run->res.n_pilot / ((double)run->film.width * run->film.height),
+               run->out.heatmap);
+    else
+        printf("mcpt: adaptive, stop rule (T %g, floor %g, batch %u, %u..%u spp): %.1f%% of "
+               "pixels at the maximum; sample map %s\n",
+               topt->tolerance, topt->adaptive_floor, topt->batch, topt->min_spp, topt->spp,
+               100.0 * sp.share_at_max, run->out.heatmap);
 }
 
 /* report: the dropped samples on stderr, then the summary on stdout, or on stderr where an
@@ -1231,12 +1635,12 @@ static int report(const struct run *run)
                 (unsigned long long)res->n_nonfinite, res->first_bad_x, res->first_bad_y,
                 res->first_bad_sample);
     if (res->cancelled) {
+        char cmd[3 * FILE_PATH_BYTES + 16];
+        resume_command(run, run->out.checkpoint, cmd, sizeof cmd);
         fprintf(stderr,
                 "mcpt: interrupted by %s: wrote the partial %s (its 'samples' channel "
-                "counts each pixel's samples) and the checkpoint %s; continue with: mcpt %s "
-                "--resume %s\n",
-                signal_name, output_image_path(&run->out), run->out.checkpoint, o->scene_path,
-                run->out.checkpoint);
+                "counts each pixel's samples) and the checkpoint %s; continue with: %s\n",
+                signal_name, output_image_path(&run->out), run->out.checkpoint, cmd);
         return 128 + run->signal;
     }
     if (o->quiet)
@@ -1244,11 +1648,19 @@ static int report(const struct run *run)
     struct bvh_stats bs = trace_bvh_stats(run->ts);
     double t = run->t_render_s;
     const struct output_paths *out = &run->out;
-    printf("mcpt: %dx%d, %u spp, %d threads: render %.2f s, %.3f Msamples/s, %.2f Mrays/s; BVH "
-           "%u tris in %.1f ms; wrote %s%s%s\n",
-           run->film.width, run->film.height, run->topt.spp, o->n_threads, t,
-           (double)res->n_samples / t * 1e-6, (double)res->n_rays / t * 1e-6, bs.n_tris,
-           run->t_build_s * 1e3, out->exr[0] ? out->exr : out->png,
+    char spp[96]; /* "256 spp", or an adaptive render's spread */
+    if (run->topt.adaptive) {
+        struct spp_spread sp = spp_spread_of(&run->film, run->topt.spp);
+        snprintf(spp, sizeof spp, "adaptive %.1f spp (least %u, most %u)", sp.mean, sp.lo, sp.hi);
+    } else {
+        snprintf(spp, sizeof spp, "%u spp", run->topt.spp);
+    }
+    /* samples/s counts every camera sample traced, the adaptive pilot's too */
+    printf("mcpt: %dx%d, %s, %d threads: render %.2f s wall, %.2f s CPU, %.3f Msamples/s, "
+           "%.2f Mrays/s; BVH %u tris in %.1f ms; wrote %s%s%s\n",
+           run->film.width, run->film.height, spp, o->n_threads, t, run->t_cpu_s,
+           (double)(res->n_samples + res->n_pilot) / t * 1e-6, (double)res->n_rays / t * 1e-6,
+           bs.n_tris, run->t_build_s * 1e3, out->exr[0] ? out->exr : out->png,
            out->exr[0] && out->png[0] ? " and " : "",
            !out->exr[0] ? " (8-bit sRGB only: -o OUT.exr keeps the float image)" : out->png);
     if (run->cv.measuring)
@@ -1265,6 +1677,7 @@ static void run_free(struct run *run)
     plot_sheet_free(&run->cv.sheet);
     image_free(&run->cv.ref_img);
     trace_free(run->ts);
+    free(run->pilot_target);
     film_free(&run->film);
     if (run->has_scene)
         scene_free(&run->scene);

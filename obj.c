@@ -17,6 +17,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "file.h"
+
 /* The subset read, as an example file:
  *
  *     mtllib box.mtl            # one or more MTL files, relative to this file's folder
@@ -238,13 +240,15 @@ static bool resolve_usemtl(struct reader *r, struct mcpt_error *err);
 static void add_warning(struct obj_mesh *m, const char *path, int line, int col, const char *fmt,
                         ...);
 static void note_site(struct warn_site *w, const struct cursor *c, const char *at);
+static bool keep_mtl_paths(struct obj_mesh *mesh, const struct obj_names *paths,
+                           const char *obj_path, struct mcpt_error *err);
 
 /* ---- public ---- */
 
 bool obj_load(const char *path, struct obj_mesh *mesh, struct mcpt_error *err)
 {
     const char *not_regular = NULL;
-    int fd = obj_open_input(path, false, &not_regular);
+    int fd = file_open_input(path, false, &not_regular);
     if (fd < 0) {
         memset(mesh, 0, sizeof *mesh);
         if (not_regular)
@@ -273,6 +277,8 @@ bool obj_load_fd(int fd, const char *path, struct obj_mesh *mesh, struct mcpt_er
                     "value%s",
                     r.spectral_key, r.spectral_key, more);
     }
+    if (ok && r.mtl_paths.n_entries > 0)
+        ok = keep_mtl_paths(mesh, &r.mtl_paths, path, err);
     free(c.joins);
     obj_names_free(&r.usemtl_names);
     obj_names_free(&r.mtl_names);
@@ -283,6 +289,27 @@ bool obj_load_fd(int fd, const char *path, struct obj_mesh *mesh, struct mcpt_er
     return ok;
 }
 
+/* Copies the paths of the MTL files read into mesh->mtl_paths; false with *err (runtime, file
+ * = obj_path) when out of memory. */
+static bool keep_mtl_paths(struct obj_mesh *mesh, const struct obj_names *paths,
+                           const char *obj_path, struct mcpt_error *err)
+{
+    mesh->mtl_paths = calloc(paths->n_entries, sizeof *mesh->mtl_paths);
+    for (uint32_t i = 0; mesh->mtl_paths && i < paths->n_entries; i++) {
+        const char *key = obj_names_key(paths, i);
+        size_t n = strlen(key) + 1;
+        if (!(mesh->mtl_paths[i] = malloc(n))) {
+            mcpt_error_runtime(err, obj_path, "out of memory");
+            return false; /* obj_free frees what was copied */
+        }
+        memcpy(mesh->mtl_paths[i], key, n);
+        mesh->n_mtl_paths = i + 1;
+    }
+    if (!mesh->mtl_paths)
+        mcpt_error_runtime(err, obj_path, "out of memory");
+    return mesh->mtl_paths != NULL;
+}
+
 void obj_free(struct obj_mesh *mesh)
 {
     free(mesh->positions);
@@ -290,39 +317,10 @@ void obj_free(struct obj_mesh *mesh)
     free(mesh->uvs);
     free(mesh->tris);
     free(mesh->materials);
+    for (uint32_t i = 0; i < mesh->n_mtl_paths; i++)
+        free(mesh->mtl_paths[i]);
+    free(mesh->mtl_paths);
     memset(mesh, 0, sizeof *mesh);
-}
-
-int obj_open_input(const char *path, bool allow_pipe, const char **not_regular)
-{
-    *not_regular = NULL;
-    /* O_NONBLOCK: open() of a FIFO returns at once, writer or not */
-    int fd = open(path, O_RDONLY | O_NONBLOCK | O_CLOEXEC);
-    if (fd < 0)
-        return -1;
-    struct stat st;
-    int flags;
-    if (fstat(fd, &st) != 0)
-        goto fail;
-    if (!S_ISREG(st.st_mode) && !(allow_pipe && S_ISFIFO(st.st_mode))) {
-        *not_regular = S_ISDIR(st.st_mode)    ? "a directory"
-                       : S_ISFIFO(st.st_mode) ? "a FIFO"
-                       : S_ISCHR(st.st_mode)  ? "a character device"
-                       : S_ISBLK(st.st_mode)  ? "a block device"
-                       : S_ISSOCK(st.st_mode) ? "a socket"
-                                              : "not a regular file";
-        goto fail;
-    }
-    /* reads block again: a pipe's reader waits for its writer, and sees the end of file once
-     * no writer is left (POSIX read(): an empty pipe with no writer reads as end of file) */
-    if ((flags = fcntl(fd, F_GETFL)) < 0 || fcntl(fd, F_SETFL, flags & ~O_NONBLOCK) != 0)
-        goto fail;
-    return fd;
-fail:;
-    int error_number = errno;
-    close(fd);
-    errno = error_number;
-    return -1;
 }
 
 /* ---- line parsers ---- */
@@ -648,7 +646,7 @@ static bool read_mtl_file(struct reader *r, struct cursor *c, const char *name,
     show_span(name, name_end, tok);
     show_span_n(mtl_path, mtl_path + path_len, shown_path, sizeof shown_path);
     const char *not_regular = NULL;
-    int fd = obj_open_input(mtl_path, false, &not_regular);
+    int fd = file_open_input(mtl_path, false, &not_regular);
     if (fd < 0 && not_regular)
         return fail_at(c, name, "expected a regular file for mtllib '%s' (%s), got %s", tok,
                        shown_path, not_regular);
@@ -1327,17 +1325,9 @@ static bool push_vec3(struct cursor *c, const char *at, const char *kw, vec3 **i
 
 /* ---- the name table (obj.h) ---- */
 
-/* FNV-1a, 64 bits: offset basis 14695981039346656037, prime 2^40 + 2^8 + 0xb3 (Fowler, Noll,
- * Vo, "The FNV Non-Cryptographic Hash Algorithm", draft-eastlake-fnv). */
-static uint64_t fnv1a_64(const char *s, size_t n)
-{
-    uint64_t h = 0xcbf29ce484222325u;
-    for (size_t i = 0; i < n; i++) {
-        h ^= (unsigned char)s[i];
-        h *= 0x100000001b3u;
-    }
-    return h;
-}
+/* FNV-1a, 64 bits (Fowler, Noll, Vo, "The FNV Non-Cryptographic Hash Algorithm",
+ * draft-eastlake-fnv): file.c's. */
+static uint64_t fnv1a_64(const char *s, size_t n) { return file_fnv1a64(FILE_FNV_OFFSET, s, n); }
 
 /* The home slot of hash in a table of 2^bits slots: the top bits of hash * 2^64/phi
  * (Fibonacci hashing, Knuth, TAOCP vol. 3, 6.4), which spreads FNV's weaker low bits. */

@@ -49,6 +49,9 @@ struct obj_mesh {
      * defines): one line each, for main to print */
     char warnings[OBJ_MAX_WARNINGS][OBJ_WARNING_BYTES];
     uint32_t n_warnings;
+    char **mtl_paths; /* every MTL file read, as opened (the OBJ's folder prefixed), each
+                         malloc'ed: inputs no output may overwrite */
+    uint32_t n_mtl_paths;
 };
 
 /* Reads the OBJ at path and every MTL it names (paths relative to the OBJ's folder).
@@ -65,20 +68,12 @@ struct obj_mesh {
  * that cannot be opened or is not a regular file has no line ("x.obj: error: cannot open: ..."). */
 bool obj_load(const char *path, struct obj_mesh *mesh, struct mcpt_error *err);
 
-/* obj_load for a file the caller has opened (with obj_open_input): reads fd, which it closes,
+/* obj_load for a file the caller has opened (with file.h's file_open_input): reads fd, which it closes,
  * naming path in messages and resolving MTL paths against path's folder. */
 bool obj_load_fd(int fd, const char *path, struct obj_mesh *mesh, struct mcpt_error *err);
 
 /* Frees what obj_load allocated and zeroes *mesh.  Safe on a zeroed mesh. */
 void obj_free(struct obj_mesh *mesh);
-
-/* Opens path for reading without ever blocking in open() (a FIFO with no writer would block
- * forever) and refuses anything but a regular file, or with allow_pipe a FIFO or pipe too.
- * Returns a descriptor in blocking mode.  On failure returns -1 with either errno set and
- * *not_regular = NULL (the file cannot be opened), or *not_regular naming what the path is
- * ("a directory", "a FIFO", "a character device", ...).  Meant to move to a shared file
- * helper once other modules use it. */
-int obj_open_input(const char *path, bool allow_pipe, const char **not_regular);
 
 /* A table of names (byte strings) to uint32 values: open addressing with linear probing on a
  * 64-bit FNV-1a hash, at most half full, so finding or adding a name costs O(1) expected.  The

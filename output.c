@@ -6,6 +6,9 @@
 
 #include <stdlib.h>
 #include <strings.h>
+#include <unistd.h>
+
+#include "image.h"
 
 /* Copies src to out (out_bytes); false with *err (bad input) when it does not fit. */
 static bool copy_path(char *out, size_t out_bytes, const char *src, struct mcpt_error *err)
@@ -82,20 +85,22 @@ bool output_paths_init(struct output_paths *p, const char *scene_path, const cha
 
 const char *output_image_path(const struct output_paths *p) { return p->exr[0] ? p->exr : p->png; }
 
-/* The PNG of film at png_path: its means as look says. */
-static bool write_png(const struct film *film, const char *png_path, const struct image_look *look,
-                      struct mcpt_error *err)
+/* The PNG of film into the temporary af: its means as look says; finished, not renamed
+ * (image_encode_png_srgb). */
+static bool encode_png(struct file_atomic *af, const struct film *film,
+                       const struct image_look *look, struct mcpt_error *err)
 {
     size_t n_pixels = (size_t)film->width * (size_t)film->height;
     float *rgb = malloc(sizeof(float) * 3 * n_pixels);
     if (!rgb) {
-        mcpt_error_runtime(err, png_path, "out of memory writing the preview");
+        mcpt_error_runtime(err, af->path, "out of memory writing the preview");
+        file_atomic_abort(af);
         return false;
     }
     for (size_t i = 0; i < n_pixels; i++)
         for (int c = 0; c < 3; c++)
             rgb[3 * i + c] = (float)film_mean(&film->pixels[i], c);
-    bool ok = image_write_png_srgb(png_path, film->width, film->height, rgb, look, err);
+    bool ok = image_encode_png_srgb(af, film->width, film->height, rgb, look, err);
     free(rgb);
     return ok;
 }
@@ -142,10 +147,10 @@ static void add_meta(struct image *img, const struct output_meta *meta, const fl
         add_attr(img, PARTIAL_ATTR_RANGES, "%s", meta->ranges);
 }
 
-/* The EXR of every render: R, G, B, variance of the mean per channel, sample count, and the
- * attributes of meta. */
-static bool write_exr(const struct film *film, const char *exr_path, const struct output_meta *meta,
-                      struct mcpt_error *err)
+/* The EXR of every render into the temporary af: R, G, B, variance of the mean per channel,
+ * sample count, and the attributes of meta; finished, not renamed. */
+static bool encode_exr(struct file_atomic *af, const struct film *film,
+                       const struct output_meta *meta, struct mcpt_error *err)
 {
     static const char *names[7] = {"R",          "G",          "B",      "variance.R",
                                    "variance.G", "variance.B", "samples"};
@@ -153,7 +158,8 @@ static bool write_exr(const struct film *film, const char *exr_path, const struc
     struct image img = {.width = film->width, .height = film->height, .n_channels = 7};
     float *planes = malloc(sizeof(float) * n_pixels * 7);
     if (!planes) {
-        mcpt_error_runtime(err, exr_path, "out of memory writing the image");
+        mcpt_error_runtime(err, af->path, "out of memory writing the image");
+        file_atomic_abort(af);
         return false;
     }
     for (int c = 0; c < 7; c++) {
@@ -162,18 +168,61 @@ static bool write_exr(const struct film *film, const char *exr_path, const struc
     }
     film_resolve(film, img.data, img.data + 3, img.data[6]);
     add_meta(&img, meta, img.data[6]);
-    bool ok = image_write_exr(exr_path, &img, err);
+    bool ok = image_encode_exr(af, &img, err);
     free(planes);
     return ok;
+}
+
+/* The PNG alone, at png_path. */
+static bool write_png(const struct film *film, const char *png_path, const struct image_look *look,
+                      struct mcpt_error *err)
+{
+    struct file_atomic af;
+    return file_atomic_open(&af, png_path, err) && encode_png(&af, film, look, err) &&
+           file_atomic_rename(&af, err);
+}
+
+/* An image and its preview as a pair (either may be "": not written): both temporaries are
+ * written and synced before either is renamed, so a failure or a kill -9 while writing leaves
+ * the old pair (and temporaries that the next run removes).  When the image is written but its
+ * preview cannot be (a disk full by the PNG), the image is kept, being what the render made,
+ * and the old preview is removed rather than left beside an image it does not show; the
+ * message says so.  Between the two renames (microseconds) a kill -9 can still leave the new
+ * image beside the old preview. */
+static bool write_pair(const char *exr_path, const char *png_path, const struct film *film,
+                       const struct partial_info *part, const struct output_meta *meta,
+                       const struct image_look *look, struct mcpt_error *err)
+{
+    if (!exr_path[0])
+        return !png_path[0] || write_png(film, png_path, look, err);
+    struct file_atomic exr, png;
+    if (!file_atomic_open(&exr, exr_path, err) ||
+        !(part ? partial_encode_exr(&exr, film, part, err) : encode_exr(&exr, film, meta, err)))
+        return false; /* nothing replaced */
+    if (!png_path[0])
+        return file_atomic_rename(&exr, err);
+    bool is_png_ready = file_atomic_open(&png, png_path, err) && encode_png(&png, film, look, err);
+    if (!file_atomic_rename(&exr, err)) {
+        if (is_png_ready)
+            file_atomic_abort(&png);
+        return false; /* nothing replaced */
+    }
+    if (is_png_ready && file_atomic_rename(&png, err))
+        return true;
+    unlink(png_path);
+    size_t len = strnlen(err->msg, sizeof err->msg);
+    snprintf(err->msg + len, sizeof err->msg - len,
+             " (the image %.60s was written; the old preview was removed, as it showed an "
+             "older image)",
+             exr_path);
+    return false;
 }
 
 bool output_write_image(const struct output_paths *p, const struct film *film,
                         const struct partial_info *part, const struct output_meta *meta,
                         const struct image_look *look, struct mcpt_error *err)
 {
-    bool ok = !p->exr[0] || (part ? partial_write_exr(p->exr, film, part, err)
-                                  : write_exr(film, p->exr, meta, err));
-    return ok && (!p->png[0] || write_png(film, p->png, look, err));
+    return write_pair(p->exr, p->png, film, part, meta, look, err);
 }
 
 bool output_write_preview(const struct output_paths *p, const struct film *film,
@@ -192,7 +241,7 @@ bool output_write_snapshot(const struct output_paths *p, const struct film *film
     if (!with_suffix(output_image_path(p), suffix, exr_path, sizeof exr_path, err) ||
         !with_suffix(exr_path, ".png", png_path, sizeof png_path, err))
         return false;
-    return write_exr(film, exr_path, meta, err) && write_png(film, png_path, look, err);
+    return write_pair(exr_path, png_path, film, NULL, meta, look, err);
 }
 
 bool output_write_heatmap(const struct output_paths *p, const struct film *film,
@@ -218,4 +267,102 @@ bool output_write_convergence(const struct output_paths *p, const char *curve_pa
         return true;
     return with_suffix(output_image_path(p), "-contact.png", path, sizeof path, err) &&
            plot_write_contact_sheet(path, sheet, err);
+}
+
+/* ---- before a render: the memory its writes need, the files it may write and the harm they
+ * could do ---- */
+
+size_t output_peak_bytes(int width, int height, bool is_partial)
+{
+    size_t n_pixels = (size_t)width * (size_t)height;
+    size_t exr_per_pixel = sizeof(float) * (is_partial ? 24 : 7); /* partial.c: 6 + 9 hi + 9 lo */
+    size_t png_per_pixel = 3 * sizeof(float) + 3;                 /* linear RGB, then sRGB bytes */
+    size_t per_pixel = exr_per_pixel > png_per_pixel ? exr_per_pixel : png_per_pixel;
+    /* OpenEXR encodes a chunk of 16 rows at a time (ZIP): the rows, packed, compressed and
+     * scratch, 4 copies; zlib and libpng keep well under a few MiB besides */
+    size_t band = 4 * 16 * (size_t)width * exr_per_pixel;
+    return n_pixels * per_pixel + band + ((size_t)8 << 20);
+}
+
+/* Adds path with role to files[*n]; false with *err when it does not fit. */
+static bool add_file(struct output_file *files, int *n, const char *path, const char *role,
+                     struct mcpt_error *err)
+{
+    if (*n >= OUTPUT_MAX_FILES || !copy_path(files[*n].path, sizeof files[*n].path, path, err))
+        return false;
+    files[(*n)++].role = role;
+    return true;
+}
+
+int output_list(const struct output_paths *p, const char *curve_path, bool snapshots,
+                uint32_t spp_final, struct output_file *files, struct mcpt_error *err)
+{
+    int n = 0;
+    char path[FILE_PATH_BYTES], suffix[64];
+    bool ok = (!p->exr[0] || add_file(files, &n, p->exr, "the image (-o)", err)) &&
+              (!p->png[0] || add_file(files, &n, p->png,
+                                      p->exr[0] ? "the PNG preview" : "the image (-o)", err)) &&
+              add_file(files, &n, p->checkpoint, "the checkpoint", err) &&
+              (!p->heatmap[0] || add_file(files, &n, p->heatmap, "the sample-count map", err));
+    if (ok && curve_path)
+        ok = add_file(files, &n, curve_path, "the curve (--curve)", err) &&
+             with_suffix(curve_path, ".json", path, sizeof path, err) &&
+             add_file(files, &n, path, "the curve's JSON", err) &&
+             with_suffix(curve_path, ".svg", path, sizeof path, err) &&
+             add_file(files, &n, path, "the curve's plot", err);
+    if (ok && snapshots) {
+        int digits = snprintf(NULL, 0, "%u", spp_final);
+        for (uint64_t spp = 1; ok; spp = spp * 2 < spp_final ? spp * 2 : spp_final) {
+            snprintf(suffix, sizeof suffix, "-spp%0*u.exr", digits, (uint32_t)spp);
+            ok = with_suffix(output_image_path(p), suffix, path, sizeof path, err) &&
+                 add_file(files, &n, path, "a snapshot", err) &&
+                 with_suffix(files[n - 1].path, ".png", path, sizeof path, err) &&
+                 add_file(files, &n, path, "a snapshot's preview", err);
+            if (spp >= spp_final)
+                break;
+        }
+        ok = ok && with_suffix(output_image_path(p), "-contact.png", path, sizeof path, err) &&
+             add_file(files, &n, path, "the contact sheet", err);
+    }
+    return ok ? n : -1;
+}
+
+bool output_check(const struct output_file *outputs, int n_outputs,
+                  const struct output_file *inputs, int n_inputs, struct mcpt_error *err)
+{
+    struct file_id *ids = malloc(sizeof *ids * (size_t)(n_outputs + n_inputs));
+    if (!ids) {
+        mcpt_error_runtime(err, NULL, "out of memory checking the output files");
+        return false;
+    }
+    bool ok = true;
+    for (int i = 0; i < n_outputs + n_inputs; i++) {
+        const char *path = i < n_outputs ? outputs[i].path : inputs[i - n_outputs].path;
+        if (!file_id_of(path, &ids[i])) {
+            mcpt_error_set(err, path, 0, 0,
+                           "expected a file name that can be resolved, got one "
+                           "too long or outside any working directory");
+            ok = false;
+            goto done;
+        }
+    }
+    for (int i = 0; i < n_outputs; i++) {
+        for (int k = 0; k < n_outputs + n_inputs; k++) {
+            if (k == i || (k < n_outputs && k > i) || !file_id_same(&ids[i], &ids[k]))
+                continue;
+            const struct output_file *other = k < n_outputs ? &outputs[k] : &inputs[k - n_outputs];
+            mcpt_error_set(err, outputs[i].path, 0, 0,
+                           "expected %s to be a file of its own, got the same file as %s '%s'",
+                           outputs[i].role, other->role, other->path);
+            ok = false;
+            goto done;
+        }
+    }
+    for (int i = 0; ok && i < n_outputs; i++)
+        ok = file_check_creatable(outputs[i].path, err);
+    for (int i = 0; ok && i < n_outputs; i++)
+        file_remove_stale(outputs[i].path);
+done:
+    free(ids);
+    return ok;
 }

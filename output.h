@@ -56,8 +56,11 @@ const char *output_image_path(const struct output_paths *p);
 
 /* Writes the film as p->exr and p->png (each where named): with part NULL the EXR of every
  * render (R, G, B, variance of the mean per channel, sample count, and meta's attributes),
- * else the partial render's EXR with its sums and ranges (partial_write_exr; p->exr must be
- * named); the PNG at look (exposure, tone curve).  False with *err (runtime) on failure. */
+ * else the partial render's EXR with its sums and ranges (partial_encode_exr; p->exr must be
+ * named); the PNG at look (exposure, tone curve).  The two are a pair: both temporaries are
+ * written and synced before either is renamed, so a failure or kill -9 leaves the old pair.
+ * When only the preview cannot be written (a disk full by it), the new image is kept and the
+ * old preview removed, and *err says so.  False with *err (runtime) on failure. */
 bool output_write_image(const struct output_paths *p, const struct film *film,
                         const struct partial_info *part, const struct output_meta *meta,
                         const struct image_look *look, struct mcpt_error *err);
@@ -81,5 +84,37 @@ bool output_write_heatmap(const struct output_paths *p, const struct film *film,
 bool output_write_convergence(const struct output_paths *p, const char *curve_path,
                               const struct stats_curve *c, const struct stats_summary *s,
                               const struct plot_sheet *sheet, struct mcpt_error *err);
+
+/* The most bytes the writes of a film of width x height allocate at any one time, besides the
+ * film: the EXR's planes (7 floats a pixel, or 24 for a partial render's sums), the preview's
+ * (3 floats and 3 bytes a pixel), and the encoders' buffers of a band of rows.  Counted before
+ * a render, so that a memory limit fails it then rather than after hours. */
+size_t output_peak_bytes(int width, int height, bool is_partial);
+
+/* One file a command reads or writes, and what it is, for messages ("the image (-o)"). */
+struct output_file {
+    char path[FILE_PATH_BYTES];
+    const char *role; /* a static string */
+};
+
+/* The most files output_list names: image, preview, checkpoint, sample map, 2 per snapshot
+ * (33 at most), contact sheet, curve CSV, JSON and SVG. */
+#define OUTPUT_MAX_FILES 80
+
+/* Lists into files (room for OUTPUT_MAX_FILES) every file a render named by p may write:
+ * with curve_path the curve's three files, with snapshots those at 1, 2, 4, ... spp_final spp
+ * and the contact sheet.  Returns the count; -1 with *err (bad input) when a name does not
+ * fit. */
+int output_list(const struct output_paths *p, const char *curve_path, bool snapshots,
+                uint32_t spp_final, struct output_file *files, struct mcpt_error *err);
+
+/* Checks, before any work, that the outputs can be written without harm: no output is the same
+ * file as an input or as another output (file_id_same: device and inode where the file exists,
+ * the normalised path otherwise), and each can be created (file_check_creatable).  Then removes
+ * the temporaries dead writers left beside each output (file_remove_stale).  False with *err
+ * (file = the output; bad input, or a runtime error for a full disk) on the first problem, e.g.
+ * "expected the image (-o) to be a file of its own, got the scene file 'box.txt'". */
+bool output_check(const struct output_file *outputs, int n_outputs,
+                  const struct output_file *inputs, int n_inputs, struct mcpt_error *err);
 
 #endif

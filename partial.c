@@ -13,6 +13,7 @@
 #include <float.h>
 #include <stdlib.h>
 
+#include "file.h"
 #include "image.h"
 
 /* The doubles of struct film_pixel, in the order of their channels. */
@@ -157,9 +158,10 @@ static int compare_ranges(const void *a, const void *b)
 
 /* ---- writing ---- */
 
-bool partial_write_exr(const char *path, const struct film *film, const struct partial_info *info,
-                       struct mcpt_error *err)
+bool partial_encode_exr(struct file_atomic *af, const struct film *film,
+                        const struct partial_info *info, struct mcpt_error *err)
 {
+    const char *path = af->path;
     size_t n_pixels = (size_t)film->width * (size_t)film->height;
     struct image *img = calloc(1, sizeof *img);
     float *planes = NULL;
@@ -204,14 +206,33 @@ bool partial_write_exr(const char *path, const struct film *film, const struct p
     snprintf(img->attr_values[0], sizeof img->attr_values[0], "%s", ranges);
     snprintf(img->attr_names[1], sizeof img->attr_names[1], "%s", PARTIAL_ATTR_RENDER);
     snprintf(img->attr_values[1], sizeof img->attr_values[1], "%s", info->render);
-    ok = image_write_exr(path, img, err);
+    ok = image_encode_exr(af, img, err);
 done:
+    if (!ok)
+        file_atomic_abort(af); /* again, after image_encode_exr: harmless */
     free(planes);
     free(img);
     return ok;
 }
 
+bool partial_write_exr(const char *path, const struct film *film, const struct partial_info *info,
+                       struct mcpt_error *err)
+{
+    struct file_atomic af;
+    return file_atomic_open(&af, path, err) && partial_encode_exr(&af, film, info, err) &&
+           file_atomic_rename(&af, err);
+}
+
 /* ---- reading ---- */
+
+/* Whether s holds printable ASCII only (no control bytes, no bytes above 0x7e). */
+static bool is_printable(const char *s)
+{
+    for (; *s; s++)
+        if ((unsigned char)*s < 0x20 || (unsigned char)*s > 0x7e)
+            return false;
+    return true;
+}
 
 bool partial_read_exr(const char *path, struct film *film, struct partial_info *info,
                       struct mcpt_error *err)
@@ -247,6 +268,15 @@ bool partial_read_exr(const char *path, struct film *film, struct partial_info *
                        "expected a partial render (mcpt --sample-range) with "
                        "attribute '%s', got an image without it",
                        !ranges ? PARTIAL_ATTR_RANGES : PARTIAL_ATTR_RENDER);
+        goto done;
+    }
+    const char *unprintable = !is_printable(ranges)   ? PARTIAL_ATTR_RANGES
+                              : !is_printable(render) ? PARTIAL_ATTR_RENDER
+                                                      : NULL;
+    if (unprintable) { /* it would be quoted in messages: no line breaks or escapes there */
+        mcpt_error_set(err, path, 0, 0,
+                       "expected attribute '%s' of printable ASCII characters, got other bytes",
+                       unprintable);
         goto done;
     }
     if (!parse_ranges(ranges, info)) {
@@ -287,6 +317,14 @@ bool partial_read_exr(const char *path, struct film *film, struct partial_info *
                            "with --resume first)",
                            (unsigned long long)n_expected, ranges,
                            (unsigned long long)p->n + p->n_dropped, x, y);
+            goto done;
+        }
+        const char *problem = film_pixel_problem(p, n_expected); /* values no render writes */
+        if (problem) {
+            mcpt_error_set(err, path, 0, 0,
+                           "expected pixel sums that %u samples can give, got %s at pixel "
+                           "%zu,%zu",
+                           p->n, problem, x, y);
             goto done;
         }
     }

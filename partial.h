@@ -45,6 +45,13 @@ bool partial_is_whole(const struct partial_info *info);
 bool partial_write_exr(const char *path, const struct film *film, const struct partial_info *info,
                        struct mcpt_error *err);
 
+struct file_atomic; /* file.h */
+
+/* partial_write_exr into af, a temporary open for writing, finished but not renamed
+ * (image_encode_exr); on failure the temporary is removed. */
+bool partial_encode_exr(struct file_atomic *af, const struct film *film,
+                        const struct partial_info *info, struct mcpt_error *err);
+
 /* Reads an EXR written by partial_write_exr into a new film (free with film_free) and *info.
  * Every value is checked: channels and attributes present, ranges well formed, sums finite,
  * counts whole numbers, and every pixel's n + n_dropped equal to the ranges' sample count (an

@@ -8,6 +8,7 @@
  * PBRT 4e, ch. A.5, "Sampling Multidimensional Functions"; Veach 1997, ch. 9 (MIS). */
 #include "sample.h"
 
+#include <assert.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -126,28 +127,45 @@ static uint32_t cmj_columns(uint32_t n_samples)
     return root;
 }
 
-static uint32_t sobol_joint_index(const struct sampler *s);
+static void sobol_pixel_seeds(struct sampler *s);
+static void sobol_joint_point(struct sampler *s);
 
-void sample_start_spp(struct sampler *s, enum sampler_kind kind, uint64_t seed, uint32_t pixel_idx,
-                      uint32_t sample_idx, uint32_t set_spp)
+void sample_start_pixel(struct sampler *s, enum sampler_kind kind, uint64_t seed,
+                        uint32_t pixel_idx, uint32_t set_spp)
 {
     s->kind = kind;
     s->seed = seed;
     s->pixel_idx = pixel_idx;
-    s->sample_idx = sample_idx;
+    s->sample_idx = 0;
     s->dim = 0;
     s->set_spp = set_spp;
-    s->cmj_cols = 1;
+    s->cmj_cols = kind == SAMPLER_STRATIFIED && set_spp > 1 ? cmj_columns(set_spp) : 1;
     s->pixel_hash = sample_hash64(seed ^ sample_hash64(0x9e3779b97f4a7c15ULL + pixel_idx));
-    if (kind == SAMPLER_INDEPENDENT) {
-        uint64_t h = sample_hash64(seed ^ sample_hash64(((uint64_t)pixel_idx << 32) | sample_idx));
+    s->rng = (struct pcg32){0, 1};
+    s->pad_dim0 = SAMPLE_PAD_NONE;
+    if (kind == SAMPLER_SOBOL)
+        sobol_pixel_seeds(s);
+}
+
+void sample_start_index(struct sampler *s, uint32_t sample_idx)
+{
+    s->sample_idx = sample_idx;
+    s->dim = 0;
+    if (s->kind == SAMPLER_INDEPENDENT) {
+        uint64_t h = sample_hash64(s->seed ^
+                                   sample_hash64(((uint64_t)s->pixel_idx << 32) | sample_idx));
         sample_pcg32_seed(&s->rng, h, sample_hash64(h));
-    } else {
-        s->rng = (struct pcg32){0, 1};
-        if (kind == SAMPLER_STRATIFIED && set_spp > 1)
-            s->cmj_cols = cmj_columns(set_spp);
+    } else if (s->kind == SAMPLER_SOBOL) {
+        s->pad_dim0 = SAMPLE_PAD_NONE;
+        sobol_joint_point(s);
     }
-    s->sobol_index = kind == SAMPLER_SOBOL ? sobol_joint_index(s) : 0;
+}
+
+void sample_start_spp(struct sampler *s, enum sampler_kind kind, uint64_t seed, uint32_t pixel_idx,
+                      uint32_t sample_idx, uint32_t set_spp)
+{
+    sample_start_pixel(s, kind, seed, pixel_idx, set_spp);
+    sample_start_index(s, sample_idx);
 }
 
 void sample_start(struct sampler *s, enum sampler_kind kind, uint64_t seed, uint32_t pixel_idx,
@@ -182,6 +200,7 @@ static float fraction_to_float(uint32_t x) { return (float)(x >> 8) * 0x1p-24f; 
  * (a hash restricted to the next power of two, cycle-walked back into [0, l)). */
 static uint32_t kensler_permute(uint32_t i, uint32_t l, uint32_t p)
 {
+    assert(l > 0); /* the cycle walk ends only in a non-empty range */
     uint32_t w = l - 1;
     w |= w >> 1;
     w |= w >> 2;
@@ -257,7 +276,9 @@ static vec2 stratified_2d(const struct sampler *s, uint32_t dim)
     uint32_t p;
     uint32_t i = strat_position(s, dim, &p);
     uint32_t n_set = s->set_spp > 1 ? s->set_spp : 1;
-    uint32_t m = s->cmj_cols, n = (n_set + m - 1) / m;
+    /* rows n = ceil(N / m), written so that N near 2^32 cannot wrap (n = 0 would never end
+     * kensler_permute's cycle walk) */
+    uint32_t m = s->cmj_cols, n = n_set / m + (n_set % m != 0);
     uint32_t sp = kensler_permute(i, n_set, p * 0x51633e2du);
     uint32_t sx = kensler_permute(sp % m, m, p * 0x68bc21ebu);
     uint32_t sy = kensler_permute(sp / m, n, p * 0x02e5be93u);
@@ -269,9 +290,12 @@ static vec2 stratified_2d(const struct sampler *s, uint32_t dim)
 
 /* -- Sobol': Burley 2020, "Practical Hash-based Owen Scrambling", JCGT 9(4) -- */
 
+/* Swaps halves, bytes, nibbles, pairs and bits: written with shifts and masks only (no
+ * byte-swap builtin), so the compiler can also run it on a vector of lanes. */
 static uint32_t reverse_bits32(uint32_t x)
 {
-    x = __builtin_bswap32(x); /* GCC and Clang builtin: the bytes reversed */
+    x = (x << 16) | (x >> 16);
+    x = ((x & 0x00ff00ffu) << 8) | ((x & 0xff00ff00u) >> 8);
     x = ((x & 0x0f0f0f0fu) << 4) | ((x & 0xf0f0f0f0u) >> 4);
     x = ((x & 0x33333333u) << 2) | ((x & 0xccccccccu) >> 2);
     x = ((x & 0x55555555u) << 1) | ((x & 0xaaaaaaaau) >> 1);
@@ -328,115 +352,189 @@ static uint32_t nested_uniform_scramble(uint32_t x, uint32_t seed)
     return reverse_bits32(laine_karras_permutation(reverse_bits32(x), seed));
 }
 
-/* nested_uniform_scramble(sample_sobol_u32(index, dim), seed).  For dimensions 0 and 1 the
- * scramble's first reversal undoes the one that puts the digits in fraction order, so both are
- * skipped: the hot path of every padding request. */
-static uint32_t scrambled_sobol(uint32_t index, uint32_t dim, uint32_t seed)
+static void pad_block_seeds(const struct sampler *s, uint32_t dim0, struct sample_pad_seeds *seeds);
+
+/* The first bounce block with a padded dimension: the blocks whose seeds a sampler keeps per
+ * pixel are this one and the next SAMPLE_PAD_KEPT - 1. */
+static const uint32_t PAD_FIRST_KEPT = SAMPLE_SOBOL_JOINT_DIMS <= SAMPLE_DIM_BOUNCE0
+                                           ? 0
+                                           : (SAMPLE_SOBOL_JOINT_DIMS - SAMPLE_DIM_BOUNCE0) /
+                                                 SAMPLE_DIMS_PER_BOUNCE;
+
+/* The per-pixel seeds: the joint point's index shuffle, one scramble seed per dimension of the
+ * joint lane (those past SAMPLE_SOBOL_JOINT_DIMS are computed for the lanes' sake, never read),
+ * and the padding seeds of the bounce blocks every path reaches first. */
+static void sobol_pixel_seeds(struct sampler *s)
 {
-    if (dim == 0)
-        return reverse_bits32(laine_karras_permutation(index, seed));
-    if (dim == 1)
-        return reverse_bits32(laine_karras_permutation(pascal_digits(index), seed));
-    return nested_uniform_scramble(sample_sobol_u32(index, dim), seed);
+    s->shuffle_seed = dim_seed(s, UINT32_MAX, 0);
+    for (uint32_t d = 0; d < SAMPLE_SOBOL_JOINT_LANES; d++)
+        s->joint_seed[d] = dim_seed(s, d, 1);
+    for (uint32_t k = 0; k < SAMPLE_PAD_KEPT; k++)
+        pad_block_seeds(s, SAMPLE_DIM_BOUNCE0 + (PAD_FIRST_KEPT + k) * SAMPLE_DIMS_PER_BOUNCE,
+                        &s->pad_kept[k]);
 }
 
-/* The per-pixel shuffle of the sample index: Owen-scrambled, so power-of-two prefixes of a
- * pixel's samples map to aligned blocks of the sequence, which are (t, m, s)-nets. */
-static uint32_t sobol_joint_index(const struct sampler *s)
+/* The joint point of the sample, every dimension at once (Burley 2020: shuffled_scrambled_sobol4d
+ * for SAMPLE_SOBOL_JOINT_DIMS dimensions):
+ *   index = nested_uniform_scramble(sample_idx, shuffle_seed)   (the per-pixel shuffle: power-
+ *           of-two prefixes of a pixel's samples map to aligned blocks of the sequence, which
+ *           are (t, m, s)-nets)
+ *   x_d = C_d * bits(index) over GF(2), as the XOR of one table row per 4-bit digit of index
+ *   u_d = nested_uniform_scramble(x_d, joint_seed_d).
+ * The loops over d run a lane per dimension with no branch, so the compiler vectorises them;
+ * u_d is nested_uniform_scramble(sample_sobol_u32(index, d), joint_seed_d) to the bit. */
+static void sobol_joint_point(struct sampler *s)
 {
-    return nested_uniform_scramble(s->sample_idx, dim_seed(s, UINT32_MAX, 0));
-}
-
-/* Dimension dim < SAMPLE_SOBOL_JOINT_DIMS: one shuffled Sobol' point per sample for all the
- * joint dimensions (Burley 2020: shuffled_scrambled_sobol4d, the index Owen-scrambled too);
- * its index, sobol_joint_index, is computed once in sample_start_spp. */
-static float sobol_joint_1d(const struct sampler *s, uint32_t dim)
-{
-    return fraction_to_float(scrambled_sobol(s->sobol_index, dim, dim_seed(s, dim, 1)));
+    s->sample_idx_rev = reverse_bits32(s->sample_idx);
+    uint32_t index = reverse_bits32(laine_karras_permutation(s->sample_idx_rev, s->shuffle_seed));
+    uint32_t x[SAMPLE_SOBOL_JOINT_LANES] = {0};
+    for (int p = 0; p < 8; p++) {
+        const uint32_t *row = SOBOL_NIBBLES[p][index >> 4 * p & 15u];
+        for (int d = 0; d < SAMPLE_SOBOL_JOINT_LANES; d++)
+            x[d] ^= row[d];
+    }
+    for (int d = 0; d < SAMPLE_SOBOL_JOINT_LANES; d++)
+        s->joint_u[d] = fraction_to_float(nested_uniform_scramble(x[d], s->joint_seed[d]));
 }
 
 /* Padding (Burley 2020): a request at dimension dim >= the joint ones reads Sobol' dimensions
  * 0 (and 1), a (0,2)-sequence, with its own index shuffle and its own scrambles, so requests
- * are mutually independent and each is stratified in itself. */
-struct pad_seeds {
-    uint32_t index; /* shuffle of the sample index */
-    uint32_t x;     /* scramble of the first coordinate */
-    uint32_t y;     /* scramble of the second */
-};
-
-/* The three seeds of a padding request from one 64-bit hash: its halves lo and hi, and
- * lo ^ mix(hi); each uniform, and pairwise independent for a uniform hash. */
-static struct pad_seeds pad_seeds(const struct sampler *s, uint32_t dim)
+ * are mutually independent and each is stratified in itself:
+ *   index = nested_uniform_scramble(sample_idx, seed_index)
+ *   x = scrambled_sobol(index, 0, seed_x),  y = scrambled_sobol(index, 1, seed_y)   (2D only)
+ * The three seeds of the request at dim come from one 64-bit hash h of (pixel, dim): its halves
+ * lo and hi, and lo ^ mix(hi); each uniform, and pairwise independent for a uniform hash. */
+static void request_seeds(const struct sampler *s, uint32_t dim, uint32_t *seed_index,
+                          uint32_t *seed_x, uint32_t *seed_y)
 {
     uint64_t h = sample_hash64(s->pixel_hash ^ ((uint64_t)dim << 32 | 2u));
     uint32_t lo = (uint32_t)h, hi = (uint32_t)(h >> 32);
-    return (struct pad_seeds){lo, hi, lo ^ (hi * 0x9e3779b9u + 0x7f4a7c15u)};
+    *seed_index = lo;
+    *seed_x = hi;
+    *seed_y = lo ^ (hi * 0x9e3779b9u + 0x7f4a7c15u);
 }
 
-static float sobol_pad_1d(const struct sampler *s, uint32_t dim)
+/* The request with these seeds, 1D (x) and 2D (x, y) alike: the x of a 2D request is the 1D
+ * request's value.  sample_idx_rev is sample_idx bit-reversed, the first step of the index
+ * shuffle.  x = nested_uniform_scramble(sample_sobol_u32(index, 0), seed_x), in which the
+ * scramble's first reversal undoes the one that puts dimension 0's digits in fraction order, so
+ * both are skipped; y likewise for dimension 1. */
+static inline vec2 pad_request(uint32_t sample_idx_rev, uint32_t seed_index, uint32_t seed_x,
+                               uint32_t seed_y)
 {
-    struct pad_seeds seed = pad_seeds(s, dim);
-    uint32_t index = nested_uniform_scramble(s->sample_idx, seed.index);
-    return fraction_to_float(scrambled_sobol(index, 0, seed.x));
-}
-
-static vec2 sobol_pad_2d(const struct sampler *s, uint32_t dim)
-{
-    struct pad_seeds seed = pad_seeds(s, dim);
-    uint32_t index = nested_uniform_scramble(s->sample_idx, seed.index);
-    uint32_t x = scrambled_sobol(index, 0, seed.x);
-    uint32_t y = scrambled_sobol(index, 1, seed.y);
+    uint32_t index = reverse_bits32(laine_karras_permutation(sample_idx_rev, seed_index));
+    uint32_t x = reverse_bits32(laine_karras_permutation(index, seed_x));
+    uint32_t y = reverse_bits32(laine_karras_permutation(pascal_digits(index), seed_y));
     return (vec2){fraction_to_float(x), fraction_to_float(y)};
 }
 
-float sample_1d(struct sampler *s)
+/* The padded dimensions of the bounce blocks (sample.h: SAMPLE_DIMS_PER_BOUNCE dimensions from
+ * SAMPLE_DIM_BOUNCE0 on) are computed a block at a time, the request at every dimension of the
+ * block at once, a lane each (the compiler vectorises the loop, hashes included), and kept until
+ * the sample leaves the block: lane l holds x and y of a request at dimension pad_dim0 + l.
+ * Other dimensions (the light-sample block, any dimension below the first bounce) are requested
+ * one at a time. */
+static bool pad_in_blocks(uint32_t dim)
 {
-    uint32_t dim = s->dim++;
+    return dim >= SAMPLE_DIM_BOUNCE0 && dim < SAMPLE_DIM_LIGHT_EXTRA;
+}
+
+/* The seeds of the requests at dimensions dim0 + lane. */
+static void pad_block_seeds(const struct sampler *s, uint32_t dim0, struct sample_pad_seeds *seeds)
+{
+    for (int l = 0; l < SAMPLE_PAD_LANES; l++)
+        request_seeds(s, dim0 + (uint32_t)l, &seeds->index[l], &seeds->x[l], &seeds->y[l]);
+}
+
+/* Fills the block cache with the block of dimension dim (pad_in_blocks(dim)). */
+static void pad_block(struct sampler *s, uint32_t dim)
+{
+    uint32_t block = (dim - SAMPLE_DIM_BOUNCE0) / SAMPLE_DIMS_PER_BOUNCE;
+    uint32_t dim0 = SAMPLE_DIM_BOUNCE0 + block * SAMPLE_DIMS_PER_BOUNCE;
+    struct sample_pad_seeds computed;
+    const struct sample_pad_seeds *seeds = &computed;
+    if (block - PAD_FIRST_KEPT < SAMPLE_PAD_KEPT)
+        seeds = &s->pad_kept[block - PAD_FIRST_KEPT];
+    else
+        pad_block_seeds(s, dim0, &computed);
+    for (int l = 0; l < SAMPLE_PAD_LANES; l++) {
+        vec2 u = pad_request(s->sample_idx_rev, seeds->index[l], seeds->x[l], seeds->y[l]);
+        s->pad_x[l] = u.x;
+        s->pad_y[l] = u.y;
+    }
+    s->pad_dim0 = dim0;
+}
+
+/* The Sobol' request at dimension dim >= SAMPLE_SOBOL_JOINT_DIMS: x, and y for a 2D request. */
+static vec2 sobol_pad(struct sampler *s, uint32_t dim)
+{
+    if (pad_in_blocks(dim)) {
+        if (dim - s->pad_dim0 >= SAMPLE_DIMS_PER_BOUNCE)
+            pad_block(s, dim);
+        uint32_t lane = dim - s->pad_dim0;
+        return (vec2){s->pad_x[lane], s->pad_y[lane]};
+    }
+    uint32_t seed_index, seed_x, seed_y;
+    request_seeds(s, dim, &seed_index, &seed_x, &seed_y);
+    return pad_request(s->sample_idx_rev, seed_index, seed_x, seed_y);
+}
+
+float sample_1d_compute(struct sampler *s, uint32_t dim)
+{
     switch (s->kind) {
     case SAMPLER_STRATIFIED:
         return stratified_1d(s, dim);
     case SAMPLER_SOBOL:
-        return dim < SAMPLE_SOBOL_JOINT_DIMS ? sobol_joint_1d(s, dim) : sobol_pad_1d(s, dim);
+        return dim < SAMPLE_SOBOL_JOINT_DIMS ? s->joint_u[dim] : sobol_pad(s, dim).x;
     case SAMPLER_INDEPENDENT:
         break;
     }
     return sample_pcg32_float(&s->rng);
 }
 
-vec2 sample_2d(struct sampler *s)
+vec2 sample_2d_compute(struct sampler *s, uint32_t dim)
 {
-    uint32_t dim = s->dim;
-    if (s->kind == SAMPLER_STRATIFIED) {
-        s->dim += 2;
+    if (s->kind == SAMPLER_STRATIFIED)
         return stratified_2d(s, dim);
-    }
-    if (s->kind == SAMPLER_SOBOL && dim >= SAMPLE_SOBOL_JOINT_DIMS) {
-        s->dim += 2;
-        return sobol_pad_2d(s, dim);
-    }
-    /* independent, and Sobol' inside the joint dimensions: two consecutive dimensions */
-    float x = sample_1d(s);
-    float y = sample_1d(s);
+    if (s->kind == SAMPLER_SOBOL && dim >= SAMPLE_SOBOL_JOINT_DIMS)
+        return sobol_pad(s, dim);
+    /* independent, and Sobol' across the end of the joint dimensions: two consecutive
+     * dimensions */
+    float x = sample_1d_compute(s, dim);
+    float y = sample_1d_compute(s, dim + 1);
     return (vec2){x, y};
 }
 
 /* ---- warps ---- */
 
+/* cos and sin of phi in [-pi/4, pi/4] by the minimax polynomials of the Cephes library's cosf
+ * and sinf on that interval (Moshier 1989, "Methods and Programs for Mathematical Functions";
+ * relative error about 3e-8): the concentric map needs no argument reduction, so it is cheaper
+ * than the library's sincosf. */
+static vec2 cos_sin_quarter(float phi)
+{
+    float z = phi * phi;
+    float c = ((2.443315711809948e-5f * z - 1.388731625493765e-3f) * z + 4.166664568298827e-2f) *
+                  z * z -
+              0.5f * z + 1.0f;
+    float sn = ((-1.9515295891e-4f * z + 8.3321608736e-3f) * z - 1.6666654611e-1f) * z * phi + phi;
+    return (vec2){c, sn};
+}
+
 vec2 sample_concentric_disk(vec2 u)
 {
-    /* map u to [-1,1]^2, then squares to concentric rings (Shirley & Chiu 1997) */
+    /* map u to [-1,1]^2, then squares to concentric rings (Shirley & Chiu 1997):
+     * r = ox, theta = pi/4 oy/ox when |ox| > |oy|, else r = oy, theta = pi/2 - pi/4 ox/oy, whose
+     * cos and sin are the sin and cos of pi/4 ox/oy */
     float ox = 2.0f * u.x - 1.0f, oy = 2.0f * u.y - 1.0f;
     if (ox == 0.0f && oy == 0.0f)
         return (vec2){0.0f, 0.0f};
-    float r, theta;
     if (fabsf(ox) > fabsf(oy)) {
-        r = ox;
-        theta = (MCPT_PI / 4.0f) * (oy / ox);
-    } else {
-        r = oy;
-        theta = (MCPT_PI / 2.0f) - (MCPT_PI / 4.0f) * (ox / oy);
+        vec2 cs = cos_sin_quarter((MCPT_PI / 4.0f) * (oy / ox));
+        return (vec2){ox * cs.x, ox * cs.y};
     }
-    return (vec2){r * cosf(theta), r * sinf(theta)};
+    vec2 cs = cos_sin_quarter((MCPT_PI / 4.0f) * (ox / oy));
+    return (vec2){oy * cs.y, oy * cs.x};
 }
 
 vec2 sample_invert_concentric_disk(vec2 p)
@@ -590,6 +688,238 @@ vec2 sample_invert_uniform_triangle(vec2 b)
     /* sqrt(u0) = 1 - b0, u1 = b1 / sqrt(u0) */
     float su0 = 1.0f - b.x;
     return (vec2){su0 * su0, su0 > 0.0f ? b.y / su0 : 0.0f};
+}
+
+/* ---- bilinear and linear densities on [0, 1] ---- */
+
+static float lerpf(float t, float a, float b) { return (1.0f - t) * a + t * b; }
+
+/* x in [0, 1) with density 2 lerp(x, a, b) / (a + b): the root of the quadratic CDF
+ * (a x + (b - a) x^2 / 2) 2 / (a + b) = u in the form that does not cancel,
+ * x = u (a + b) / (a + sqrt(lerp(u, a^2, b^2))) (PBRT 4e, ch. A.5, SampleLinear). */
+static float sample_linear(float u, float a, float b)
+{
+    if (u == 0.0f && a == 0.0f)
+        return 0.0f;
+    float x = u * (a + b) / (a + sqrtf(lerpf(u, a * a, b * b)));
+    return fminf(x, 0x1.fffffep-1f);
+}
+
+/* The CDF of sample_linear at x: u = x (a (2 - x) + b x) / (a + b). */
+static float invert_linear(float x, float a, float b)
+{
+    return x * (a * (2.0f - x) + b * x) / (a + b);
+}
+
+vec2 sample_bilinear(vec2 u, const float w[4])
+{
+    /* y by its marginal (w0 + w1 at y = 0, w2 + w3 at y = 1), then x given y */
+    float y = sample_linear(u.y, w[0] + w[1], w[2] + w[3]);
+    float x = sample_linear(u.x, lerpf(y, w[0], w[2]), lerpf(y, w[1], w[3]));
+    return (vec2){x, y};
+}
+
+float pdf_bilinear(vec2 p, const float w[4])
+{
+    if (p.x < 0.0f || p.x > 1.0f || p.y < 0.0f || p.y > 1.0f)
+        return 0.0f;
+    float sum = w[0] + w[1] + w[2] + w[3];
+    if (sum == 0.0f)
+        return 1.0f; /* all weights 0: sample_linear is the identity */
+    /* pdf = 4 bilerp(p, w) / sum w: the bilinear function over its integral sum w / 4 */
+    float bilerp = (1.0f - p.x) * (1.0f - p.y) * w[0] + p.x * (1.0f - p.y) * w[1] +
+                   (1.0f - p.x) * p.y * w[2] + p.x * p.y * w[3];
+    return 4.0f * bilerp / sum;
+}
+
+vec2 sample_invert_bilinear(vec2 p, const float w[4])
+{
+    return (vec2){invert_linear(p.x, lerpf(p.y, w[0], w[2]), lerpf(p.y, w[1], w[3])),
+                  invert_linear(p.y, w[0] + w[1], w[2] + w[3])};
+}
+
+/* ---- spherical triangles (Arvo 1995) ---- */
+
+/* The angle between unit vectors a and b, precise near 0 and pi (PBRT 4e, ch. 3, "Vectors",
+ * AngleBetween): 2 asin(|b - a| / 2), or pi - 2 asin(|a + b| / 2) past 90 degrees. */
+static float angle_between(vec3 a, vec3 b)
+{
+    if (v3_dot(a, b) < 0.0f)
+        return MCPT_PI - 2.0f * asinf(fminf(1.0f, 0.5f * v3_length(v3_add(a, b))));
+    return 2.0f * asinf(fminf(1.0f, 0.5f * v3_length(v3_sub(b, a))));
+}
+
+/* normalize(v), or false when v is 0 (or not finite). */
+static bool normalize_to(vec3 v, vec3 *out)
+{
+    float len = v3_length(v);
+    if (!(len > 0.0f) || !isfinite(len))
+        return false;
+    *out = v3_scale(v, 1.0f / len);
+    return true;
+}
+
+float sample_spherical_triangle_area(vec3 a, vec3 b, vec3 c)
+{
+    /* Omega = 2 atan2(|a . (b x c)|, 1 + a.b + b.c + c.a) */
+    float num = fabsf(v3_dot(a, v3_cross(b, c)));
+    float den = 1.0f + v3_dot(a, b) + v3_dot(b, c) + v3_dot(c, a);
+    return 2.0f * atan2f(num, den);
+}
+
+bool sample_sph_triangle_init(vec3 a, vec3 b, vec3 c, struct sample_sph_triangle *st)
+{
+    /* the unit normals of the planes of the edges through a: the angle between them is the
+     * interior angle alpha, so cos alpha = n_ab . n_ac and sin alpha = |n_ab x n_ac|, without
+     * a trigonometric function */
+    vec3 n_ab, n_ac;
+    if (!normalize_to(v3_cross(a, b), &n_ab) || !normalize_to(v3_cross(a, c), &n_ac) ||
+        !normalize_to(v3_sub(c, v3_scale(a, v3_dot(c, a))), &st->c_perp))
+        return false;
+    st->a = a;
+    st->b = b;
+    st->c = c;
+    st->cos_alpha = v3_dot(n_ab, n_ac);
+    st->sin_alpha = v3_length(v3_cross(n_ab, n_ac));
+    st->cos_ab = v3_dot(a, b);
+    st->area = sample_spherical_triangle_area(a, b, c);
+    return st->area > 0.0f && st->sin_alpha > 0.0f;
+}
+
+vec3 sample_spherical_triangle(const struct sample_sph_triangle *st, vec2 u)
+{
+    /* Arvo 1995, sec. 3: the sub-triangle a, b, c' of area A' = u0 Omega has
+     *   cos |a c'| = q = ((v t - w s) cos alpha - v) / ((v s + w t) sin alpha),
+     * s = sin(A' - alpha), t = cos(A' - alpha), w = t - cos alpha, v = s + sin alpha cos |a b|;
+     * s and t by the angle-difference formulas, so only A' needs a sine and a cosine */
+    float a_sub = u.x * st->area;
+    float sin_a = sinf(a_sub), cos_a = cosf(a_sub);
+    float s = sin_a * st->cos_alpha - cos_a * st->sin_alpha;
+    float t = cos_a * st->cos_alpha + sin_a * st->sin_alpha;
+    float w = t - st->cos_alpha;
+    float v = s + st->sin_alpha * st->cos_ab;
+    float q = ((v * t - w * s) * st->cos_alpha - v) / ((v * s + w * t) * st->sin_alpha);
+    q = fminf(1.0f, fmaxf(-1.0f, q));
+    vec3 c_sub = v3_add(v3_scale(st->a, q), v3_scale(st->c_perp, sqrtf(fmaxf(0.0f, 1.0f - q * q))));
+    /* on the arc b -> c', 1 - cos theta uniform in [0, 1 - cos |b c'|]; 1 - cos = |x - b|^2 / 2
+     * keeps its digits for a small arc */
+    vec3 d = v3_sub(c_sub, st->b);
+    float one_minus_z = u.y * 0.5f * v3_dot(d, d);
+    float z = 1.0f - one_minus_z;
+    vec3 perp;
+    if (!normalize_to(v3_sub(c_sub, v3_scale(st->b, v3_dot(c_sub, st->b))), &perp))
+        return st->b; /* c' = b: the arc has no length */
+    float sin_theta = sqrtf(fmaxf(0.0f, one_minus_z * (2.0f - one_minus_z)));
+    return v3_normalize(v3_add(v3_scale(st->b, z), v3_scale(perp, sin_theta)));
+}
+
+float pdf_spherical_triangle(const struct sample_sph_triangle *st) { return 1.0f / st->area; }
+
+vec2 sample_invert_spherical_triangle(const struct sample_sph_triangle *st, vec3 w)
+{
+    /* c' lies on the great circle through b and w and on the arc a -> c: along the line where
+     * their planes meet, (b x w) x (c x a), on the side of a + c */
+    vec3 c_sub;
+    if (!normalize_to(v3_cross(v3_cross(st->b, w), v3_cross(st->c, st->a)), &c_sub))
+        return (vec2){0.0f, 0.0f}; /* w = b: every u0 maps there */
+    if (v3_dot(c_sub, v3_add(st->a, st->c)) < 0.0f)
+        c_sub = v3_neg(c_sub);
+    /* u0 = area(a, b, c') / Omega; u1 = (1 - w.b) / (1 - c'.b) = |w - b|^2 / |c' - b|^2 */
+    float u0 = sample_spherical_triangle_area(st->a, st->b, c_sub) / st->area;
+    vec3 dw = v3_sub(w, st->b), dc = v3_sub(c_sub, st->b);
+    float dc2 = v3_dot(dc, dc);
+    float u1 = dc2 > 0.0f ? v3_dot(dw, dw) / dc2 : 0.0f;
+    return (vec2){fminf(1.0f, fmaxf(0.0f, u0)), fminf(1.0f, fmaxf(0.0f, u1))};
+}
+
+/* ---- spherical rectangles (Urena, Fajardo & King 2013) ---- */
+
+/* Solid angle of the rectangle [x0, xa] x [y0, y1] at z = z0 seen from the origin: two
+ * spherical triangles (Van Oosterom & Strackee 1983). */
+static float rect_solid_angle(float x0, float xa, float y0, float y1, float z0)
+{
+    vec3 v00 = v3_normalize(v3(x0, y0, z0)), v10 = v3_normalize(v3(xa, y0, z0));
+    vec3 v11 = v3_normalize(v3(xa, y1, z0)), v01 = v3_normalize(v3(x0, y1, z0));
+    return sample_spherical_triangle_area(v00, v10, v11) +
+           sample_spherical_triangle_area(v00, v11, v01);
+}
+
+bool sample_sph_rect_init(vec3 o, vec3 corner, vec3 e1, vec3 e2, struct sample_sph_rect *sr)
+{
+    float len1 = v3_length(e1), len2 = v3_length(e2);
+    if (!(len1 > 0.0f && len2 > 0.0f) || fabsf(v3_dot(e1, e2)) > 1e-5f * len1 * len2)
+        return false;
+    /* the frame of the paper, sec. 3: x, y along the edges, the rectangle at z0 < 0 */
+    sr->o = o;
+    sr->x = v3_scale(e1, 1.0f / len1);
+    sr->y = v3_normalize(v3_sub(e2, v3_scale(sr->x, v3_dot(e2, sr->x))));
+    sr->z = v3_cross(sr->x, sr->y);
+    vec3 d = v3_sub(corner, o);
+    sr->z0 = v3_dot(d, sr->z);
+    if (sr->z0 > 0.0f) {
+        sr->z = v3_neg(sr->z);
+        sr->z0 = -sr->z0;
+    }
+    if (!(sr->z0 < 0.0f))
+        return false; /* o lies in the rectangle's plane */
+    sr->x0 = v3_dot(d, sr->x);
+    sr->y0 = v3_dot(d, sr->y);
+    sr->x1 = sr->x0 + len1;
+    sr->y1 = sr->y0 + len2;
+    /* the planes through o and each edge, and the interior angles gamma_i between them */
+    vec3 v00 = v3(sr->x0, sr->y0, sr->z0), v10 = v3(sr->x1, sr->y0, sr->z0);
+    vec3 v11 = v3(sr->x1, sr->y1, sr->z0), v01 = v3(sr->x0, sr->y1, sr->z0);
+    vec3 n0, n1, n2, n3;
+    if (!normalize_to(v3_cross(v00, v10), &n0) || !normalize_to(v3_cross(v10, v11), &n1) ||
+        !normalize_to(v3_cross(v11, v01), &n2) || !normalize_to(v3_cross(v01, v00), &n3))
+        return false;
+    float g2 = angle_between(v3_neg(n2), n3), g3 = angle_between(v3_neg(n3), n0);
+    sr->b0 = n0.z;
+    sr->b1 = n2.z;
+    sr->k = g2 + g3;
+    /* S = g0 + g1 + g2 + g3 - 2 pi cancels for a small rectangle: two triangles instead */
+    sr->area = rect_solid_angle(sr->x0, sr->x1, sr->y0, sr->y1, sr->z0);
+    return sr->area > 0.0f && isfinite(sr->area);
+}
+
+vec3 sample_spherical_rectangle(const struct sample_sph_rect *sr, vec2 u)
+{
+    /* Urena et al. 2013, sec. 4.1: the sub-rectangle angle au = u0 S - gamma2 - gamma3 gives
+     * fu = (cos au b0 - b1) / sin au, cu = sign(fu) / sqrt(fu^2 + b0^2) (the cosine of the
+     * angle of the plane x = xu), xu = -cu z0 / sqrt(1 - cu^2) */
+    float au = u.x * sr->area - sr->k;
+    float fu = (cosf(au) * sr->b0 - sr->b1) / sinf(au);
+    float cu = copysignf(1.0f / sqrtf(fu * fu + sr->b0 * sr->b0), fu);
+    cu = fminf(0x1.fffffep-1f, fmaxf(-0x1.fffffep-1f, cu));
+    float xu = -(cu * sr->z0) / sqrtf(fmaxf(0.0f, 1.0f - cu * cu));
+    xu = fminf(sr->x1, fmaxf(sr->x0, xu));
+    /* sec. 4.2: along x = xu, h = y / sqrt(d^2 + y^2) (the sine of the elevation) is uniform
+     * in solid angle, d = sqrt(xu^2 + z0^2) */
+    float dd = sqrtf(xu * xu + sr->z0 * sr->z0);
+    float h0 = sr->y0 / sqrtf(dd * dd + sr->y0 * sr->y0);
+    float h1 = sr->y1 / sqrtf(dd * dd + sr->y1 * sr->y1);
+    float hv = lerpf(u.y, h0, h1), hv2 = hv * hv;
+    float yv = hv2 < 1.0f - 1e-6f ? hv * dd / sqrtf(1.0f - hv2) : sr->y1;
+    yv = fminf(sr->y1, fmaxf(sr->y0, yv));
+    return v3_add(sr->o, v3_add(v3_add(v3_scale(sr->x, xu), v3_scale(sr->y, yv)),
+                                v3_scale(sr->z, sr->z0)));
+}
+
+float pdf_spherical_rectangle(const struct sample_sph_rect *sr) { return 1.0f / sr->area; }
+
+vec2 sample_invert_spherical_rectangle(const struct sample_sph_rect *sr, vec3 p)
+{
+    /* u0 = S(x0 .. xu) / S, the sub-rectangle's share; u1 = (h - h0) / (h1 - h0) */
+    vec3 d = v3_sub(p, sr->o);
+    float xu = fminf(sr->x1, fmaxf(sr->x0, v3_dot(d, sr->x)));
+    float yv = fminf(sr->y1, fmaxf(sr->y0, v3_dot(d, sr->y)));
+    float u0 = xu > sr->x0 ? rect_solid_angle(sr->x0, xu, sr->y0, sr->y1, sr->z0) / sr->area : 0.0f;
+    float dd2 = xu * xu + sr->z0 * sr->z0;
+    float h0 = sr->y0 / sqrtf(dd2 + sr->y0 * sr->y0);
+    float h1 = sr->y1 / sqrtf(dd2 + sr->y1 * sr->y1);
+    float h = yv / sqrtf(dd2 + yv * yv);
+    float u1 = h1 != h0 ? (h - h0) / (h1 - h0) : 0.0f;
+    return (vec2){fminf(1.0f, fmaxf(0.0f, u0)), fminf(1.0f, fmaxf(0.0f, u1))};
 }
 
 /* ---- discrete distributions: the alias method ---- */

@@ -75,19 +75,49 @@ enum {
 };
 
 /* Dimensions the Sobol' sampler draws from one Sobol' point: pixel, lens and the first
- * bounce (direct light at the first hit), 11 dimensions; every later 1D or 2D request is a
- * separately shuffled and scrambled padding sequence.  docs/sampling.md measures this against
- * a joint pixel and lens only (4, Burley 2020's choice). */
-#define SAMPLE_SOBOL_JOINT_DIMS (SAMPLE_DIM_BOUNCE0 + SAMPLE_DIMS_PER_BOUNCE)
+ * bounce's light sample (choice and position: the direct light at the first hit, whose shadow
+ * edges couple it with the pixel position), 7 dimensions; every later 1D or 2D request (the
+ * first bounce's BSDF sample on) is a separately shuffled and scrambled (0,2)-sequence.
+ * docs/sampling.md measures this against the whole first bounce joint (11) and pixel and lens
+ * only (4, Burley 2020's choice); -DSAMPLE_SOBOL_JOINT_DIMS=N builds the others. */
+#ifndef SAMPLE_SOBOL_JOINT_DIMS
+#define SAMPLE_SOBOL_JOINT_DIMS (SAMPLE_DIM_BOUNCE0 + SAMPLE_BOUNCE_BSDF_LOBE)
+#endif
 #define SAMPLE_SOBOL_MAX_DIMS 16 /* dimensions in the generator-matrix table */
+/* Lanes of the joint point's loops (sample.c): the joint dimensions rounded up to a vector of 8
+ * or 16 (the lanes past the joint dimensions are computed and never read). */
+#define SAMPLE_SOBOL_JOINT_LANES (SAMPLE_SOBOL_JOINT_DIMS <= 8 ? 8 : SAMPLE_SOBOL_MAX_DIMS)
 
 /* The unscrambled Sobol' point of index in dimension dim < SAMPLE_SOBOL_MAX_DIMS, as a 32-bit
  * fraction (value / 2^32); direction numbers of Joe & Kuo 2008 (sobol_matrices.h). */
 uint32_t sample_sobol_u32(uint32_t index, uint32_t dim);
 
+/* Sobol' padding is computed a bounce block at a time (sample.c, pad_block), a lane per
+ * dimension of the block. */
+enum {
+    SAMPLE_PAD_LANES = 8, /* lanes of a block: SAMPLE_DIMS_PER_BOUNCE, and one spare */
+    SAMPLE_PAD_KEPT = 3,  /* the first padded blocks, whose seeds are hashed once per pixel */
+};
+_Static_assert((int)SAMPLE_PAD_LANES >= (int)SAMPLE_DIMS_PER_BOUNCE,
+               "a padded block is one bounce");
+/* pad_dim0 when no block is held: dim - SAMPLE_PAD_NONE is no lane for any dimension in use
+ * (all are below 2^28). */
+#define SAMPLE_PAD_NONE 0xf0000000u
+
+/* The seeds of the padding requests at the dimensions dim0 + lane of one bounce block. */
+struct sample_pad_seeds {
+    uint32_t index[SAMPLE_PAD_LANES]; /* the shuffle of the sample index */
+    uint32_t x[SAMPLE_PAD_LANES];     /* the scramble of the first coordinate */
+    uint32_t y[SAMPLE_PAD_LANES];     /* the scramble of the second */
+};                                    /* 96 bytes */
+
 /* The sample generator for one (pixel, sample index), read dimension by dimension.
  * Independent: a PCG32 stream seeded by hashing (seed, pixel_idx, sample_idx).  Stratified and
- * Sobol': stateless hashes of (seed, pixel_idx, sample_idx, dim, set_spp). */
+ * Sobol': stateless hashes of (seed, pixel_idx, sample_idx, dim, set_spp).  What the samples of
+ * one pixel share (the hashes of the pixel's seeds) is computed once by sample_start_pixel; each
+ * sample then starts with sample_start_index, which for Sobol' also computes the whole joint
+ * point at once (a lane per dimension), so that reading a joint dimension is a load.  A sampler
+ * holds no pointer: copying one copies the sample. */
 struct sampler {
     enum sampler_kind kind;
     uint64_t seed;
@@ -95,11 +125,21 @@ struct sampler {
     uint32_t sample_idx;
     uint32_t dim; /* next dimension to be returned */
     struct pcg32 rng;
-    uint32_t set_spp;     /* stratified: samples per stratified set (0 or 1: none) */
-    uint32_t cmj_cols;    /* stratified: columns m of the m x n multi-jittered grid */
-    uint64_t pixel_hash;  /* hash of (seed, pixel_idx): root of every scrambling seed */
-    uint32_t sobol_index; /* Sobol': the shuffled index of the joint dimensions */
-};
+    uint32_t set_spp;    /* stratified: samples per stratified set (0 or 1: none) */
+    uint32_t cmj_cols;   /* stratified: columns m of the m x n multi-jittered grid */
+    uint64_t pixel_hash; /* hash of (seed, pixel_idx): root of every scrambling seed */
+    /* Sobol', per pixel */
+    uint32_t shuffle_seed;                             /* seed of the joint point's index shuffle */
+    uint32_t joint_seed[SAMPLE_SOBOL_JOINT_LANES];     /* scramble seed of each joint dimension */
+    struct sample_pad_seeds pad_kept[SAMPLE_PAD_KEPT]; /* of the first padded blocks */
+    /* Sobol', per sample */
+    uint32_t sample_idx_rev;                 /* sample_idx bit-reversed: the padding's input */
+    float joint_u[SAMPLE_SOBOL_JOINT_LANES]; /* the joint point, a value per dimension */
+    uint32_t pad_dim0;                       /* first dimension of the block held, or
+                                             SAMPLE_PAD_NONE */
+    float pad_x[SAMPLE_PAD_LANES];           /* the padding requests at pad_dim0 + lane: x, */
+    float pad_y[SAMPLE_PAD_LANES];           /* and y of a 2D request */
+};                                           /* 464 bytes */
 
 /* Starts the sample sample_idx of pixel pixel_idx at dimension 0, with set_spp = 0: the
  * stratified sampler then has no strata to fill and gives independent hashed uniforms. */
@@ -108,16 +148,53 @@ void sample_start(struct sampler *s, enum sampler_kind kind, uint64_t seed, uint
 /* As sample_start, for a pixel whose samples come in stratified sets of set_spp (normally its
  * spp): sample indices k set_spp .. (k+1) set_spp - 1 form set k, whose points fill every
  * stratum once.  Only SAMPLER_STRATIFIED uses set_spp; Sobol' is stratified at every
- * power-of-two prefix without it. */
+ * power-of-two prefix without it.  The same as sample_start_pixel then sample_start_index. */
 void sample_start_spp(struct sampler *s, enum sampler_kind kind, uint64_t seed, uint32_t pixel_idx,
                       uint32_t sample_idx, uint32_t set_spp);
+/* The two halves of sample_start_spp, for a caller that takes many samples of one pixel:
+ * sample_start_pixel computes what they share, then each sample_start_index(s, sample_idx)
+ * starts one of them at dimension 0 (any order of indices; the values are those of
+ * sample_start_spp with the same arguments). */
+void sample_start_pixel(struct sampler *s, enum sampler_kind kind, uint64_t seed,
+                        uint32_t pixel_idx, uint32_t set_spp);
+void sample_start_index(struct sampler *s, uint32_t sample_idx);
 /* Moves to dimension dim (>= the current one), skipping the values in between. */
 void sample_set_dim(struct sampler *s, uint32_t dim);
-/* The value of the next dimension, in [0, 1). */
-float sample_1d(struct sampler *s);
+/* The out-of-line parts of sample_1d and sample_2d: the value(s) at dimension dim, which the
+ * caller has just passed (s->dim is already past them), for everything but the Sobol' values
+ * the sampler holds. */
+float sample_1d_compute(struct sampler *s, uint32_t dim);
+vec2 sample_2d_compute(struct sampler *s, uint32_t dim);
+
+/* The value of the next dimension, in [0, 1).  Inline because a path reads a dozen or more per
+ * sample: Sobol' values the sampler holds (the joint point, the current padded block) are one
+ * load. */
+static inline float sample_1d(struct sampler *s)
+{
+    uint32_t dim = s->dim++;
+    if (s->kind == SAMPLER_SOBOL) {
+        if (dim < SAMPLE_SOBOL_JOINT_DIMS)
+            return s->joint_u[dim];
+        if (dim - s->pad_dim0 < SAMPLE_DIMS_PER_BOUNCE)
+            return s->pad_x[dim - s->pad_dim0];
+    }
+    return sample_1d_compute(s, dim);
+}
+
 /* The next two dimensions as one 2D point in [0, 1)^2: stratified and Sobol' stratify the pair
  * jointly (in 2D), which two sample_1d calls would not. */
-vec2 sample_2d(struct sampler *s);
+static inline vec2 sample_2d(struct sampler *s)
+{
+    uint32_t dim = s->dim;
+    s->dim += 2;
+    if (s->kind == SAMPLER_SOBOL) {
+        if (dim + 1 < SAMPLE_SOBOL_JOINT_DIMS)
+            return (vec2){s->joint_u[dim], s->joint_u[dim + 1]};
+        if (dim >= SAMPLE_SOBOL_JOINT_DIMS && dim - s->pad_dim0 < SAMPLE_DIMS_PER_BOUNCE)
+            return (vec2){s->pad_x[dim - s->pad_dim0], s->pad_y[dim - s->pad_dim0]};
+    }
+    return sample_2d_compute(s, dim);
+}
 
 /* 64-bit mixing hash (SplitMix64 finaliser, Steele et al. 2014). */
 uint64_t sample_hash64(uint64_t x);
@@ -171,6 +248,76 @@ vec2 sample_invert_uniform_cone(vec3 w, const struct sample_cone *cone);
  * diagonal); pdf = 1 / area per unit area. */
 vec2 sample_uniform_triangle(vec2 u);
 vec2 sample_invert_uniform_triangle(vec2 b);
+
+/* A bilinear density on [0, 1]^2 with the weights w[0..3] >= 0 at its corners (0,0), (1,0),
+ * (0,1), (1,1): pdf(p) = 4 bilerp(p, w) / sum w, per unit area; y from its marginal, then x
+ * from its conditional, each a linear density (PBRT 4e, ch. A.5, "Sampling Multidimensional
+ * Functions", SampleBilinear).  The light samplers warp their uniforms by it so that the
+ * directions follow the cosine at the receiver (shape.c). */
+vec2 sample_bilinear(vec2 u, const float w[4]);
+float pdf_bilinear(vec2 p, const float w[4]);
+vec2 sample_invert_bilinear(vec2 p, const float w[4]);
+
+/* ---- spherical polygons: directions uniform in the solid angle that a triangle or a rectangle
+ * subtends from a point (light sampling, shape.c) ---- */
+
+/* Solid angle (sr) of the spherical triangle with unit vertices a, b, c: Van Oosterom & Strackee
+ * 1983, "The Solid Angle of a Plane Triangle", tan(Omega / 2) = |a . (b x c)| /
+ * (1 + a.b + b.c + c.a), which keeps its precision for small triangles where the angle excess
+ * alpha + beta + gamma - pi cancels. */
+float sample_spherical_triangle_area(vec3 a, vec3 b, vec3 c);
+
+/* A spherical triangle prepared for Arvo's map (Arvo 1995, "Stratified Sampling of Spherical
+ * Triangles", SIGGRAPH 95; PBRT 4e, ch. 6, "Triangles"): u0 picks the sub-triangle a, b, c' of
+ * area u0 Omega (c' on the arc a -> c), u1 a point on the arc b -> c' with 1 - cos uniform. */
+struct sample_sph_triangle {
+    vec3 a; /* unit vertices */
+    vec3 b;
+    vec3 c;
+    vec3 c_perp;     /* unit: c's part orthogonal to a, so the arc a -> c is a cos + c_perp sin */
+    float area;      /* Omega, sr */
+    float cos_alpha; /* cos and sin of the interior angle alpha at a */
+    float sin_alpha;
+    float cos_ab; /* a . b: cos of the arc a -> b */
+};                /* 64 bytes */
+/* Prepares the triangle of unit vertices a, b, c; false when it is degenerate (two vertices
+ * equal or opposite, or a zero area). */
+bool sample_sph_triangle_init(vec3 a, vec3 b, vec3 c, struct sample_sph_triangle *st);
+/* A unit direction uniform in the spherical triangle, pdf 1 / Omega per steradian. */
+vec3 sample_spherical_triangle(const struct sample_sph_triangle *st, vec2 u);
+float pdf_spherical_triangle(const struct sample_sph_triangle *st);
+/* The u that maps to the unit direction w inside the triangle (Arvo's inverse: c' where the
+ * great circle through b and w meets the arc a -> c). */
+vec2 sample_invert_spherical_triangle(const struct sample_sph_triangle *st, vec3 w);
+
+/* A rectangle corner + s e1 + t e2 (s, t in [0, 1], e1 orthogonal to e2) seen from the point o,
+ * prepared for the map of Urena, Fajardo & King 2013, "An Area-Preserving Parametrization for
+ * Spherical Rectangles" (EGSR): u0 picks the sub-rectangle [x0, xu] x [y0, y1] of solid angle
+ * u0 S, u1 the height along the line x = xu, uniform in solid angle. */
+struct sample_sph_rect {
+    vec3 o; /* the reference point */
+    vec3 x; /* unit frame: x along e1, y along e2, z away from the rectangle's side */
+    vec3 y;
+    vec3 z;
+    float x0; /* the rectangle in that frame: [x0, x1] x [y0, y1] at z = z0 < 0 */
+    float x1;
+    float y0;
+    float y1;
+    float z0;
+    float b0; /* z components of the unit normals of the planes (o, v00, v10), (o, v11, v01) */
+    float b1;
+    float k;    /* gamma2 + gamma3: the sub-rectangle's angle is au = u0 S - k (mod 2 pi) */
+    float area; /* S, sr */
+};              /* 88 bytes */
+/* Prepares the rectangle; false when o lies in its plane, the edges are not orthogonal (to
+ * 1e-4 of their lengths' product) or the solid angle is 0. */
+bool sample_sph_rect_init(vec3 o, vec3 corner, vec3 e1, vec3 e2, struct sample_sph_rect *sr);
+/* The POINT on the rectangle whose direction from o is uniform in solid angle, pdf 1 / S per
+ * steradian. */
+vec3 sample_spherical_rectangle(const struct sample_sph_rect *sr, vec2 u);
+float pdf_spherical_rectangle(const struct sample_sph_rect *sr);
+/* The u that maps to the point p of the rectangle. */
+vec2 sample_invert_spherical_rectangle(const struct sample_sph_rect *sr, vec3 p);
 
 /* ---- discrete distributions ---- */
 

@@ -15,6 +15,8 @@
 #include <stdlib.h>
 #include <unistd.h>
 
+#include "file.h"
+
 /* A small scene in the grammar this file reads:
  *
  *   # Cornell box lit by its ceiling quad
@@ -51,22 +53,24 @@
 /* ---- the statement table ---------------------------------------------------------------- */
 
 enum value_kind {
-    VAL_NUMBER,   /* one number */
-    VAL_VEC3,     /* x,y,z */
-    VAL_ROTATION, /* ax,ay,az,deg: axis and angle in degrees */
-    VAL_SCALE,    /* s (uniform) or sx,sy,sz */
-    VAL_INT,      /* unsigned integer, bounds from the range */
-    VAL_DEPTH,    /* unsigned integer or "inf" */
-    VAL_BOOL,     /* true or false */
-    VAL_NAME,     /* a new material name */
-    VAL_MATERIAL, /* the name of a material defined on an earlier line */
-    VAL_PATH,     /* a file path, relative to the scene file's folder */
-    VAL_TYPE,     /* one of the statement's type words */
-    VAL_SAMPLER,  /* a sampler name: independent, stratified, sobol */
-    VAL_DIRECT,   /* a direct-lighting estimator: mis, light, bsdf, cosine, hemisphere */
-    VAL_SPLIT,    /* full, direct or indirect */
-    VAL_RR,       /* 'throughput' (stored as 0) or a probability in (0, 1] */
-    VAL_CHECKER,  /* true, false, or a colour (the checker's second albedo) */
+    VAL_NUMBER,         /* one number */
+    VAL_VEC3,           /* x,y,z */
+    VAL_ROTATION,       /* ax,ay,az,deg: axis and angle in degrees */
+    VAL_SCALE,          /* s (uniform) or sx,sy,sz */
+    VAL_INT,            /* unsigned integer, bounds from the range */
+    VAL_DEPTH,          /* unsigned integer or "inf" */
+    VAL_BOOL,           /* true or false */
+    VAL_NAME,           /* a new material name */
+    VAL_MATERIAL,       /* the name of a material defined on an earlier line */
+    VAL_PATH,           /* a file path, relative to the scene file's folder */
+    VAL_TYPE,           /* one of the statement's type words */
+    VAL_SAMPLER,        /* a sampler name: independent, stratified, sobol */
+    VAL_DIRECT,         /* a direct-lighting estimator: mis, light, bsdf, cosine, hemisphere */
+    VAL_SPLIT,          /* full, direct or indirect */
+    VAL_ADAPTIVE_RULE,  /* pilot or stop */
+    VAL_LIGHT_SAMPLING, /* area or solid-angle */
+    VAL_RR,             /* 'throughput' (stored as 0) or a probability in (0, 1] */
+    VAL_CHECKER,        /* true, false, or a colour (the checker's second albedo) */
 };
 
 enum value_range {
@@ -155,6 +159,8 @@ static const struct stmt_spec stmt_specs[STMT_COUNT] = {
                          {"max-depth", VAL_DEPTH, RANGE_ANY, ALL_TYPES, 0},
                          {"sampler", VAL_SAMPLER, RANGE_ANY, ALL_TYPES, 0},
                          {"adaptive", VAL_BOOL, RANGE_ANY, ALL_TYPES, 0},
+                         {"adaptive-rule", VAL_ADAPTIVE_RULE, RANGE_ANY, ALL_TYPES, 0},
+                         {"pilot-spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
                          {"tolerance", VAL_NUMBER, RANGE_POSITIVE, ALL_TYPES, 0},
                          {"adaptive-floor", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
                          {"batch", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
@@ -163,8 +169,10 @@ static const struct stmt_spec stmt_specs[STMT_COUNT] = {
                          {"direct", VAL_DIRECT, RANGE_ANY, ALL_TYPES, 0},
                          {"light-samples", VAL_INT, RANGE_1K, ALL_TYPES, 0},
                          {"split", VAL_SPLIT, RANGE_ANY, ALL_TYPES, 0},
+                         {"light-sampling", VAL_LIGHT_SAMPLING, RANGE_ANY, ALL_TYPES, 0},
                          {"rr", VAL_RR, RANGE_ANY, ALL_TYPES, 0},
                          {"rr-depth", VAL_INT, RANGE_1K, ALL_TYPES, 0},
+                         {"rr-threshold", VAL_NUMBER, RANGE_POSITIVE, ALL_TYPES, 0},
                      }},
     [STMT_MATERIAL] = {"material",
                        false,
@@ -735,6 +743,21 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
         p->u = (uint32_t)direct;
         return true;
     }
+    case VAL_ADAPTIVE_RULE: {
+        enum render_adaptive_rule rule;
+        if (!scene_adaptive_rule_parse(p->text, &rule))
+            return fail(ps, p->val_col, "expected pilot or stop for '%s', got '%s'", sp->key, v);
+        p->u = (uint32_t)rule;
+        return true;
+    }
+    case VAL_LIGHT_SAMPLING: {
+        enum render_light_sampling mode;
+        if (!scene_light_sampling_parse(p->text, &mode))
+            return fail(ps, p->val_col, "expected area or solid-angle for '%s', got '%s'", sp->key,
+                        v);
+        p->u = (uint32_t)mode;
+        return true;
+    }
     case VAL_SPLIT: {
         enum render_split split;
         if (!scene_split_parse(p->text, &split))
@@ -804,6 +827,7 @@ static int next_byte(struct parser *ps)
             ps->at_eof = true;
             return -1;
         }
+        ps->scene->file_hash = file_fnv1a64(ps->scene->file_hash, ps->in, (size_t)got);
         ps->in_pos = 0;
         ps->in_len = (size_t)got;
     }
@@ -1169,6 +1193,22 @@ static char *resolve_path(const char *dir, const char *file)
     return p;
 }
 
+/* Adds *path (malloc'ed; the scene takes it, *path becomes NULL) to the files the scene
+ * loaded, which no output of a render may overwrite (main.c). */
+static bool add_loaded(struct parser *ps, char **path)
+{
+    struct scene *sc = ps->scene;
+    char **grown = realloc(sc->loaded_paths, sizeof *grown * ((size_t)sc->n_loaded + 1));
+    if (!grown) {
+        mcpt_error_runtime(ps->err, ps->path, "out of memory");
+        return false;
+    }
+    sc->loaded_paths = grown;
+    sc->loaded_paths[sc->n_loaded++] = *path;
+    *path = NULL;
+    return true;
+}
+
 static bool do_mesh(struct parser *ps, const struct stmt *st)
 {
     struct scene *sc = ps->scene;
@@ -1185,7 +1225,7 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
     }
     /* a mesh that cannot be opened is an error of this line; what is inside is the OBJ's */
     const char *not_regular = NULL;
-    int fd = obj_open_input(full, false, &not_regular);
+    int fd = file_open_input(full, false, &not_regular);
     if (fd < 0) {
         char where[SHOW_OUT_BYTES + 8] = "";
         if (strcmp(full, file->text) != 0)
@@ -1297,7 +1337,9 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
     sc->n_normals += mesh.n_normals;
     sc->n_uvs += mesh.n_uvs;
     sc->n_tris += mesh.n_tris;
-    ok = true;
+    ok = add_loaded(ps, &full);
+    for (uint32_t i = 0; ok && i < mesh.n_mtl_paths; i++)
+        ok = add_loaded(ps, &mesh.mtl_paths[i]);
 done:
     obj_free(&mesh);
     free(full);
@@ -1508,35 +1550,75 @@ static bool do_material(struct parser *ps, const struct stmt *st)
 static const char *const DIRECT_NAMES[RENDER_DIRECT_COUNT] = {"mis", "light", "bsdf", "cosine",
                                                               "hemisphere"};
 static const char *const SPLIT_NAMES[RENDER_SPLIT_COUNT] = {"full", "direct", "indirect"};
+static const char *const ADAPTIVE_RULE_NAMES[RENDER_ADAPTIVE_RULE_COUNT] = {"pilot", "stop"};
+static const char *const LIGHT_SAMPLING_NAMES[RENDER_LIGHT_SAMPLING_COUNT] = {"area",
+                                                                              "solid-angle"};
+
+/* names[k] of an enum of n values, or "?" outside it. */
+static const char *enum_name(const char *const *names, int n, int k)
+{
+    return k >= 0 && k < n ? names[k] : "?";
+}
+
+/* The k with names[k] equal to name, or -1. */
+static int enum_parse(const char *const *names, int n, const char *name)
+{
+    for (int k = 0; k < n; k++)
+        if (strcmp(name, names[k]) == 0)
+            return k;
+    return -1;
+}
 
 const char *scene_direct_name(enum render_direct direct)
 {
-    return (unsigned)direct < RENDER_DIRECT_COUNT ? DIRECT_NAMES[direct] : "?";
+    return enum_name(DIRECT_NAMES, RENDER_DIRECT_COUNT, (int)direct);
 }
 
 bool scene_direct_parse(const char *name, enum render_direct *direct)
 {
-    for (int k = 0; k < RENDER_DIRECT_COUNT; k++)
-        if (strcmp(name, DIRECT_NAMES[k]) == 0) {
-            *direct = (enum render_direct)k;
-            return true;
-        }
-    return false;
+    int k = enum_parse(DIRECT_NAMES, RENDER_DIRECT_COUNT, name);
+    if (k >= 0)
+        *direct = (enum render_direct)k;
+    return k >= 0;
 }
 
 const char *scene_split_name(enum render_split split)
 {
-    return (unsigned)split < RENDER_SPLIT_COUNT ? SPLIT_NAMES[split] : "?";
+    return enum_name(SPLIT_NAMES, RENDER_SPLIT_COUNT, (int)split);
 }
 
 bool scene_split_parse(const char *name, enum render_split *split)
 {
-    for (int k = 0; k < RENDER_SPLIT_COUNT; k++)
-        if (strcmp(name, SPLIT_NAMES[k]) == 0) {
-            *split = (enum render_split)k;
-            return true;
-        }
-    return false;
+    int k = enum_parse(SPLIT_NAMES, RENDER_SPLIT_COUNT, name);
+    if (k >= 0)
+        *split = (enum render_split)k;
+    return k >= 0;
+}
+
+const char *scene_adaptive_rule_name(enum render_adaptive_rule rule)
+{
+    return enum_name(ADAPTIVE_RULE_NAMES, RENDER_ADAPTIVE_RULE_COUNT, (int)rule);
+}
+
+bool scene_adaptive_rule_parse(const char *name, enum render_adaptive_rule *rule)
+{
+    int k = enum_parse(ADAPTIVE_RULE_NAMES, RENDER_ADAPTIVE_RULE_COUNT, name);
+    if (k >= 0)
+        *rule = (enum render_adaptive_rule)k;
+    return k >= 0;
+}
+
+const char *scene_light_sampling_name(enum render_light_sampling mode)
+{
+    return enum_name(LIGHT_SAMPLING_NAMES, RENDER_LIGHT_SAMPLING_COUNT, (int)mode);
+}
+
+bool scene_light_sampling_parse(const char *name, enum render_light_sampling *mode)
+{
+    int k = enum_parse(LIGHT_SAMPLING_NAMES, RENDER_LIGHT_SAMPLING_COUNT, name);
+    if (k >= 0)
+        *mode = (enum render_light_sampling)k;
+    return k >= 0;
 }
 
 /* render: spp, depth, sampler, the adaptive-sampling settings (docs/sampling.md) and the light
@@ -1553,6 +1635,16 @@ static bool do_render(struct parser *ps, const struct stmt *st)
         r->sampler = (enum sampler_kind)p->u;
     if ((p = get(st, "adaptive"))->key)
         r->adaptive = p->b;
+    if ((p = get(st, "adaptive-rule"))->key) {
+        r->has_adaptive_rule = true;
+        r->adaptive_rule = (enum render_adaptive_rule)p->u;
+    }
+    if ((p = get(st, "pilot-spp"))->key) {
+        /* one sample has no spread, as for min-spp */
+        if (p->u < 2)
+            return fail(ps, p->val_col, "expected 'pilot-spp' >= 2, got %s", p->text);
+        r->pilot_spp = p->u;
+    }
     if ((p = get(st, "tolerance"))->key)
         r->tolerance = p->f[0];
     if ((p = get(st, "adaptive-floor"))->key)
@@ -1567,10 +1659,14 @@ static bool do_render(struct parser *ps, const struct stmt *st)
         r->light_samples = p->u;
     if ((p = get(st, "split"))->key)
         r->split = (enum render_split)p->u;
+    if ((p = get(st, "light-sampling"))->key)
+        r->light_sampling = (enum render_light_sampling)p->u;
     if ((p = get(st, "rr"))->key)
         r->rr_prob = p->f[0];
     if ((p = get(st, "rr-depth"))->key)
         r->rr_depth = p->u;
+    if ((p = get(st, "rr-threshold"))->key)
+        r->rr_threshold = p->f[0];
     if ((p = get(st, "min-spp"))->key) {
         /* one sample has no spread: sigma = 0 would stop every lit pixel at once */
         if (p->u < 2)
@@ -1782,6 +1878,7 @@ static bool load(int fd, const char *path, size_t n_dir, struct scene *scene,
     bool ok = false;
     bool is_opened = fd < 0;
     memset(scene, 0, sizeof *scene);
+    scene->file_hash = FILE_FNV_OFFSET;
     scene->width = 512;
     scene->height = 512;
     scene->render = (struct render_settings){.spp = 64,
@@ -1793,7 +1890,7 @@ static bool load(int fd, const char *path, size_t n_dir, struct scene *scene,
      * never waits for a FIFO's writer */
     const char *not_regular = NULL;
     if (is_opened)
-        ps.fd = obj_open_input(path, true, &not_regular);
+        ps.fd = file_open_input(path, true, &not_regular);
     if (ps.fd < 0) {
         if (not_regular)
             mcpt_error_set(ps.err, path, 0, 0, "expected a regular file, got %s", not_regular);
@@ -1872,5 +1969,8 @@ void scene_free(struct scene *scene)
     free(scene->quads);
     free(scene->planes);
     free(scene->lights);
+    for (uint32_t i = 0; i < scene->n_loaded; i++)
+        free(scene->loaded_paths[i]);
+    free(scene->loaded_paths);
     memset(scene, 0, sizeof *scene);
 }

@@ -65,6 +65,31 @@ enum render_split {
 };
 #define RENDER_SPLIT_COUNT 3
 
+/* How an area light (triangle, quad) is sampled from a point: uniformly by area (the default:
+ * cheaper, and as good where visibility dominates the error) or by solid angle (light.c,
+ * shape.h; docs/performance.md, "Per-sample error"). */
+enum render_light_sampling {
+    RENDER_LIGHT_AREA,
+    RENDER_LIGHT_SOLID_ANGLE,
+};
+#define RENDER_LIGHT_SAMPLING_COUNT 2
+
+/* "area", "solid-angle"; "?" outside the enum. */
+const char *scene_light_sampling_name(enum render_light_sampling mode);
+bool scene_light_sampling_parse(const char *name, enum render_light_sampling *mode);
+
+/* Adaptive sampling's rule (trace.c; docs/sampling.md, "Adaptive sampling"). */
+enum render_adaptive_rule {
+    RENDER_ADAPTIVE_PILOT, /* a pilot of independent samples, discarded, sets each pixel's
+                              count: unbiased (Kirk & Arvo 1991) */
+    RENDER_ADAPTIVE_STOP,  /* stop when the pixel's own 95% interval is narrow: biased low */
+};
+#define RENDER_ADAPTIVE_RULE_COUNT 2
+
+/* "pilot", "stop"; "?" outside the enum. */
+const char *scene_adaptive_rule_name(enum render_adaptive_rule rule);
+bool scene_adaptive_rule_parse(const char *name, enum render_adaptive_rule *rule);
+
 /* "mis", "light", "bsdf", "cosine", "hemisphere"; "?" outside the enum. */
 const char *scene_direct_name(enum render_direct direct);
 /* Sets *direct to the estimator called name; false (untouched) when there is none. */
@@ -78,19 +103,24 @@ struct render_settings {
     uint32_t spp;       /* samples per pixel */
     uint32_t max_depth; /* longest path in segments from the camera; 0 = emission only */
     /* sampling (docs/sampling.md); 0 in a count or tolerance: not given, the CLI's default */
-    enum sampler_kind sampler; /* SAMPLER_* */
-    bool adaptive;             /* adaptive sampling on */
-    float tolerance;           /* adaptive: relative 95% half-width T */
-    float adaptive_floor;      /* adaptive: absolute luminance floor; < 0: not given */
-    uint32_t batch;            /* adaptive: samples between tests */
-    uint32_t min_spp;          /* adaptive: samples before the first test */
-    uint32_t max_spp;          /* adaptive: most samples per pixel */
+    enum sampler_kind sampler;               /* SAMPLER_* */
+    bool adaptive;                           /* adaptive sampling on */
+    bool has_adaptive_rule;                  /* adaptive-rule given */
+    enum render_adaptive_rule adaptive_rule; /* adaptive: pilot (default) or stop */
+    float tolerance;                         /* adaptive: relative 95% half-width T */
+    float adaptive_floor; /* adaptive: absolute luminance floor; < 0: not given */
+    uint32_t batch;       /* adaptive: samples between tests, or the pilot's unit */
+    uint32_t min_spp;     /* adaptive: samples before the first test, or the least */
+    uint32_t max_spp;     /* adaptive: most samples per pixel */
+    uint32_t pilot_spp;   /* adaptive pilot: the pilot's samples */
     /* light transport (trace.c); 0 in a count or probability: not given, the CLI's default */
-    enum render_direct direct; /* direct-lighting estimator (default MIS) */
-    uint32_t light_samples;    /* light samples per path vertex */
-    enum render_split split;   /* bounces kept (default all) */
-    float rr_prob;             /* fixed Russian-roulette continuation probability; 0: by beta */
-    uint32_t rr_depth;         /* bounces before Russian roulette starts */
+    enum render_direct direct;                 /* direct-lighting estimator (default MIS) */
+    uint32_t light_samples;                    /* light samples per path vertex */
+    enum render_split split;                   /* bounces kept (default all) */
+    enum render_light_sampling light_sampling; /* area lights: by area (default) or solid angle */
+    float rr_prob;      /* fixed Russian-roulette continuation probability; 0: by beta */
+    float rr_threshold; /* roulette by beta below this throughput; 0: not given */
+    uint32_t rr_depth;  /* bounces before Russian roulette starts */
 };
 
 #define SCENE_MAX_WARNINGS 8    /* warning lines a scene keeps */
@@ -130,6 +160,12 @@ struct scene {
      * first SCENE_MAX_WARNINGS of n_warnings */
     char warnings[SCENE_MAX_WARNINGS][SCENE_WARNING_BYTES];
     uint32_t n_warnings;
+
+    uint64_t file_hash;  /* FNV-1a 64 of the scene file's bytes as read (file.h): a checkpoint
+                             names its scene by it, and a pipe cannot be read twice */
+    char **loaded_paths; /* every mesh and MTL file loaded, as opened (paths from the scene's
+                             folder): inputs no output may overwrite */
+    uint32_t n_loaded;
 };
 
 /* Parses the scene file at path (and the OBJ/MTL files it names, relative to its folder).

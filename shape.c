@@ -51,6 +51,49 @@ static float pdf_by_area(float pdf_area, const struct surface *ref, const struct
                                                                                      : 0.0f;
 }
 
+/* ---- by solid angle: spherical triangles and rectangles ---- */
+
+/* PBRT 4e's Triangle::Sample samples by solid angle only between these solid angles (sr):
+ * below, float loses the spherical map's precision (and the light is small: little to gain);
+ * above, the light fills most of the hemisphere, where BSDF sampling does better anyway. */
+static const float SPHERICAL_MIN_SR = 3e-4f;
+static const float SPHERICAL_MAX_SR = 6.22f;
+
+/* The weights of the bilinear warp that makes light samples follow |cos theta| at the receiver
+ * (PBRT 4e, ch. 6, "Triangles" and "Bilinear Patches"): |ns . d| at the directions d of the
+ * corners of the u square, at least 0.01 so that no direction gets density 0 (the BSDF may
+ * still reflect there: shading normals, transmission). */
+static void receiver_weights(const struct surface *ref, vec3 d00, vec3 d10, vec3 d01, vec3 d11,
+                             float w[4])
+{
+    const vec3 d[4] = {d00, d10, d01, d11};
+    for (int k = 0; k < 4; k++)
+        w[k] = fmaxf(0.01f, fabsf(v3_dot(ref->ns, d[k])));
+}
+
+/* Warps *u by the bilinear density of the receiver weights w (receiver_weights) and returns
+ * its density at the warped point, pdf_bilinear(u, w): the factor of pdf_sa before the
+ * spherical map's 1 / solid angle. */
+static float warp_by_cosine(vec2 *u, const float w[4])
+{
+    *u = sample_bilinear(*u, w);
+    return pdf_bilinear(*u, w);
+}
+
+/* Completes *ss, whose point p is set, with the unit direction wi from ref->p and the density
+ * pdf_sa; false when p coincides with ref->p or is seen edge-on (n, any length, is the
+ * shape's normal) or the density is not finite. */
+static bool direction_to(struct shape_sample *ss, vec3 n, const struct surface *ref, float pdf_sa)
+{
+    vec3 d = v3_sub(ss->p, ref->p);
+    float dist = v3_length(d);
+    if (!(dist > 0.0f) || v3_dot(n, d) == 0.0f)
+        return false;
+    ss->wi = v3_scale(d, 1.0f / dist);
+    ss->pdf_sa = pdf_sa;
+    return pdf_sa > 0.0f && isfinite(pdf_sa);
+}
+
 /* ---- sphere ---- */
 
 bool shape_sphere_intersect(const struct sphere *s, const struct ray *ray, float *t_hit)
@@ -249,6 +292,55 @@ float shape_quad_pdf(const struct quad *q, const struct surface *ref, const stru
     return pdf_by_area(1.0f / v3_length(v3_cross(q->e1, q->e2)), ref, on, wi);
 }
 
+/* Whether the quad q is sampled by solid angle from ref: a rectangle whose solid angle is at
+ * least SPHERICAL_MIN_SR (PBRT 4e's BilinearPatch::Sample has no upper bound).  Fills *sr, and
+ * w[4] with the cosine weights at ref's shading normal of the corners corner, + e1, + e2,
+ * + e1 + e2, where u = (0,0), (1,0), (0,1), (1,1) map. */
+static bool quad_by_solid_angle(const struct quad *q, const struct surface *ref,
+                                struct sample_sph_rect *sr, float w[4])
+{
+    if (!sample_sph_rect_init(ref->p, q->corner, q->e1, q->e2, sr) ||
+        !(sr->area >= SPHERICAL_MIN_SR))
+        return false;
+    vec3 c[4] = {q->corner, v3_add(q->corner, q->e1), v3_add(q->corner, q->e2),
+                 v3_add(v3_add(q->corner, q->e1), q->e2)};
+    for (int k = 0; k < 4; k++)
+        c[k] = v3_normalize(v3_sub(c[k], ref->p));
+    receiver_weights(ref, c[0], c[1], c[2], c[3], w);
+    return true;
+}
+
+bool shape_quad_sample_solid_angle(const struct quad *q, const struct surface *ref, vec2 u,
+                                   struct shape_sample *ss)
+{
+    struct sample_sph_rect sr;
+    float w[4];
+    if (!quad_by_solid_angle(q, ref, &sr, w))
+        return shape_quad_sample(q, ref, u, ss);
+    /* Urena et al. 2013, u first warped by the cosine at the receiver:
+     * pdf_sa = pdf_bilinear(u) / S */
+    float pdf_u = warp_by_cosine(&u, w);
+    vec3 pr = v3_sub(sample_spherical_rectangle(&sr, u), q->corner);
+    float alpha = fminf(1.0f, fmaxf(0.0f, v3_dot(pr, q->e1) / v3_dot(q->e1, q->e1)));
+    float beta = fminf(1.0f, fmaxf(0.0f, v3_dot(pr, q->e2) / v3_dot(q->e2, q->e2)));
+    ss->p = quad_point(q, alpha, beta, &ss->p_error);
+    vec3 c = v3_cross(q->e1, q->e2);
+    ss->n = v3_normalize(c);
+    return direction_to(ss, c, ref, pdf_u * pdf_spherical_rectangle(&sr));
+}
+
+float shape_quad_pdf_solid_angle(const struct quad *q, const struct surface *ref,
+                                 const struct surface *on, vec3 wi)
+{
+    struct sample_sph_rect sr;
+    float w[4];
+    if (!quad_by_solid_angle(q, ref, &sr, w))
+        return shape_quad_pdf(q, ref, on, wi);
+    /* pdf_sa = pdf_bilinear(u) / S at the u that maps to the point on->p */
+    return pdf_bilinear(sample_invert_spherical_rectangle(&sr, on->p), w) *
+           pdf_spherical_rectangle(&sr);
+}
+
 /* ---- infinite plane ---- */
 
 bool shape_plane_intersect(const struct plane *pl, const struct ray *ray, float *t_hit)
@@ -343,4 +435,68 @@ float shape_triangle_pdf(const vec3 p[3], const struct surface *ref, const struc
                          vec3 wi)
 {
     return pdf_by_area(1.0f / shape_triangle_area(p, NULL), ref, on, wi);
+}
+
+/* Whether the triangle p[3] is sampled by solid angle from ref: its solid angle lies between
+ * the bounds (PBRT 4e's Triangle::Sample).  Fills *st, and w[4] with the cosine weights of the
+ * corners of Arvo's u square at ref's shading normal (u = (0,0) and (1,0) map to p[1], (0,1) to
+ * p[0], (1,1) to p[2]). */
+static bool triangle_by_solid_angle(const vec3 p[3], const struct surface *ref,
+                                    struct sample_sph_triangle *st, float w[4])
+{
+    vec3 d[3];
+    for (int k = 0; k < 3; k++) {
+        d[k] = v3_sub(p[k], ref->p);
+        float len = v3_length(d[k]);
+        if (!(len > 0.0f))
+            return false;
+        d[k] = v3_scale(d[k], 1.0f / len);
+    }
+    if (!sample_sph_triangle_init(d[0], d[1], d[2], st) ||
+        !(st->area >= SPHERICAL_MIN_SR && st->area <= SPHERICAL_MAX_SR))
+        return false;
+    receiver_weights(ref, d[1], d[1], d[0], d[2], w);
+    return true;
+}
+
+bool shape_triangle_sample_solid_angle(const vec3 p[3], const struct surface *ref, vec2 u,
+                                       struct shape_sample *ss)
+{
+    struct sample_sph_triangle st;
+    float w[4];
+    if (!triangle_by_solid_angle(p, ref, &st, w))
+        return shape_triangle_sample(p, ref, u, ss);
+    /* Arvo 1995, u first warped by the cosine at the receiver: pdf_sa = pdf_bilinear(u) / Omega */
+    float pdf_u = warp_by_cosine(&u, w);
+    vec3 wi = sample_spherical_triangle(&st, u);
+    /* the barycentrics where the ray ref->p + t wi meets the triangle's plane (Moller & Trumbore
+     * 1997), clamped onto the triangle against rounding */
+    vec3 e1 = v3_sub(p[1], p[0]), e2 = v3_sub(p[2], p[0]), s = v3_sub(ref->p, p[0]);
+    vec3 s1 = v3_cross(wi, e2);
+    float divisor = v3_dot(s1, e1);
+    if (divisor == 0.0f)
+        return false;
+    float b1 = fminf(1.0f, fmaxf(0.0f, v3_dot(s, s1) / divisor));
+    float b2 = fminf(1.0f, fmaxf(0.0f, v3_dot(wi, v3_cross(s, e1)) / divisor));
+    if (b1 + b2 > 1.0f) {
+        float sum = b1 + b2;
+        b1 /= sum;
+        b2 /= sum;
+    }
+    vec3 abs_sum;
+    ss->p = barycentric_point(p, 1.0f - b1 - b2, b1, b2, &abs_sum);
+    ss->p_error = v3_scale(abs_sum, mcpt_gamma(6));
+    shape_triangle_area(p, &ss->n);
+    return direction_to(ss, ss->n, ref, pdf_u * pdf_spherical_triangle(&st));
+}
+
+float shape_triangle_pdf_solid_angle(const vec3 p[3], const struct surface *ref,
+                                     const struct surface *on, vec3 wi)
+{
+    struct sample_sph_triangle st;
+    float w[4];
+    if (!triangle_by_solid_angle(p, ref, &st, w))
+        return shape_triangle_pdf(p, ref, on, wi);
+    /* pdf_sa = pdf_bilinear(u) / Omega at the u that maps to wi */
+    return pdf_bilinear(sample_invert_spherical_triangle(&st, wi), w) * pdf_spherical_triangle(&st);
 }

@@ -92,4 +92,19 @@ float shape_quad_pdf(const struct quad *q, const struct surface *ref, const stru
 float shape_sphere_pdf(const struct sphere *s, const struct surface *ref, const struct surface *on,
                        vec3 wi);
 
+/* The same by solid angle (--light-sampling solid-angle): a triangle by Arvo's spherical-triangle
+ * map (Arvo 1995), a rectangular quad by the spherical-rectangle map (Urena et al. 2013), each
+ * with its uniforms first warped by the bilinear approximation of |cos theta| at ref's shading
+ * normal (PBRT 4e, ch. 6, "Triangles" and "Bilinear Patches"), so pdf_sa = pdf_bilinear(u) /
+ * solid angle.  Where the solid angle lies outside PBRT 4e's bounds (3e-4 sr and, for a
+ * triangle, 6.22 sr) or the quad is not a rectangle, they are the area samplers above. */
+bool shape_triangle_sample_solid_angle(const vec3 p[3], const struct surface *ref, vec2 u,
+                                       struct shape_sample *ss);
+float shape_triangle_pdf_solid_angle(const vec3 p[3], const struct surface *ref,
+                                     const struct surface *on, vec3 wi);
+bool shape_quad_sample_solid_angle(const struct quad *q, const struct surface *ref, vec2 u,
+                                   struct shape_sample *ss);
+float shape_quad_pdf_solid_angle(const struct quad *q, const struct surface *ref,
+                                 const struct surface *on, vec3 wi);
+
 #endif

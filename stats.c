@@ -114,9 +114,30 @@ static double welford_var(const struct welford *w)
 bool stats_compare(const struct stats_image *a, const struct stats_image *ref,
                    struct stats_metrics *m, struct mcpt_error *err)
 {
+    return stats_compare_where(a, ref, INFINITY, m, err);
+}
+
+/* Whether pixel i of ref is compared: its luminance 0.2126 R + 0.7152 G + 0.0722 B is at most
+ * max_lum (a pixel whose luminance is NaN counts as included: its channels are skipped
+ * one by one, as without a mask). */
+static bool pixel_included(const struct stats_image *ref, size_t i, double max_lum)
+{
+    if (!ref || isinf(max_lum))
+        return true;
+    double lum = 0.2126 * ref->rgb[0][i] + 0.7152 * ref->rgb[1][i] + 0.0722 * ref->rgb[2][i];
+    return !(lum > max_lum);
+}
+
+bool stats_compare_where(const struct stats_image *a, const struct stats_image *ref,
+                         double max_ref_luminance, struct stats_metrics *m, struct mcpt_error *err)
+{
     if (ref && (ref->width != a->width || ref->height != a->height)) {
         mcpt_error_set(err, "", 0, 0, "expected a reference of the image's size %dx%d, got %dx%d",
                        a->width, a->height, ref->width, ref->height);
+        return false;
+    }
+    if (isnan(max_ref_luminance)) {
+        mcpt_error_set(err, "", 0, 0, "expected a luminance bound, got nan");
         return false;
     }
     double nan = NAN;
@@ -139,8 +160,11 @@ bool stats_compare(const struct stats_image *a, const struct stats_image *ref,
         .psnr_corrected_db = nan,
         .mean_variance = nan,
         .relmse_own = nan,
+        .max_ref_luminance = max_ref_luminance,
     };
     size_t n_pixels = (size_t)a->width * (size_t)a->height;
+    for (size_t i = 0; i < n_pixels; i++)
+        m->n_pixels_masked += !pixel_included(ref, i, max_ref_luminance);
     bool has_var_a = a->var[0] && a->var[1] && a->var[2];
     bool has_var_r = ref && ref->var[0] && ref->var[1] && ref->var[2];
 
@@ -154,7 +178,7 @@ bool stats_compare(const struct stats_image *a, const struct stats_image *ref,
         for (size_t i = 0; known && i < n_pixels; i++)
             for (int c = 0; c < 3; c++) {
                 double v = a->var[c][i], x = a->rgb[c][i];
-                if (!isfinite(v) || !isfinite(x))
+                if (!isfinite(v) || !isfinite(x) || !pixel_included(ref, i, max_ref_luminance))
                     continue;
                 sum_var += v;
                 sum_rel += v / (x * x + STATS_RELMSE_EPS);
@@ -175,6 +199,8 @@ bool stats_compare(const struct stats_image *a, const struct stats_image *ref,
     for (size_t i = 0; i < n_pixels; i++) {
         double pix_sq = 0.0, pix_corr = 0.0;
         int pix_n = 0;
+        if (!pixel_included(ref, i, max_ref_luminance))
+            continue;
         for (int c = 0; c < 3; c++) {
             double x = a->rgb[c][i], r = ref->rgb[c][i];
             double var_r = has_var_r ? ref->var[c][i] : 0.0;
@@ -294,6 +320,9 @@ void stats_print_metrics(FILE *f, const struct stats_metrics *m, const char *a_p
     fprintf(f, "image              %s\nreference          %s\n", a_path, ref_path);
     fprintf(f, "size               %dx%d, %zu values compared, %zu skipped (NaN or infinite)\n",
             m->width, m->height, m->n_values, m->n_skipped);
+    if (!isinf(m->max_ref_luminance))
+        fprintf(f, "pixels             %zu left out: reference luminance > %s\n",
+                m->n_pixels_masked, fmt_num(b[0], 64, m->max_ref_luminance));
     fprintf(f, "mse                %s  (standard error %s)\n", fmt_num(b[0], 64, m->mse),
             fmt_num(b[1], 64, m->mse_se));
     fprintf(f, "rmse               %s\n", fmt_num(b[0], 64, m->rmse));
@@ -355,16 +384,21 @@ void stats_write_metrics_json(FILE *f, const struct stats_metrics *m, const char
         const char *key;
         double v;
     } more[] = {
-        {"noise_floor", m->noise_floor},           {"mse_corrected", m->mse_corrected},
-        {"mse_corrected_se", m->mse_corrected_se}, {"rmse_corrected", m->rmse_corrected},
-        {"relmse_corrected", m->relmse_corrected}, {"psnr_corrected_db", m->psnr_corrected_db},
-        {"mean_variance", m->mean_variance},       {"relmse_own", m->relmse_own},
+        {"noise_floor", m->noise_floor},
+        {"mse_corrected", m->mse_corrected},
+        {"mse_corrected_se", m->mse_corrected_se},
+        {"rmse_corrected", m->rmse_corrected},
+        {"relmse_corrected", m->relmse_corrected},
+        {"psnr_corrected_db", m->psnr_corrected_db},
+        {"mean_variance", m->mean_variance},
+        {"relmse_own", m->relmse_own},
+        {"max_ref_luminance", m->max_ref_luminance},
     };
     for (size_t i = 0; i < sizeof more / sizeof more[0]; i++) {
         fprintf(f, ", \"%s\": ", more[i].key);
         json_num(f, more[i].v);
     }
-    fputs("}\n", f);
+    fprintf(f, ", \"n_pixels_masked\": %zu}\n", m->n_pixels_masked);
 }
 
 /* ---- line fits ---- */

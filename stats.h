@@ -58,15 +58,23 @@ struct stats_metrics {
     double rmse_corrected;   /* sqrt(mse_corrected); NAN when mse_corrected <= 0 */
     double relmse_corrected; /* mean ((a - r)^2 - var r) / (r^2 + 0.01) */
     double psnr_corrected_db;
-    double mean_variance; /* mean variance of the mean of a (a's variance channels; NAN
+    double mean_variance;     /* mean variance of the mean of a (a's variance channels; NAN
                                 when a has none or a pixel has fewer than 2 samples) */
-    double relmse_own;    /* mean var a / (a^2 + 0.01): a's own relMSE estimate */
+    double relmse_own;        /* mean var a / (a^2 + 0.01): a's own relMSE estimate */
+    double max_ref_luminance; /* only pixels whose reference luminance is <= this were
+                                 compared (INFINITY: all) */
+    size_t n_pixels_masked;   /* pixels left out by max_ref_luminance */
 };
 
 /* Compares a with ref (may be NULL: then only a's own-variance fields are filled).  Fails
  * (err: msg "expected ... WxH ..., got ...") when the sizes differ. */
 bool stats_compare(const struct stats_image *a, const struct stats_image *ref,
                    struct stats_metrics *m, struct mcpt_error *err);
+/* As stats_compare, over only the pixels whose reference luminance (Rec. 709 weights of its
+ * R, G, B) is <= max_ref_luminance; e.g. the Cornell box without its lamp (luminance 12.5)
+ * with 1.  A NaN max_ref_luminance is refused like a size mismatch; ref must not be NULL. */
+bool stats_compare_where(const struct stats_image *a, const struct stats_image *ref,
+                         double max_ref_luminance, struct stats_metrics *m, struct mcpt_error *err);
 
 /* Writes m as "name value" lines (human) or as one JSON object whose keys are documented in
  * docs/convergence.md; a_path and ref_path are echoed. */

@@ -28,6 +28,12 @@
 #include "light.h"
 #include "material.h"
 
+/* Camera rays are intersected TRACE_PACKET at a time (a BVH packet), the samples of one pixel
+ * (render_pixel); fewer than TRACE_PACKET_MIN go one by one, and so do all of them with
+ * trace_options.single_rays (the same image to the bit).  docs/performance.md measures it. */
+#define TRACE_PACKET BVH_PACKET_SIZE
+#define TRACE_PACKET_MIN 2
+
 /* PBRT 4e, ch. 6, "Robust Spawned Ray Origins": shadow rays stop this fraction short of the
  * light point, whose own origin is offset by its error bound. */
 static const float SHADOW_EPSILON = 1e-4f;
@@ -43,6 +49,13 @@ struct trace_scene {
 struct hit_record {
     struct surface sf;
     uint32_t light_idx; /* or LIGHT_NONE */
+};
+
+/* The first intersection of a camera ray, found before its path starts (the packets of the
+ * render loop). */
+struct first_hit {
+    bool hit;
+    struct hit_record hr; /* when hit */
 };
 
 /* A path vertex as the estimators see it. */
@@ -65,7 +78,13 @@ struct last_bounce {
     bool is_specular;  /* the sample came from a delta lobe: no MIS */
 };
 
+static void count_ray(const struct trace_options *opt, const struct ray *ray, bool is_shadow,
+                      uint64_t *n_rays);
+static vec3 radiance(const struct trace_scene *ts, const struct trace_options *opt, struct ray ray,
+                     const struct first_hit *first, struct sampler *sampler, uint64_t *n_rays);
 static bool intersect(const struct trace_scene *ts, const struct ray *ray, struct hit_record *hr);
+static bool intersect_camera_rays(const struct trace_scene *ts, const struct trace_options *opt,
+                                  const struct ray *rays, uint32_t n, struct first_hit *first);
 static bool occluded(const struct trace_scene *ts, const struct ray *ray);
 static struct ray spawn_ray(const struct surface *sf, vec3 d);
 static struct ray spawn_ray_to(const struct surface *from, vec3 p_to, vec3 p_to_error, vec3 n_to);
@@ -95,9 +114,18 @@ static bool split_keeps(enum render_split split, uint32_t n_bounces)
 vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *opt, struct ray ray,
                     struct sampler *sampler, uint64_t *n_rays)
 {
+    return radiance(ts, opt, ray, NULL, sampler, n_rays);
+}
+
+/* trace_radiance, with the camera ray's intersection already found when first is not NULL. */
+static vec3 radiance(const struct trace_scene *ts, const struct trace_options *opt, struct ray ray,
+                     const struct first_hit *first, struct sampler *sampler, uint64_t *n_rays)
+{
     const struct scene *scene = ts->scene;
     const uint32_t n_ls = opt->light_samples ? opt->light_samples : 1;
     const uint32_t rr_depth = opt->rr_depth ? opt->rr_depth : TRACE_RR_DEPTH_DEFAULT;
+    const float rr_threshold = opt->rr_threshold > 0.0f ? opt->rr_threshold
+                                                        : TRACE_RR_THRESHOLD_DEFAULT;
     /* inf (TRACE_DEPTH_INFINITE) and anything deeper stop at the cap, which also keeps the
      * bounce dimensions below sample.h's SAMPLE_DIM_LIGHT_EXTRA */
     uint32_t max_bounces = opt->max_depth < TRACE_DEPTH_CAP ? opt->max_depth : TRACE_DEPTH_CAP;
@@ -113,8 +141,11 @@ vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *op
     for (uint32_t n_bounces = 0;;) {
         /* find the next vertex */
         struct hit_record hr;
-        (*n_rays)++;
-        bool hit = intersect(ts, &ray, &hr);
+        count_ray(opt, &ray, false, n_rays);
+        bool hit = first ? first->hit : intersect(ts, &ray, &hr);
+        if (first && hit)
+            hr = first->hr;
+        first = NULL;
         vec3 wo_world = v3_normalize(v3_neg(ray.d));
 
         /* emission where the ray ends, or the sky where it escapes: L += beta Le w_bsdf */
@@ -175,10 +206,12 @@ vec3 trace_radiance(const struct trace_scene *ts, const struct trace_options *op
         ray = spawn_ray(&hr.sf, wi_world);
 
         /* Russian roulette after bounce rr_depth: continue with probability p, beta /= p;
-         * p = min(1, max(beta) eta^2) by throughput, or the fixed --rr p */
+         * p = min(1, max(beta) eta^2 / threshold) by throughput (a survivor below the threshold
+         * carries max(beta) eta^2 = threshold on), or the fixed --rr p */
         if (n_bounces >= rr_depth) {
-            float p = opt->rr_prob > 0.0f ? opt->rr_prob
-                                          : fminf(1.0f, v3_max_comp(beta) * eta_scale);
+            float p = opt->rr_prob > 0.0f
+                          ? opt->rr_prob
+                          : fminf(1.0f, v3_max_comp(beta) * eta_scale / rr_threshold);
             if (p < 1.0f) {
                 sample_set_dim(sampler, dim0 + SAMPLE_BOUNCE_ROULETTE);
                 if (!(sample_1d(sampler) < p))
@@ -225,19 +258,104 @@ bool trace_adaptive_stop(double s1, double s2, uint64_t n, double tolerance, dou
     return 1.96 * 1.96 * sigma2 / dn <= bound * bound;
 }
 
-/* Adaptive sampling: whether pixel px, at a test point (min_spp + k batch samples taken), has
- * met the stopping rule.  It reads only the pixel's own sums, so the decision is the same
- * whichever thread, call or resumed run makes it. */
+uint32_t trace_pilot_spp(double s1, double s2, uint64_t n, double tolerance, double floor_lum,
+                         uint32_t min_spp, uint32_t max_spp, uint32_t batch)
+{
+    if (n == 0 || min_spp >= max_spp)
+        return max_spp;
+    /* N = (1.96 sigma / (T max(mu, floor)))^2, the n at which the stop rule's I reaches T mu */
+    double dn = (double)n;
+    double mu = s1 / dn;
+    double sigma2 = fmax(0.0, s2 / dn - mu * mu);
+    double bound = tolerance * fmax(mu, floor_lum);
+    double need = bound > 0.0 ? 1.96 * 1.96 * sigma2 / (bound * bound) : (double)max_spp;
+    if (!(need < (double)max_spp)) /* also NaN */
+        return max_spp;
+    uint32_t b = batch ? batch : 1;
+    uint64_t n_spp = ((uint64_t)ceil(need) + b - 1) / b * b; /* whole batches */
+    if (n_spp < min_spp)
+        n_spp = min_spp;
+    return n_spp < max_spp ? (uint32_t)n_spp : max_spp;
+}
+
+/* Adaptive sampling, the stop rule: whether pixel px, at a test point (min_spp + k batch
+ * samples taken), has met the stopping rule.  It reads only the pixel's own sums, so the
+ * decision is the same whichever thread, call or resumed run makes it. */
 static bool adaptive_converged(const struct trace_options *opt, const struct film_pixel *px)
 {
     uint32_t taken = px->n + px->n_dropped;
     uint32_t batch = opt->batch ? opt->batch : 1;
-    if (!opt->adaptive || taken < opt->min_spp || (taken - opt->min_spp) % batch != 0)
+    if (!opt->adaptive || opt->adaptive_rule != RENDER_ADAPTIVE_STOP || taken < opt->min_spp ||
+        (taken - opt->min_spp) % batch != 0)
         return false;
     return trace_adaptive_stop(film_sum_lum(px), px->sum_lum_sq, px->n, opt->tolerance,
                                opt->adaptive_floor);
 }
 
+/* The tag hashed into the seed of the pilots' stream ("pilot" in ASCII). */
+static const uint64_t PILOT_SEED_TAG = 0x70696c6f74ull;
+
+/* Adaptive sampling, the pilot rule (two-stage sampling, Kirk & Arvo 1991, "Unbiased Sampling
+ * Techniques for Image Synthesis", SIGGRAPH 91): the samples pixel (x, y) gets.  A pilot of
+ * pilot_spp samples from a stream of its own (the seed hashed with PILOT_SEED_TAG, so its
+ * scrambles and its values are independent of the image's) estimates mu and sigma of the
+ * pixel's luminance, and trace_pilot_spp turns them into N.  The pilot is then discarded: the
+ * pixel's estimate is the mean of its N image samples, and since N depends on the pilot alone,
+ * which is independent of them, E[estimate | N] = E[one sample] = the pixel's value.  The stop
+ * rule's estimate is biased because one set of samples both decides and estimates.  The count
+ * is a pure function of (seed, pixel), the same for every call; opt->pilot_target keeps it. */
+static uint32_t pilot_target(const struct render_job *job, struct worker *w, uint32_t x, uint32_t y,
+                             uint64_t *n_rays)
+{
+    const struct trace_options *opt = job->opt;
+    uint32_t pixel_idx = y * (uint32_t)job->film->width + x;
+    if (opt->pilot_target && opt->pilot_target[pixel_idx])
+        return opt->pilot_target[pixel_idx];
+    struct sampler sampler;
+    sample_start_pixel(&sampler, opt->sampler, sample_hash64(opt->seed ^ PILOT_SEED_TAG), pixel_idx,
+                       job->set_spp);
+    double s1 = 0.0, s2 = 0.0;
+    uint64_t n = 0;
+    uint32_t n_pilot = opt->pilot_spp ? opt->pilot_spp : TRACE_ADAPTIVE_PILOT_SPP;
+    for (uint32_t i = 0; i < n_pilot; i++) {
+        sample_start_index(&sampler, i);
+        vec2 u_pixel = sample_2d(&sampler);
+        vec2 u_lens = sample_2d(&sampler);
+        struct ray ray = camera_ray(&job->ts->camera, (float)x + u_pixel.x, (float)y + u_pixel.y,
+                                    u_lens);
+        vec3 L = trace_radiance(job->ts, opt, ray, &sampler, n_rays);
+        w->result.n_pilot++;
+        if (!v3_is_finite(L))
+            continue; /* as in the film: not counted */
+        double lum = 0.2126 * L.x + 0.7152 * L.y + 0.0722 * L.z;
+        s1 += lum;
+        s2 += lum * lum;
+        n++;
+    }
+    uint32_t max_spp = opt->max_spp ? opt->max_spp : opt->spp;
+    uint32_t target = trace_pilot_spp(s1, s2, n, opt->tolerance, opt->adaptive_floor, opt->min_spp,
+                                      max_spp, opt->batch);
+    if (opt->pilot_target)
+        opt->pilot_target[pixel_idx] = target;
+    return target;
+}
+
+/* How many samples the pixel may take, from `taken`, before its next adaptive test point
+ * (min_spp + k batch) of the stop rule: a batch of samples never steps over one. */
+static uint32_t samples_to_test(const struct trace_options *opt, uint32_t taken)
+{
+    if (!opt->adaptive || opt->adaptive_rule != RENDER_ADAPTIVE_STOP)
+        return UINT32_MAX;
+    if (taken < opt->min_spp)
+        return opt->min_spp - taken;
+    uint32_t batch = opt->batch ? opt->batch : 1;
+    return batch - (taken - opt->min_spp) % batch;
+}
+
+/* The samples of a pixel are taken TRACE_PACKET at a time (fewer before a test point or the
+ * end): their camera rays are made from their own samplers, intersected together
+ * (intersect_camera_rays), and each path then goes on alone from its first hit.  A sample's
+ * numbers, rays and film updates are those of one taken alone, in sample-index order. */
 static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, uint32_t y)
 {
     const struct trace_options *opt = job->opt;
@@ -245,9 +363,21 @@ static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, u
     uint32_t pixel_idx = y * (uint32_t)film->width + x;
     struct film_pixel *px = &film->pixels[pixel_idx];
     uint64_t done = 0;
-    uint64_t skipped = 0; /* samples an adaptive stop saved, counted as progress */
-    struct sampler sampler;
-    while (px->n + px->n_dropped < opt->spp) {
+    uint64_t skipped = 0; /* samples adaptive sampling saved, counted as progress */
+    uint64_t n_rays = 0;  /* kept here, added to the worker's count once per pixel */
+    uint32_t spp = opt->spp;
+    if (opt->adaptive && opt->adaptive_rule == RENDER_ADAPTIVE_PILOT &&
+        px->n + px->n_dropped < opt->spp) {
+        uint32_t target = pilot_target(job, w, x, y, &n_rays);
+        if (target < spp) {
+            skipped = spp - (px->n + px->n_dropped > target ? px->n + px->n_dropped : target);
+            spp = target;
+        }
+    }
+    struct sampler samplers[TRACE_PACKET];
+    uint32_t n_started = 1; /* samplers started on the pixel: copies of the first */
+    sample_start_pixel(&samplers[0], opt->sampler, opt->seed, pixel_idx, job->set_spp);
+    while (px->n + px->n_dropped < spp) {
         if (opt->cancel && atomic_load_explicit(opt->cancel, memory_order_relaxed)) {
             w->result.cancelled = true;
             break;
@@ -256,28 +386,43 @@ static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, u
             skipped = opt->spp - (px->n + px->n_dropped);
             break;
         }
-        uint32_t sample_idx = opt->sample_offset + px->n + px->n_dropped;
-        sample_start_spp(&sampler, opt->sampler, opt->seed, pixel_idx, sample_idx, job->set_spp);
-        /* box filter: uniform jitter inside the pixel */
-        vec2 u_pixel = sample_2d(&sampler);
-        vec2 u_lens = sample_2d(&sampler);
-        struct ray ray = camera_ray(&job->ts->camera, (float)x + u_pixel.x, (float)y + u_pixel.y,
-                                    u_lens);
-        vec3 L = trace_radiance(job->ts, opt, ray, &sampler, &w->result.n_rays);
-        if (v3_is_finite(L)) {
-            film_add(px, L);
-        } else {
-            if (w->result.n_nonfinite == 0) {
-                w->result.first_bad_x = x;
-                w->result.first_bad_y = y;
-                w->result.first_bad_sample = sample_idx;
-            }
-            w->result.n_nonfinite++;
-            px->n_dropped++;
+        uint32_t taken = px->n + px->n_dropped;
+        uint32_t n = spp - taken;
+        uint32_t to_test = samples_to_test(opt, taken);
+        n = n < to_test ? n : to_test;
+        n = n < TRACE_PACKET ? n : TRACE_PACKET;
+        /* the camera rays: box filter (uniform jitter inside the pixel), then the lens */
+        struct ray rays[TRACE_PACKET];
+        for (; n_started < n; n_started++)
+            samplers[n_started] = samplers[0];
+        for (uint32_t i = 0; i < n; i++) {
+            sample_start_index(&samplers[i], opt->sample_offset + taken + i);
+            vec2 u_pixel = sample_2d(&samplers[i]);
+            vec2 u_lens = sample_2d(&samplers[i]);
+            rays[i] = camera_ray(&job->ts->camera, (float)x + u_pixel.x, (float)y + u_pixel.y,
+                                 u_lens);
         }
-        done++;
+        struct first_hit first[TRACE_PACKET];
+        bool packet = intersect_camera_rays(job->ts, opt, rays, n, first);
+        for (uint32_t i = 0; i < n; i++) {
+            vec3 L = packet ? radiance(job->ts, opt, rays[i], &first[i], &samplers[i], &n_rays)
+                            : trace_radiance(job->ts, opt, rays[i], &samplers[i], &n_rays);
+            if (v3_is_finite(L)) {
+                film_add(px, L);
+            } else {
+                if (w->result.n_nonfinite == 0) {
+                    w->result.first_bad_x = x;
+                    w->result.first_bad_y = y;
+                    w->result.first_bad_sample = samplers[i].sample_idx;
+                }
+                w->result.n_nonfinite++;
+                px->n_dropped++;
+            }
+        }
+        done += n;
     }
     w->result.n_samples += done;
+    w->result.n_rays += n_rays;
     atomic_fetch_add_explicit(&job->samples_done, done + skipped, memory_order_relaxed);
 }
 
@@ -314,6 +459,7 @@ void trace_result_add(struct trace_result *sum, const struct trace_result *r)
         sum->first_bad_sample = r->first_bad_sample;
     }
     sum->n_samples += r->n_samples;
+    sum->n_pilot += r->n_pilot;
     sum->n_rays += r->n_rays;
     sum->n_nonfinite += r->n_nonfinite;
     sum->cancelled |= r->cancelled;
@@ -520,9 +666,9 @@ static vec3 sample_one_light(const struct trace_scene *ts, const struct trace_op
     if (v3_is_zero(f))
         return zero;
     /* the shadow ray: to infinity for the sky, else to the light point */
-    (*n_rays)++;
     struct ray shadow = ls.is_infinite ? spawn_ray(sf, ls.wi)
                                        : spawn_ray_to(sf, ls.p, ls.p_error, ls.n);
+    count_ray(opt, &shadow, true, n_rays);
     if (occluded(ts, &shadow))
         return zero;
     vec3 Ld = v3_scale(v3_mul(f, ls.Le), fabsf(wi.z) / ((float)n_ls * pmf));
@@ -555,6 +701,15 @@ static bool sample_direction(const struct material *m, vec3 wo, enum render_dire
 
 /* ---- scene queries ---- */
 
+/* Every ray traced is counted, and shown to the benchmark's hook if there is one. */
+static void count_ray(const struct trace_options *opt, const struct ray *ray, bool is_shadow,
+                      uint64_t *n_rays)
+{
+    (*n_rays)++;
+    if (opt->ray_hook)
+        opt->ray_hook(opt->ray_hook_user, ray, is_shadow);
+}
+
 /* The surface of scene triangle tri_idx at the barycentrics (b1, b2) of a hit. */
 static struct surface triangle_surface(const struct scene *scene, uint32_t tri_idx, float b1,
                                        float b2)
@@ -575,17 +730,19 @@ static struct surface triangle_surface(const struct scene *scene, uint32_t tri_i
 
 enum hit_kind { HIT_NONE, HIT_TRI, HIT_SPHERE, HIT_QUAD, HIT_PLANE };
 
-static bool intersect(const struct trace_scene *ts, const struct ray *ray_in, struct hit_record *hr)
+/* The closest hit along ray_in among the analytic shapes, nearer than the triangle hit bh (NULL:
+ * none) the BVH found, as a hit record: the second half of every intersection. */
+static bool closest_hit(const struct trace_scene *ts, const struct ray *ray_in,
+                        const struct bvh_hit *bh, struct hit_record *hr)
 {
     const struct scene *scene = ts->scene;
     struct ray ray = *ray_in;
     enum hit_kind kind = HIT_NONE;
     uint32_t idx = 0;
-    struct bvh_hit bh;
-    if (bvh_intersect(ts->bvh, &ray, &bh)) {
+    if (bh) {
         kind = HIT_TRI;
-        idx = bh.prim_idx;
-        ray.t_max = bh.t;
+        idx = bh->prim_idx;
+        ray.t_max = bh->t;
     }
     float t;
     for (uint32_t i = 0; i < scene->n_spheres; i++)
@@ -610,7 +767,7 @@ static bool intersect(const struct trace_scene *ts, const struct ray *ray_in, st
     case HIT_NONE:
         return false;
     case HIT_TRI:
-        hr->sf = triangle_surface(scene, idx, bh.u, bh.v);
+        hr->sf = triangle_surface(scene, idx, bh->u, bh->v);
         hr->light_idx = light_idx_of(ts->lights, LIGHT_TRIANGLE, idx);
         return true;
     case HIT_SPHERE:
@@ -627,6 +784,34 @@ static bool intersect(const struct trace_scene *ts, const struct ray *ray_in, st
         return true;
     }
     return false;
+}
+
+static bool intersect(const struct trace_scene *ts, const struct ray *ray, struct hit_record *hr)
+{
+    struct bvh_hit bh;
+    bool tri_hit = bvh_intersect(ts->bvh, ray, &bh);
+    return closest_hit(ts, ray, tri_hit ? &bh : NULL, hr);
+}
+
+/* The first hits of n <= TRACE_PACKET camera rays of one pixel, their triangles found as one
+ * packet (bvh_intersect_packet reports each ray's bvh_intersect result).  Returns false, filling
+ * nothing, where a packet does not pay (fewer than TRACE_PACKET_MIN rays, a scene without
+ * triangles) or is not wanted (opt->single_rays). */
+static bool intersect_camera_rays(const struct trace_scene *ts, const struct trace_options *opt,
+                                  const struct ray *rays, uint32_t n, struct first_hit *first)
+{
+    if (opt->single_rays || n < TRACE_PACKET_MIN || ts->scene->n_tris == 0)
+        return false;
+    struct bvh_packet packet;
+    for (uint32_t i = 0; i < n; i++)
+        bvh_packet_set(&packet, (int)i, &rays[i]);
+    struct bvh_packet_hit ph;
+    uint32_t hits = bvh_intersect_packet(ts->bvh, &packet, (1u << n) - 1u, &ph);
+    for (uint32_t i = 0; i < n; i++) {
+        struct bvh_hit bh = {ph.t[i], ph.u[i], ph.v[i], ph.prim_idx[i]};
+        first[i].hit = closest_hit(ts, &rays[i], hits >> i & 1u ? &bh : NULL, &first[i].hr);
+    }
+    return true;
 }
 
 static bool occluded(const struct trace_scene *ts, const struct ray *ray)

@@ -40,27 +40,52 @@ struct trace_options {
     uint32_t sampler_spp; /* stratified: samples per stratified set; 0 = spp, or batch when
                               adaptive.  Progressive renders pass their final spp here so that
                               the last image equals a one-call render. */
-    bool adaptive;        /* stop each pixel by trace_adaptive_stop; spp is then the maximum */
-    float tolerance;      /* adaptive: T, relative half-width of the 95% interval */
-    float adaptive_floor; /* adaptive: luminance below which T applies absolutely */
-    uint32_t min_spp;     /* adaptive: samples before the first test */
-    uint32_t batch;       /* adaptive: samples between tests (>= 1) */
+    bool adaptive;        /* adaptive sampling (docs/sampling.md); spp is then the maximum */
+    enum render_adaptive_rule adaptive_rule; /* pilot (unbiased) or stop (the teaching rule) */
+    float tolerance;        /* adaptive: T, relative half-width of the 95% interval */
+    float adaptive_floor;   /* adaptive: luminance below which T applies absolutely */
+    uint32_t min_spp;       /* adaptive: stop, samples before the first test; pilot, the least
+                             samples a pixel gets */
+    uint32_t batch;         /* adaptive: samples between tests, or the pilot's unit (>= 1) */
+    uint32_t pilot_spp;     /* adaptive pilot: samples of the pilot (>= 2); 0 means the default */
+    uint32_t max_spp;       /* adaptive pilot: most samples a pixel gets; 0 = spp.  A render in
+                             passes (spp growing to max_spp) must give the final maximum. */
+    uint32_t *pilot_target; /* adaptive pilot: per pixel, its sample count once computed (0
+                               before), kept between the calls of a render in passes; NULL:
+                               recomputed by every call (the same numbers, more work) */
     /* light transport (trace_radiance) */
     enum render_direct direct; /* direct-lighting estimator; 0 is RENDER_DIRECT_MIS */
     uint32_t light_samples;    /* light samples (shadow rays) per path vertex; 0 means 1 */
     enum render_split split;   /* bounces kept; 0 is RENDER_SPLIT_FULL */
     float rr_prob;             /* Russian roulette: fixed continuation probability in (0, 1], or
-                                  0 for the throughput-based rule (continue with max beta) */
+                                  0 for the throughput-based rule, min(1, max beta / threshold) */
+    float rr_threshold;        /* the throughput below which roulette plays; 0 means
+                                  TRACE_RR_THRESHOLD_DEFAULT */
     uint32_t rr_depth;         /* roulette may end a path after its rr_depth-th bounce and any
                                   later one; 0 means TRACE_RR_DEPTH_DEFAULT */
+    /* benchmarking (may be NULL): every ray the render traces, from the thread that traces it
+     * (so the hook must be thread-safe, or the render use one thread): camera and bounce rays
+     * (closest hit, is_shadow false) and shadow rays (any hit, is_shadow true).  bench/raydump
+     * writes them as ray files for bench/raybench. */
+    void (*ray_hook)(void *user, const struct ray *ray, bool is_shadow);
+    void *ray_hook_user;
+    /* benchmarking and tests: every camera ray intersected alone, not in the packets of
+     * render_pixel; the image is the same to the bit (bench/packetbench times the two) */
+    bool single_rays;
 };
 
 #define TRACE_RR_DEPTH_DEFAULT 2u /* as PBRT 4e: the first two bounces are never cut short */
+/* Paths whose throughput max(beta) eta^2 is at least this never meet roulette; below, they go on
+ * with probability max(beta) eta^2 / threshold and carry the threshold as their weight.  PBRT
+ * 4e's rule is 1; 0.25 measured 1.5x more efficient on the Cornell box (docs/performance.md,
+ * "Per-sample error"). */
+#define TRACE_RR_THRESHOLD_DEFAULT 0.25f
 
 #define TRACE_ADAPTIVE_TOLERANCE 0.05f /* default T */
 #define TRACE_ADAPTIVE_FLOOR 0.01f     /* default floor, luminance in the image's linear units */
 #define TRACE_ADAPTIVE_BATCH 32u       /* default batch */
 #define TRACE_ADAPTIVE_MIN_SPP 64u     /* default minimum spp */
+#define TRACE_ADAPTIVE_PILOT_SPP 16u   /* default pilot samples */
 
 /* The adaptive stopping rule on one pixel's n samples of luminance x, s1 = sum x and
  * s2 = sum x^2: mu = s1 / n, sigma^2 = s2 / n - mu^2, I = 1.96 sigma / sqrt(n) (the half-width
@@ -70,8 +95,16 @@ struct trace_options {
  * depend on its own samples only, so adaptive renders are identical for any thread count. */
 bool trace_adaptive_stop(double s1, double s2, uint64_t n, double tolerance, double floor_lum);
 
+/* The pilot rule's sample count for a pixel whose pilot gave n samples of luminance with
+ * s1 = sum x, s2 = sum x^2 (mu, sigma^2 as in trace_adaptive_stop): the N at which
+ * I = 1.96 sigma / sqrt(N) reaches T max(mu, floor), N = (1.96 sigma / (T max(mu, floor)))^2,
+ * rounded up to whole batches and clamped to [min_spp, max_spp].  Pure, like the stop rule. */
+uint32_t trace_pilot_spp(double s1, double s2, uint64_t n, double tolerance, double floor_lum,
+                         uint32_t min_spp, uint32_t max_spp, uint32_t batch);
+
 struct trace_result {
     uint64_t n_samples;   /* camera samples added to the film by this call */
+    uint64_t n_pilot;     /* camera samples of adaptive pilots (traced, not in the film) */
     uint64_t n_rays;      /* rays traced (camera, bounce and shadow) */
     uint64_t n_nonfinite; /* samples dropped because a component was NaN or infinite */
     uint32_t first_bad_x; /* pixel and sample index of the first dropped sample, if any */
@@ -84,11 +117,13 @@ struct trace_result {
 void trace_result_add(struct trace_result *sum, const struct trace_result *r);
 
 /* Renders each pixel from its current count film->pixels[i].n up to opt->spp samples (sample
- * indices sample_offset + n), tiles handed out to opt->n_threads threads.  With opt->adaptive a
- * pixel also stops when trace_adaptive_stop holds at a test point, i.e. when n + n_dropped is
- * min_spp + k batch (k >= 0).  The film's result is bit-identical for any thread count and any
- * split of the work into calls.  Returns false only when threads cannot be started (err
- * filled). */
+ * indices sample_offset + n), tiles handed out to opt->n_threads threads.  With opt->adaptive,
+ * by the stop rule a pixel also stops when trace_adaptive_stop holds at a test point, i.e. when
+ * n + n_dropped is min_spp + k batch (k >= 0); by the pilot rule it renders only up to the count
+ * trace_pilot_spp gives for its pilot, pilot_spp samples from a stream independent of the
+ * image's (seed hashed with a tag), which the film never sees.  The film's result is
+ * bit-identical for any thread count and any split of the work into calls.  Returns false only
+ * when threads cannot be started (err filled). */
 bool trace_render(const struct trace_scene *ts, const struct trace_options *opt, struct film *film,
                   struct trace_result *result, struct mcpt_error *err);
 

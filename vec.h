@@ -154,8 +154,23 @@ static inline float mcpt_gamma(int n)
     const float eps = 0x1p-24f;
     return ((float)n * eps) / (1.0f - (float)n * eps);
 }
-static inline float next_float_up(float v) { return nextafterf(v, INFINITY); }
-static inline float next_float_down(float v) { return nextafterf(v, -INFINITY); }
+/* The neighbouring floats, nextafterf(v, +-INFINITY) to the bit, without the library call (a
+ * spawned ray makes three): PBRT 4e, ch. 6, "Managing Rounding Error", NextFloatUp/Down, which
+ * step the bit pattern; -0 and +0 both step to the smallest denormal, infinities towards the
+ * finite range stay put, and NaN stays NaN. */
+static inline float next_float_up(float v)
+{
+    if (isnan(v) || (isinf(v) && v > 0.0f))
+        return v;
+    if (v == 0.0f)
+        return 0x1p-149f;
+    uint32_t bits;
+    memcpy(&bits, &v, sizeof bits);
+    bits = v > 0.0f ? bits + 1u : bits - 1u;
+    memcpy(&v, &bits, sizeof v);
+    return v;
+}
+static inline float next_float_down(float v) { return -next_float_up(-v); }
 
 /* PBRT 4e, ch. 6, "Robust Spawned Ray Origins": p carries the absolute error bound p_error of
  * its computation; push it along the geometric normal n by the error projected on n, to the side

@@ -7,13 +7,18 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "vec.h"
 
-/* Makes a new empty folder "/tmp/mcpt_fuzz_<name>_XXXXXX" (mkdtemp) and writes its path to dir. */
+/* Makes a new empty folder "<tmp>/mcpt_fuzz_<name>_XXXXXX" (mkdtemp) and writes its path to
+ * dir; <tmp> is /dev/shm (memory) where it exists, else /tmp: rewriting the input file on
+ * every execution costs a disk's truncate and discard on /tmp, which made a harness 20 times
+ * slower. */
 static inline void fuzz_make_dir(char *dir, size_t dir_bytes, const char *name)
 {
-    int len = snprintf(dir, dir_bytes, "/tmp/mcpt_fuzz_%s_XXXXXX", name);
+    const char *tmp = access("/dev/shm", W_OK) == 0 ? "/dev/shm" : "/tmp";
+    int len = snprintf(dir, dir_bytes, "%s/mcpt_fuzz_%s_XXXXXX", tmp, name);
     if (len < 0 || (size_t)len >= dir_bytes || !mkdtemp(dir))
         abort();
 }

@@ -1,13 +1,17 @@
 #!/bin/sh
-# fuzz/run.sh SECONDS [BUILD] - runs each libFuzzer harness (fuzz_scene, fuzz_obj) for SECONDS
-# seconds from the repo root, seeded with scenes/, tests/data/, tests/extremes/ and the bad
-# corpus tests/bad/.
+# fuzz/run.sh SECONDS [BUILD [HARNESS...]] - runs each libFuzzer harness (fuzz_scene, fuzz_obj,
+# fuzz_checkpoint, fuzz_partial; or those named) for SECONDS seconds from the repo root, seeded
+# with scenes/, tests/data/, tests/extremes/ and the bad corpus tests/bad/.
+# FUZZ_RUNS=N runs each for N executions instead (-runs=N; SECONDS then bounds the time).
 # New inputs accumulate in BUILD/corpus-*/ between runs.  Prints each harness's final line
 # (executions "#N", coverage "cov:", features "ft:", corpus size) and fails when a harness
 # found a crash, leak or hang: the input is BUILD/crash-*; turn it into a tests/bad/ case.
 set -eu
 secs=${1:-60}
 B=${2:-build-fuzz}
+[ $# -ge 2 ] && shift 2 || shift $#
+harnesses=${*:-scene obj checkpoint partial}
+runs=${FUZZ_RUNS:--1}
 status=0
 
 # seed_copy DEST FILE...: copies each file under a name made from its path (names repeat)
@@ -20,7 +24,9 @@ seed_copy() {
     return 0
 }
 
-mkdir -p "$B/seeds-scene" "$B/seeds-obj" "$B/corpus-scene" "$B/corpus-obj"
+for h in scene obj checkpoint partial; do
+    mkdir -p "$B/seeds-$h" "$B/corpus-$h"
+done
 seed_copy "$B/seeds-scene" scenes/*.txt tests/data/scene/*.txt tests/data/cli/*.txt \
     tests/bad/scene/*.txt tests/bad/obj/*.txt tests/bad/mtl/*.txt tests/extremes/*.txt
 seed_copy "$B/seeds-obj" scenes/models/*.obj tests/data/obj/*.obj tests/data/scene/*.obj \
@@ -36,12 +42,22 @@ for obj in tests/bad/mtl/*.obj tests/data/obj/*.obj scenes/models/*.obj; do
     } >"$B/seeds-obj/$(echo "$obj" | tr '/' '_').mtl"
 done
 
-for h in scene obj; do
+# a checkpoint input is a control byte (odd: the harness reseals the checksum) and the file
+for f in tests/bad/ckpt/*.ckpt; do
+    for c in 0 1; do
+        { printf "\\$c"; cat "$f"; } >"$B/seeds-checkpoint/$c-$(basename "$f")"
+    done
+done
+seed_copy "$B/seeds-partial" tests/data/partial/*.exr tests/data/image/*.exr
+
+for h in $harnesses; do
     log="$B/fuzz_$h.log"
     echo "fuzz_$h: $secs s"
     rc=0
-    "$B/fuzz_$h" -max_total_time="$secs" -timeout=10 -rss_limit_mb=2048 \
-        -dict="fuzz/$h.dict" -artifact_prefix="$B/crash-$h-" -print_final_stats=1 \
+    dict=""
+    [ -f "fuzz/$h.dict" ] && dict="-dict=fuzz/$h.dict"
+    "$B/fuzz_$h" -max_total_time="$secs" -runs="$runs" -timeout=10 -rss_limit_mb=2048 $dict \
+        -artifact_prefix="$B/crash-$h-" -print_final_stats=1 \
         "$B/corpus-$h" "$B/seeds-$h" >"$log" 2>&1 || rc=$?
     grep -E '^#[0-9]+[[:space:]]+(INITED|DONE)' "$log" | tail -n 2
     grep -E '^stat::number_of_executed_units' "$log" || true

@@ -90,6 +90,28 @@ def main():
         for i in range(0, BITS, 6):
             out.write("        " + " ".join("0x%08xu," % x for x in v[i:i + 6]) + "\n")
         out.write("    },\n")
+    out.write("};\n\n")
+    # the products of every dimension's matrix with each 4-bit digit of an index, the dimension
+    # last: SOBOL_NIBBLES[p][v][d] = C_d * (v << 4p) over GF(2), so that sample.c computes a
+    # point of every dimension at once by 8 lookups, a lane per dimension
+    out.write("/* SOBOL_NIBBLES[p][v][d] = C_d * (v << 4p): the XOR of the columns 4p + b of\n"
+              " * dimension d for the bits b of v; x_d = XOR over p of SOBOL_NIBBLES[p][index digit p][d]. */\n"
+              "static const uint32_t SOBOL_NIBBLES[8][16][SOBOL_N_DIMS] = {\n")
+    for p in range(BITS // 4):
+        out.write("    {\n")
+        for v in range(16):
+            row = []
+            for cols in rows:
+                x = 0
+                for b in range(4):
+                    if v >> b & 1:
+                        x ^= cols[4 * p + b]
+                row.append(x)
+            out.write("        {\n")
+            for i in range(0, n_dims, 6):
+                out.write("            " + " ".join("0x%08xu," % x for x in row[i:i + 6]) + "\n")
+            out.write("        },\n")
+        out.write("    },\n")
     out.write("};\n\n#endif\n")
 
 

@@ -61,7 +61,7 @@ Test(bad, corpus, .init = setup, .fini = teardown, .timeout = 600)
     snprintf(out_dir, sizeof out_dir, "%s/out", tmpdir);
     snprintf(out_path, sizeof out_path, "%s/out.exr", out_dir);
     cr_assert_eq(mkdir(out_dir, 0755), 0);
-    int n_cases = 0, n_scene = 0, n_obj = 0, n_mtl = 0, n_ckpt = 0;
+    int n_cases = 0, n_scene = 0, n_obj = 0, n_mtl = 0, n_ckpt = 0, n_exr = 0;
     for (int line_no = 1; fgets(line, sizeof line, f); line_no++) {
         char *s = trim(line);
         if (*s == '\0' || *s == '#')
@@ -76,6 +76,7 @@ Test(bad, corpus, .init = setup, .fini = teardown, .timeout = 600)
         n_obj += strstr(args, "tests/bad/obj/") != NULL;
         n_mtl += strstr(args, "tests/bad/mtl/") != NULL;
         n_ckpt += strstr(args, "tests/bad/ckpt/") != NULL;
+        n_exr += strstr(args, "tests/bad/exr/") != NULL;
 
         FILE *o = fopen(out_path, "w"); /* an earlier image the failed run must not touch */
         cr_assert_not_null(o);
@@ -118,8 +119,10 @@ Test(bad, corpus, .init = setup, .fini = teardown, .timeout = 600)
                   n_scene + n_obj + n_mtl + n_ckpt);
     cr_assert(n_scene >= 40 && n_obj >= 15 && n_mtl >= 10 && n_ckpt >= 8,
               "scene %d, obj %d, mtl %d, ckpt %d", n_scene, n_obj, n_mtl, n_ckpt);
-    cr_log_info("bad corpus: %d cases (%d scene, %d OBJ, %d MTL, %d checkpoint, %d options)",
-                n_cases, n_scene, n_obj, n_mtl, n_ckpt, n_cases - n_scene - n_obj - n_mtl - n_ckpt);
+    cr_log_info("bad corpus: %d cases (%d scene, %d OBJ, %d MTL, %d checkpoint, %d EXR, %d "
+                "options)",
+                n_cases, n_scene, n_obj, n_mtl, n_ckpt, n_exr,
+                n_cases - n_scene - n_obj - n_mtl - n_ckpt - n_exr);
 }
 
 /* Every malformed file in tests/bad/ has a case: a file added without an expectation is an
@@ -128,15 +131,16 @@ Test(bad, every_file_listed)
 {
     char cases[65536];
     cr_assert(test_read_file(CASES_PATH, cases, sizeof cases) > 0);
-    const char *dirs[] = {"scene", "obj", "mtl", "ckpt"};
-    for (int k = 0; k < 4; k++) {
+    const char *dirs[] = {"scene", "obj", "mtl", "ckpt", "exr"};
+    for (int k = 0; k < 5; k++) {
         char dir[64];
         snprintf(dir, sizeof dir, "tests/bad/%s", dirs[k]);
         DIR *d = opendir(dir);
         cr_assert_not_null(d, "%s", dir);
         for (struct dirent *e; (e = readdir(d));) {
             const char *dot = strrchr(e->d_name, '.');
-            if (!dot || (strcmp(dot, ".txt") != 0 && strcmp(dot, ".ckpt") != 0))
+            if (!dot ||
+                (strcmp(dot, ".txt") != 0 && strcmp(dot, ".ckpt") != 0 && strcmp(dot, ".exr") != 0))
                 continue; /* the .obj and .mtl behind a wrapper scene, fixtures, the generator */
             char want[600];
             snprintf(want, sizeof want, "%s/%s ", dir, e->d_name);

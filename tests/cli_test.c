@@ -33,7 +33,7 @@ static int count_lines(const char *s)
 /* Bad usage: exit 2, exactly one line "mcpt: error: expected ...". */
 Test(cli, bad_usage, .init = setup, .fini = teardown)
 {
-    const char *cases[][4] = {
+    const char *cases[][7] = {
         {NULL},
         {"tests/data/cli/tiny.txt", "--spp", "0", NULL},
         {"tests/data/cli/tiny.txt", "--spp", "-3", NULL},
@@ -46,6 +46,12 @@ Test(cli, bad_usage, .init = setup, .fini = teardown)
         {"tests/data/cli/tiny.txt", "--bogus", NULL},
         {"tests/data/cli/tiny.txt", "--spp", NULL},
         {"a.txt", "b.txt", NULL},
+        {"tests/data/cli/tiny.txt", "--adaptive", "--adaptive-rule", "early", NULL},
+        {"tests/data/cli/tiny.txt", "--adaptive", "--pilot-spp", "1", NULL},
+        {"tests/data/cli/tiny.txt", "--adaptive-rule", "pilot", NULL}, /* without --adaptive */
+        {"tests/data/cli/tiny.txt", "--adaptive", "--adaptive-rule", "stop", "--pilot-spp", "8"},
+        {"tests/data/cli/tiny.txt", "--light-sampling", "sphere", NULL},
+        {"tests/data/cli/tiny.txt", "--rr-threshold", "0", NULL},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         char err[4096];

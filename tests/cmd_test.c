@@ -67,10 +67,10 @@ static int run_mcpt(const char *const *args, char *err_out, size_t err_bytes)
 }
 
 /* Each subcommand: --help 0; an unknown option, a missing file 2; a write into a missing folder
- * 1, with one line naming the file. */
+ * 2, found before any work (issue 15), with one line naming the file. */
 Test(cmd, subcommand_exit_statuses, .init = setup, .fini = teardown, .timeout = 60)
 {
-    char img[300], bad_out[300], part[300], err[4096], want[400];
+    char img[300], bad_out[300], part[300], err[4096], want[800];
     snprintf(img, sizeof img, "%s/img.exr", tmpdir);
     snprintf(part, sizeof part, "%s/part.exr", tmpdir);
     snprintf(bad_out, sizeof bad_out, "%s/no/such/dir/out.png", tmpdir);
@@ -92,22 +92,26 @@ Test(cmd, subcommand_exit_statuses, .init = setup, .fini = teardown, .timeout = 
                              {"merge", "--help", NULL}};
     for (int i = 0; i < 3; i++)
         cr_assert_eq(run_mcpt(help[i], err, sizeof err), 0, "%s --help: %s", help[i][0], err);
-    const char *usage[][4] = {{"compare", "--bogus", NULL},
+    const char *usage[][6] = {{"compare", "--bogus", NULL},
                               {"integrate", "--bogus", NULL},
                               {"merge", "--bogus", NULL},
                               {"compare", img, "missing.exr", NULL},
-                              {"merge", "missing.exr", "-o", NULL}};
-    for (int i = 0; i < 5; i++)
+                              {"merge", "missing.exr", "-o", NULL},
+                              {"compare", img, img, "--max-ref-luminance", "-1", NULL},
+                              {"compare", img, img, "--max-ref-luminance", "nan", NULL}};
+    for (int i = 0; i < 7; i++)
         cr_assert_eq(run_mcpt(usage[i], err, sizeof err), 2, "%s %s: %s", usage[i][0], usage[i][1],
                      err);
 
     const char *heat[] = {"compare", img, img, "--heatmap", bad_out, NULL};
-    cr_assert_eq(run_mcpt(heat, err, sizeof err), 1, "%s", err);
-    snprintf(want, sizeof want, "%s: error: cannot write: No such file or directory\n", bad_out);
+    cr_assert_eq(run_mcpt(heat, err, sizeof err), 2, "%s", err);
+    snprintf(want, sizeof want, "%s: error: cannot create: no folder '%s/no/such/dir'\n", bad_out,
+             tmpdir);
     cr_assert_str_eq(err, want);
     snprintf(bad_out, sizeof bad_out, "%s/no/such/dir/merged.exr", tmpdir);
     const char *merge[] = {"merge", part, "-o", bad_out, NULL};
-    cr_assert_eq(run_mcpt(merge, err, sizeof err), 1, "%s", err);
-    snprintf(want, sizeof want, "%s: error: cannot write: No such file or directory\n", bad_out);
+    cr_assert_eq(run_mcpt(merge, err, sizeof err), 2, "%s", err);
+    snprintf(want, sizeof want, "%s: error: cannot create: no folder '%s/no/such/dir'\n", bad_out,
+             tmpdir);
     cr_assert_str_eq(err, want);
 }

@@ -70,6 +70,28 @@ static struct scene light_scene(void)
     return s;
 }
 
+/* The same scene sampled by solid angle (render light-sampling=solid-angle), and with its
+ * triangle and quad swapped for ones that take the other path there: a triangle that fills
+ * almost the whole hemisphere of REF (solid angle above 6.22 sr: sampled uniformly by area,
+ * PBRT 4e's bound) and a rectangular quad (by solid angle, Urena et al. 2013), where
+ * light_scene's triangle goes by solid angle (Arvo 1995) and its parallelogram by area. */
+static struct scene light_scene_variant(int variant)
+{
+    struct scene s = light_scene();
+    if (variant == 0)
+        return s;
+    s.render.light_sampling = RENDER_LIGHT_SOLID_ANGLE;
+    if (variant == 2) {
+        lt_positions[0] = v3(-50.0f, -50.0f, 0.05f);
+        lt_positions[1] = v3(100.0f, -50.0f, 0.05f);
+        lt_positions[2] = v3(-50.0f, 100.0f, 0.05f);
+        lt_quads[0].corner = v3(-1.0f, -1.5f, 0.2f); /* a rectangle of about 0.9 sr */
+        lt_quads[0].e1 = v3(2.0f, 0.0f, 0.4f);
+        lt_quads[0].e2 = v3(0.12f, 0.9f, -0.6f); /* orthogonal to e1 */
+    }
+    return s;
+}
+
 /* light_table_build(s), which must succeed. */
 static struct light_table *build(const struct scene *s)
 {
@@ -173,59 +195,94 @@ static double light_density(void *ctx, vec3 w)
 }
 
 /* Chi-square (tests/chi2.h) of the directions light_sample draws against light_pdf, for a
- * triangle and a quad (uniform area, converted to solid angle), a sphere seen from outside (cone
- * sampling) and from inside (uniform area), and the sky (cosine about n_sky); each density
- * integrates to 1 (Bonferroni over the 5 tests). */
-Test(light, chi2_sampling, .timeout = 60)
+ * triangle and a quad by area, a triangle by solid angle (Arvo 1995) and by area above the
+ * bound, a quad by area (a parallelogram) and by solid angle (a rectangle, Urena et al. 2013),
+ * both by solid angle warped by the cosine at REF (PBRT 4e's bilinear warp), a sphere seen from
+ * outside (cone sampling) and from inside (uniform area), and the sky (cosine about n_sky); each
+ * density integrates to 1 (Bonferroni over the 9 tests: five lights, then the triangle and quad
+ * of the two scenes by solid angle). */
+Test(light, chi2_sampling, .timeout = 120)
 {
-    struct scene s = light_scene();
-    struct light_table *lt = build(&s);
-    cr_assert_eq(light_count(lt), 5u, "four lights and the sky");
-    cr_assert_eq(light_sky_idx(lt), 4u);
-    vec3 n_sky = v3_normalize(v3(0.3f, 0.2f, 1.0f));
-    for (uint32_t k = 0; k < 5; k++) {
-        struct light_ctx c = {lt, &s, k, n_sky};
-        struct chi2_spec spec = chi2_sphere(light_draw, light_density, &c);
-        spec.n_samples = 500000;
-        struct chi2_result r;
-        chi2_run(&spec, &r);
-        cr_assert(chi2_accept(&r, 5), "light %u: %s", k, r.msg);
-        cr_assert(fabs(r.pdf_integral - 1.0) < 2e-3, "light %u: pdf integrates to %f", k,
-                  r.pdf_integral);
+    for (int variant = 0; variant < 3; variant++) {
+        struct scene s = light_scene_variant(variant);
+        struct light_table *lt = build(&s);
+        cr_assert_eq(light_count(lt), 5u, "four lights and the sky");
+        cr_assert_eq(light_sky_idx(lt), 4u);
+        vec3 n_sky = v3_normalize(v3(0.3f, 0.2f, 1.0f));
+        for (uint32_t k = 0; k < (variant == 0 ? 5u : 2u); k++) {
+            struct light_ctx c = {lt, &s, k, n_sky};
+            struct chi2_spec spec = chi2_sphere(light_draw, light_density, &c);
+            spec.n_samples = 500000;
+            struct chi2_result r;
+            chi2_run(&spec, &r);
+            cr_assert(chi2_accept(&r, 9), "scene %d, light %u: %s", variant, k, r.msg);
+            cr_assert(fabs(r.pdf_integral - 1.0) < 2e-3, "scene %d, light %u: pdf integrates to %f",
+                      variant, k, r.pdf_integral);
+        }
+        light_table_free(lt);
     }
-    light_table_free(lt);
 }
 
 /* light_pdf at the sampled point (the point and its normal as the sample gives them) returns
- * the density light_sample returned: exactly for the area lights and the cone, whose two
- * computations are the same formula, and to float rounding for the sky, whose sample measures
- * cos theta before normalising wi. */
+ * the density light_sample returned: exactly by area and for the spheres (the cone), whose two
+ * computations are the same formula, to 1e-4 by solid angle (the density is the bilinear
+ * warp's at the inverse of the spherical map, which rounds), and to float rounding for the
+ * sky, whose sample measures cos theta before normalising wi. */
 Test(light, pdf_agrees_with_sample)
 {
-    struct scene s = light_scene();
-    struct light_table *lt = build(&s);
-    vec3 n_sky = v3_normalize(v3(-0.2f, 0.1f, 1.0f));
-    struct pcg32 rng;
-    sample_pcg32_seed(&rng, 3u, 9u);
-    for (uint32_t k = 0; k < light_count(lt); k++) {
-        int n_ok = 0;
-        for (int i = 0; i < 2000; i++) {
-            vec2 u = {sample_pcg32_float(&rng), sample_pcg32_float(&rng)};
-            struct light_sample ls;
-            if (!light_sample(lt, k, &REF, n_sky, u, &ls))
-                continue;
-            n_ok++;
-            cr_assert(!ls.is_delta && ls.pdf_sa > 0.0f && isfinite(ls.pdf_sa));
-            cr_assert_eq(ls.is_infinite, k == light_sky_idx(lt));
-            struct surface on = {.p = ls.p, .ng = ls.n};
-            float pdf = light_pdf(lt, k, &REF, n_sky, ls.is_infinite ? NULL : &on, ls.wi);
-            if (ls.is_infinite)
-                cr_assert(fabsf(pdf / ls.pdf_sa - 1.0f) < 1e-5f, "sky: %g vs %g", pdf, ls.pdf_sa);
-            else
-                cr_assert_eq(pdf, ls.pdf_sa, "light %u: light_pdf %g, light_sample %g", k, pdf,
-                             ls.pdf_sa);
+    for (int variant = 0; variant < 3; variant++) {
+        struct scene s = light_scene_variant(variant);
+        struct light_table *lt = build(&s);
+        vec3 n_sky = v3_normalize(v3(-0.2f, 0.1f, 1.0f));
+        struct pcg32 rng;
+        sample_pcg32_seed(&rng, 3u, 9u);
+        for (uint32_t k = 0; k < light_count(lt); k++) {
+            int n_ok = 0;
+            for (int i = 0; i < 2000; i++) {
+                vec2 u = {sample_pcg32_float(&rng), sample_pcg32_float(&rng)};
+                struct light_sample ls;
+                if (!light_sample(lt, k, &REF, n_sky, u, &ls))
+                    continue;
+                n_ok++;
+                cr_assert(!ls.is_delta && ls.pdf_sa > 0.0f && isfinite(ls.pdf_sa));
+                cr_assert_eq(ls.is_infinite, k == light_sky_idx(lt));
+                struct surface on = {.p = ls.p, .ng = ls.n};
+                float pdf = light_pdf(lt, k, &REF, n_sky, ls.is_infinite ? NULL : &on, ls.wi);
+                if (ls.is_infinite)
+                    cr_assert(fabsf(pdf / ls.pdf_sa - 1.0f) < 1e-5f, "sky: %g vs %g", pdf,
+                              ls.pdf_sa);
+                else if (variant > 0 && k < 2)
+                    cr_assert(fabsf(pdf / ls.pdf_sa - 1.0f) < 1e-4f,
+                              "scene %d, light %u: light_pdf %g, light_sample %g", variant, k, pdf,
+                              ls.pdf_sa);
+                else
+                    cr_assert_eq(pdf, ls.pdf_sa, "light %u: light_pdf %g, light_sample %g", k, pdf,
+                                 ls.pdf_sa);
+            }
+            cr_assert(n_ok > 1000, "light %u: %d of 2000 samples carry light", k, n_ok);
         }
-        cr_assert(n_ok > 1000, "light %u: %d of 2000 samples carry light", k, n_ok);
+        light_table_free(lt);
+    }
+}
+
+/* A one-sided emitter seen from behind its plane gives no sample (it sends no light there):
+ * the triangle and the quad of the light scene made one-sided, from a point behind each. */
+Test(light, one_sided_emitter_from_behind)
+{
+    struct scene s = light_scene();
+    lt_materials[0].two_sided_emission = false;
+    struct light_table *lt = build(&s);
+    vec3 n_tri = v3_cross(v3_sub(lt_positions[1], lt_positions[0]),
+                          v3_sub(lt_positions[2], lt_positions[0]));
+    vec3 n_quad = v3_cross(lt_quads[0].e1, lt_quads[0].e2);
+    for (uint32_t k = 0; k < 2; k++) {
+        vec3 n = k == 0 ? n_tri : n_quad, p0 = k == 0 ? lt_positions[0] : lt_quads[0].corner;
+        struct surface front = REF, back = REF;
+        front.p = v3_add(p0, v3_normalize(n));
+        back.p = v3_sub(p0, v3_normalize(n));
+        struct light_sample ls;
+        cr_assert(light_sample(lt, k, &front, front.ns, (vec2){0.3f, 0.4f}, &ls), "light %u", k);
+        cr_assert_not(light_sample(lt, k, &back, back.ns, (vec2){0.3f, 0.4f}, &ls), "light %u", k);
     }
     light_table_free(lt);
 }

@@ -5,7 +5,8 @@
  * sheet and curve files are named from it by replacing the extension (never taking a leading
  * dot for one).  An image is written as the EXR of every render (7 channels and mcpt's header
  * attributes) with its PNG beside it; a snapshot's names carry the spp zero-padded to the
- * final spp's digits. */
+ * final spp's digits.  Every file a render may write is listed before it, and none may be an
+ * input or another output. */
 #include <criterion/criterion.h>
 
 #include "image.h"
@@ -115,5 +116,61 @@ Test(output, image_and_snapshot_files)
     cr_assert(test_exists(path), "%s", path);
     cr_assert(output_write_heatmap(&p, &film, &err)); /* none asked for: nothing written */
     film_free(&film);
+    test_remove_dir(dir);
+}
+
+/* Every file a render may write is listed before it starts: image, preview, checkpoint, the
+ * curve's three files, a snapshot and its preview at 1, 2, 4 and 5 of 5 spp (the final spp
+ * included), the contact sheet; a PNG image (-o r.png) is listed once, as the image. */
+Test(output, list_names_every_file)
+{
+    struct output_paths p;
+    struct mcpt_error err;
+    cr_assert(output_paths_init(&p, "s.txt", "r.exr", NULL, NULL, false, true, &err));
+    static struct output_file files[OUTPUT_MAX_FILES];
+    int n = output_list(&p, "c.csv", true, 5, files, &err);
+    const char *want[] = {"r.exr",      "r.png",      "r.exr.ckpt", "c.csv",      "c.json",
+                          "c.svg",      "r-spp1.exr", "r-spp1.png", "r-spp2.exr", "r-spp2.png",
+                          "r-spp4.exr", "r-spp4.png", "r-spp5.exr", "r-spp5.png", "r-contact.png"};
+    cr_assert_eq(n, 15);
+    for (int i = 0; i < n; i++)
+        cr_assert_str_eq(files[i].path, want[i]);
+    n = output_list(&p, NULL, true, UINT32_MAX, files, &err);
+    cr_assert_eq(n, 3 + 2 * 33 + 1, "1, 2, 4, ..., 2^31 and 2^32 - 1 spp: %d files", n);
+    /* a PNG image alone: it is the image, and the snapshots are named from it */
+    cr_assert(output_paths_init(&p, "s.txt", "r.png", NULL, NULL, false, true, &err));
+    n = output_list(&p, NULL, true, 1, files, &err);
+    cr_assert_eq(n, 5);
+    cr_assert_str_eq(files[0].path, "r.png");
+    cr_assert_str_eq(files[0].role, "the image (-o)");
+    cr_assert_str_eq(files[1].path, "r.png.ckpt");
+    cr_assert_str_eq(files[2].path, "r-spp1.exr");
+}
+
+/* output_check: two outputs of one name, or an output naming an input, are refused (the later
+ * output named, with what it would overwrite); distinct creatable outputs pass. */
+Test(output, check_refuses_shared_files)
+{
+    char dir[256];
+    test_make_dir(dir, sizeof dir, "output");
+    struct output_file out[2] = {{.role = "the image (-o)"}, {.role = "the sample-count map"}};
+    struct output_file in[1] = {{.role = "the scene file"}};
+    snprintf(out[0].path, sizeof out[0].path, "%s/a.exr", dir);
+    snprintf(out[1].path, sizeof out[1].path, "%s/./a.exr", dir);
+    snprintf(in[0].path, sizeof in[0].path, "%s/s.txt", dir);
+    struct mcpt_error err;
+    cr_assert_not(output_check(out, 2, in, 1, &err));
+    cr_assert_str_eq(err.file, out[1].path);
+    char want[FILE_PATH_BYTES + 200];
+    snprintf(want, sizeof want,
+             "expected the sample-count map to be a file of its own, got the same file as the "
+             "image (-o) '%s'",
+             out[0].path);
+    cr_assert_str_eq(err.msg, want);
+    snprintf(out[1].path, sizeof out[1].path, "%s/b.png", dir);
+    cr_assert(output_check(out, 2, in, 1, &err), "%s", err.msg);
+    snprintf(out[1].path, sizeof out[1].path, "%s", in[0].path);
+    cr_assert_not(output_check(out, 2, in, 1, &err));
+    cr_assert(strstr(err.msg, "got the same file as the scene file"), "%s", err.msg);
     test_remove_dir(dir);
 }

@@ -47,23 +47,27 @@ static double uniform01(void)
     return (double)((g_rng * 0x2545F4914F6CDD1Dull) >> 11) * 0x1p-53;
 }
 
-/* A film whose pixels hold random sums spanning exponents 2^-60 .. 2^100 and counts n with
- * n + n_dropped = n_total. */
+/* A film whose pixels hold random sums spanning exponents 2^-60 .. 2^60 and sums of squares
+ * 2^-60 .. 2^100, counts n with n + n_dropped = n_total, and sums that n samples can give
+ * (film_pixel_problem: each sum of squares at least sum^2 / n, Cauchy-Schwarz). */
 static void random_film(struct film *film, int width, int height, uint32_t n_total)
 {
     struct mcpt_error err;
     cr_assert(film_init(film, width, height, &err), "%s", err.msg);
     for (int i = 0; i < width * height; i++) {
         struct film_pixel *p = &film->pixels[i];
-        for (int c = 0; c < 3; c++) {
-            p->sum[c] = uniform01() * ldexp(1.0, (int)(uniform01() * 160.0) - 60);
-            p->sum_sq[c] = uniform01() * ldexp(1.0, (int)(uniform01() * 160.0) - 60);
-        }
-        p->sum_lum_sq = uniform01() * 1e10;
         p->n_dropped = (uint32_t)(uniform01() * 3.0);
-        if (p->n_dropped > n_total)
-            p->n_dropped = n_total;
+        if (p->n_dropped >= n_total)
+            p->n_dropped = n_total - 1;
         p->n = n_total - p->n_dropped;
+        double n = (double)p->n;
+        for (int c = 0; c < 3; c++) {
+            p->sum[c] = uniform01() * ldexp(1.0, (int)(uniform01() * 120.0) - 60);
+            p->sum_sq[c] = fmax(uniform01() * ldexp(1.0, (int)(uniform01() * 160.0) - 60),
+                                p->sum[c] * p->sum[c] / n * 1.001);
+        }
+        double lum = film_sum_lum(p);
+        p->sum_lum_sq = fmax(uniform01() * 1e10, lum * lum / n * 1.001);
     }
 }
 
@@ -173,6 +177,46 @@ Test(partial, read_refuses_incomplete_pixels, .init = setup, .fini = teardown)
                               "pixel 1,1 (an interrupted render? finish it with --resume first)");
     cr_assert_str_eq(err.file, path);
     cr_assert_null(back.pixels);
+    film_free(&film);
+}
+
+/* Sums no render writes (a negative sum of squares, a sum beyond Cauchy-Schwarz's bound
+ * sum^2 <= n sum_sq), though finite and with the right counts, are refused (issue 15). */
+Test(partial, read_refuses_impossible_sums, .init = setup, .fini = teardown)
+{
+    struct film film, back;
+    random_film(&film, 3, 2, 16);
+    struct partial_info info = one_range(0, 16, "r"), info_back;
+    char path[300];
+    struct mcpt_error err;
+    film.pixels[5].sum_sq[1] = -1.0;
+    cr_assert(partial_write_exr(scratch(path, sizeof path, "neg.exr"), &film, &info, &err));
+    cr_assert_not(partial_read_exr(path, &back, &info_back, &err));
+    cr_assert(strstr(err.msg, "got a sum of squares below 0") && strstr(err.msg, "pixel 2,1"), "%s",
+              err.msg);
+    film.pixels[5].sum_sq[1] = 1.0;
+    film.pixels[5].sum[1] = 100.0; /* 16 samples, squares summing to 1: |sum| <= 4 */
+    cr_assert(partial_write_exr(path, &film, &info, &err));
+    cr_assert_not(partial_read_exr(path, &back, &info_back, &err));
+    cr_assert(strstr(err.msg, "a sum whose square exceeds the count times the sum of squares"),
+              "%s", err.msg);
+    cr_assert_null(back.pixels);
+    film_free(&film);
+}
+
+/* The attributes mcpt quotes in its messages (the render settings, the ranges) must be
+ * printable: a line break or an escape sequence from a file would reach the terminal. */
+Test(partial, read_refuses_unprintable_attributes, .init = setup, .fini = teardown)
+{
+    struct film film, back;
+    random_film(&film, 2, 2, 4);
+    struct partial_info info = one_range(0, 4, "scene=1\n\x1b[2Jspp=4"), info_back;
+    char path[300];
+    struct mcpt_error err;
+    cr_assert(partial_write_exr(scratch(path, sizeof path, "ctl.exr"), &film, &info, &err));
+    cr_assert_not(partial_read_exr(path, &back, &info_back, &err));
+    cr_assert_str_eq(err.msg, "expected attribute 'mcpt.render' of printable ASCII characters, "
+                              "got other bytes");
     film_free(&film);
 }
 

@@ -5,6 +5,7 @@
  * interrupted any number of times and resumed is bit-identical to an uninterrupted one. */
 #include <criterion/criterion.h>
 
+#include <dirent.h>
 #include <signal.h>
 #include <time.h>
 
@@ -84,7 +85,7 @@ static void assert_partial(const char *exr_path, float spp)
     image_free(&img);
 }
 
-/* FNV-1a 64 of a file, as checkpoint_hash_file records it (docs/reliability.md). */
+/* FNV-1a 64 of a file, as the scene loader records it (scene.file_hash, docs/reliability.md). */
 static uint64_t fnv1a_file(const char *path)
 {
     FILE *f = fopen(path, "rb");
@@ -225,7 +226,10 @@ Test(interrupt, sigint_then_sigterm_then_bit_identical, .init = setup, .fini = t
     cr_assert_lt(stop_s, 2.0, "took %.2f s to stop", stop_s);
     cr_log_info("SIGINT to exit: %.3f s", stop_s);
     cr_assert(strstr(err, "mcpt: interrupted by SIGINT"), "%s", err);
-    cr_assert(strstr(err, "--resume"), "%s", err);
+    char hint[700]; /* the command as this binary was invoked (issue 14, item 5) */
+    snprintf(hint, sizeof hint, "continue with: %s %s --resume %s\n",
+             getenv("MCPT") ? getenv("MCPT") : "./mcpt", SCENE, ckpt);
+    cr_assert(strstr(err, hint), "want '%s' in: %s", hint, err);
     assert_partial(part, 4096.0f);
     cr_assert(test_exists(ckpt));
 
@@ -295,4 +299,91 @@ Test(interrupt, second_signal_exits_at_once, .init = setup, .fini = teardown, .t
         cr_assert(checkpoint_load(ckpt, &film, &info, &e), "%s", e.msg);
         film_free(&film);
     }
+}
+
+/* Two signals during the checkpoint's write (the first starts it, the second arrives while its
+ * temporary is being written): mcpt exits at once and leaves no temporary behind.  The film is
+ * 1500x1500, so the checkpoint is 144 MB and takes long enough to be caught mid-write. */
+Test(interrupt, second_signal_mid_checkpoint_leaves_no_temporary, .init = setup, .fini = teardown,
+     .timeout = 180)
+{
+    char out[300], err_path[300], err[4096];
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
+    const char *args[] = {SCENE,   "--width", "1500",      "--height", "1500",
+                          "--spp", "64",      "--threads", "2",        "--checkpoint-every",
+                          "0",     "-o",      out,         NULL};
+    pid_t pid = test_start_mcpt(args, NULL, err_path, ALARM_S);
+    wait_for_progress(err_path);
+    kill(pid, SIGINT);
+    bool caught = false;
+    for (int k = 0; k < 20000 && !caught; k++) { /* the checkpoint's temporary appears */
+        DIR *d = opendir(tmpdir);
+        for (struct dirent *e; d && (e = readdir(d));)
+            caught |= strncmp(e->d_name, "out.exr.ckpt.tmp.", 17) == 0;
+        closedir(d);
+        if (!caught)
+            nanosleep(&(struct timespec){0, 500 * 1000}, NULL);
+    }
+    kill(pid, SIGTERM);
+    int rc = test_wait(pid);
+    test_read_file(err_path, err, sizeof err);
+    cr_assert(caught, "the checkpoint's temporary never appeared: %s", err);
+    cr_assert(rc == 143 || rc == 130, "exit %d: %s", rc, err);
+    DIR *d = opendir(tmpdir);
+    for (struct dirent *e; d && (e = readdir(d));)
+        cr_assert_null(strstr(e->d_name, ".tmp."), "left %s (exit %d)", e->d_name, rc);
+    closedir(d);
+}
+
+/* SIGINT when the checkpoint cannot be written (its folder was removed during the render):
+ * the partial image is still written, and the one error line says so; exit 1. */
+Test(interrupt, checkpoint_unwritable_still_writes_the_image, .init = setup, .fini = teardown,
+     .timeout = 120)
+{
+    char dir[300], ckpt[340], out[300], err_path[300], err[4096];
+    snprintf(dir, sizeof dir, "%s/ck", tmpdir);
+    snprintf(ckpt, sizeof ckpt, "%s/c.ckpt", dir);
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
+    cr_assert_eq(mkdir(dir, 0755), 0);
+    const char *args[] = {SCENE, "--spp", SIGNAL_SPP, "--threads",          "2", "--checkpoint",
+                          ckpt,  "-o",    out,        "--checkpoint-every", "0", NULL};
+    pid_t pid = test_start_mcpt(args, NULL, err_path, ALARM_S);
+    wait_for_progress(err_path);
+    cr_assert_eq(rmdir(dir), 0);
+    kill(pid, SIGINT);
+    int rc = test_wait(pid);
+    test_read_file(err_path, err, sizeof err);
+    cr_assert_eq(rc, 1, "exit %d: %s", rc, err);
+    char want[800];
+    snprintf(want, sizeof want,
+             "%s: error: cannot write: No such file or directory; the partial image %s was "
+             "written, but the render cannot be resumed\n",
+             ckpt, out);
+    cr_assert(strstr(err, want), "want '%s' in: %s", want, err);
+    assert_partial(out, 4096.0f);
+}
+
+/* A render stopped (SIGSTOP) for 1.5 s and continued (SIGCONT) reports its wall time, which
+ * counts the stop, and its CPU time, which does not: "render W s wall, C s CPU", W - C >= 1.5
+ * on one thread. */
+Test(interrupt, stopped_time_is_wall_not_cpu, .init = setup, .fini = teardown, .timeout = 120)
+{
+    char out[300], out_path[300], err_path[300], text[4096];
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(out_path, sizeof out_path, "%s/stdout.txt", tmpdir);
+    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
+    const char *args[] = {SCENE, "--spp", "2048", "--threads", "1", "-o", out, NULL};
+    pid_t pid = test_start_mcpt(args, out_path, err_path, ALARM_S);
+    wait_for_progress(err_path);
+    kill(pid, SIGSTOP);
+    nanosleep(&(struct timespec){1, 500 * 1000 * 1000}, NULL);
+    kill(pid, SIGCONT);
+    cr_assert_eq(test_wait(pid), 0);
+    test_read_file(out_path, text, sizeof text);
+    const char *r = strstr(text, "render ");
+    double wall = 0.0, cpu = 0.0;
+    cr_assert(r && sscanf(r, "render %lf s wall, %lf s CPU", &wall, &cpu) == 2, "%s", text);
+    cr_assert_geq(wall - cpu, 1.5, "wall %.2f s, CPU %.2f s", wall, cpu);
 }

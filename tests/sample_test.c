@@ -154,6 +154,63 @@ Test(sample, sobol_matches_generator_matrices)
     }
 }
 
+/* The nibble table the joint point is computed from is the generator matrices' product with
+ * every 4-bit digit: SOBOL_NIBBLES[p][v][d] = C_d * (v << 4p) over GF(2). */
+Test(sample, sobol_nibbles_match_generator_matrices)
+{
+    for (int p = 0; p < 8; p++)
+        for (uint32_t v = 0; v < 16; v++)
+            for (int d = 0; d < SOBOL_N_DIMS; d++) {
+                uint32_t x = 0;
+                for (int b = 0; b < 4; b++)
+                    if (v >> b & 1u)
+                        x ^= SOBOL_MATRICES[d][4 * p + b];
+                cr_assert_eq(SOBOL_NIBBLES[p][v][d], x, "digit %d value %u dim %d", p, v, d);
+            }
+}
+
+/* A sampler started once per pixel (sample_start_pixel) and then per sample
+ * (sample_start_index), in any order of sample indices, gives the values of a sampler started
+ * afresh for each sample: what it keeps between samples (the pixel's seeds, the joint point,
+ * the padded block) is a cache of a function of (seed, pixel, sample, dimension).  Requests of
+ * both sizes at every offset of the bounce blocks, in the extra light-sample block, and a sample
+ * that starts in the block where the last one ended. */
+Test(sample, pixel_start_matches_sample_start)
+{
+    static const uint32_t order[] = {5, 0, 1, 1000, 3, 5, 77, 2, 4096, 0};
+    for (int k = 0; k < SAMPLER_COUNT; k++) {
+        struct sampler px;
+        sample_start_pixel(&px, KINDS[k], 21u, 4242u, 16u);
+        for (size_t i = 0; i < sizeof order / sizeof order[0]; i++) {
+            sample_start_index(&px, order[i]);
+            /* odd samples start in the block where the previous one ended */
+            for (uint32_t dim = i % 2 ? 95 : 0; dim < 100;) {
+                bool is_2d = (dim * 7 + order[i]) % 3 == 0;
+                struct sampler fresh;
+                sample_start_spp(&fresh, KINDS[k], 21u, 4242u, order[i], 16u);
+                sample_set_dim(&fresh, dim);
+                sample_set_dim(&px, dim);
+                if (is_2d) {
+                    vec2 a = sample_2d(&px), b = sample_2d(&fresh);
+                    cr_assert(a.x == b.x && a.y == b.y, "%s sample %u dim %u (2D)",
+                              sample_sampler_name(KINDS[k]), order[i], dim);
+                } else {
+                    cr_assert(sample_1d(&px) == sample_1d(&fresh), "%s sample %u dim %u",
+                              sample_sampler_name(KINDS[k]), order[i], dim);
+                }
+                dim += is_2d ? 2 + dim % 2 : 1;
+            }
+            struct sampler fresh;
+            sample_start_spp(&fresh, KINDS[k], 21u, 4242u, order[i], 16u);
+            sample_set_dim(&fresh, SAMPLE_DIM_LIGHT_EXTRA + 4);
+            sample_set_dim(&px, SAMPLE_DIM_LIGHT_EXTRA + 4);
+            vec2 a = sample_2d(&px), b = sample_2d(&fresh);
+            cr_assert(a.x == b.x && a.y == b.y, "%s sample %u light-sample block",
+                      sample_sampler_name(KINDS[k]), order[i]);
+        }
+    }
+}
+
 /* Is every elementary interval [a 2^-j, (a+1) 2^-j) x [b 2^-(m-j), (b+1) 2^-(m-j)) hit exactly
  * once by the 2^m points (x, y) (fractions of 2^32)?  That is a (0,m,2)-net in base 2. */
 static bool is_02_net(const uint32_t *x, const uint32_t *y, int m)
@@ -228,14 +285,16 @@ Test(sample, sobol_power_of_two_prefixes_stratified)
 }
 
 /* sample_2d of the Sobol' sampler gives (0,m,2)-nets for the first 2^m samples, at the joint
- * pixel dimensions (Sobol' dimensions 0 and 1) and at padded pairs: scrambling and shuffling
- * keep Sobol's 2D nets. */
+ * pixel dimensions (Sobol' dimensions 0 and 1) and at padded pairs (the first bounce's BSDF
+ * direction on): scrambling and shuffling keep Sobol's 2D nets. */
 Test(sample, sobol_2d_requests_are_02_nets)
 {
-    cr_assert(SAMPLE_SOBOL_JOINT_DIMS <= 11, "dims below are padded");
-    static const uint32_t dims[] = {0, 11, 14, SAMPLE_DIM_LIGHT_EXTRA + 1};
+    cr_assert(SAMPLE_SOBOL_JOINT_DIMS <= SAMPLE_DIM_BOUNCE0 + SAMPLE_BOUNCE_BSDF_DIR,
+              "dims below are padded");
+    static const uint32_t dims[] = {0, SAMPLE_DIM_BOUNCE0 + SAMPLE_BOUNCE_BSDF_DIR, 11, 14,
+                                    SAMPLE_DIM_LIGHT_EXTRA + 1};
     static uint32_t x[1024], y[1024];
-    for (size_t d = 0; d < 4; d++)
+    for (size_t d = 0; d < sizeof dims / sizeof dims[0]; d++)
         for (int m = 1; m <= 10; m++) {
             for (uint32_t i = 0; i < (1u << m); i++) {
                 struct sampler s;
@@ -289,6 +348,25 @@ Test(sample, stratified_sets_fill_every_stratum)
             free(hx);
             free(hy);
             free(cell);
+        }
+    }
+}
+
+/* Stratified sets as large as a uint32_t holds (--spp 4294967295, or --batch 4294967295 with
+ * --adaptive): the m x n grid's rows ceil(N / m) must not wrap to 0 (issue 15: the sample never
+ * ended); the points lie in [0, 1). */
+Test(sample, stratified_set_of_2_32_minus_1)
+{
+    static const uint32_t ns[] = {UINT32_MAX, UINT32_MAX - 1, 4294836225u /* 65535^2 */};
+    for (size_t t = 0; t < sizeof ns / sizeof ns[0]; t++) {
+        for (uint32_t i = 0; i < 64; i++) {
+            struct sampler s;
+            sample_start_spp(&s, SAMPLER_STRATIFIED, 1u, 5u, i, ns[t]);
+            float u1 = sample_1d(&s);
+            vec2 u2 = sample_2d(&s);
+            cr_assert(u1 >= 0.0f && u1 < 1.0f && u2.x >= 0.0f && u2.x < 1.0f && u2.y >= 0.0f &&
+                          u2.y < 1.0f,
+                      "N %u sample %u: %g %g %g", ns[t], i, u1, u2.x, u2.y);
         }
     }
 }
@@ -361,14 +439,14 @@ Test(sample, samplers_uniform_and_independent_in_expectation)
 }
 
 /* Dimensions within a pixel are decorrelated: over one pixel's first 1024 samples the
- * correlation of two joint dimensions (5 and 8), of a joint and a padded one (0 and 12) and of
+ * correlation of two joint dimensions (2 and 5), of a joint and a padded one (0 and 12) and of
  * two padded requests (11 and 14) is at most that of a random pairing, |r| < 4 / sqrt(n - 1).
  * Sobol' without its per-request shuffle, or strata paired identically, would give r near 1. */
 Test(sample, padding_decorrelates_dimensions)
 {
     const int n = 1024;
     for (int k = 1; k < SAMPLER_COUNT; k++) {
-        const uint32_t pairs[3][2] = {{5, 8}, {0, 12}, {11, 14}};
+        const uint32_t pairs[3][2] = {{2, 5}, {0, 12}, {11, 14}};
         for (int q = 0; q < 3; q++) {
             double sa = 0, sb = 0, saa = 0, sbb = 0, sab = 0;
             for (int i = 0; i < n; i++) {
@@ -554,6 +632,163 @@ Test(sample, narrow_cone_keeps_precision)
     cr_assert_eq(pdf_uniform_cone(&wide_sin2), pdf_uniform_cone(&wide_cos));
 }
 
+/* ---- the spherical polygons and the bilinear warp ---- */
+
+/* Whether unit w lies inside the spherical triangle (a, b, c): on the inner side of each edge's
+ * great circle. */
+static bool in_sph_triangle(vec3 a, vec3 b, vec3 c, vec3 w)
+{
+    float o = v3_dot(a, v3_cross(b, c));
+    return v3_dot(w, v3_cross(a, b)) * o >= 0.0f && v3_dot(w, v3_cross(b, c)) * o >= 0.0f &&
+           v3_dot(w, v3_cross(c, a)) * o >= 0.0f;
+}
+
+static bool draw_sph_triangle(void *ctx, const float u[3], vec3 *w)
+{
+    *w = sample_spherical_triangle(ctx, (vec2){u[0], u[1]});
+    return true;
+}
+static double pdf_sph_triangle_at(void *ctx, vec3 w)
+{
+    const struct sample_sph_triangle *st = ctx;
+    return in_sph_triangle(st->a, st->b, st->c, w) ? pdf_spherical_triangle(st) : 0.0;
+}
+
+struct rect_ctx {
+    struct sample_sph_rect sr;
+    vec3 corner, e1, e2;
+};
+static bool draw_sph_rect(void *ctx, const float u[3], vec3 *w)
+{
+    struct rect_ctx *c = ctx;
+    *w = v3_normalize(v3_sub(sample_spherical_rectangle(&c->sr, (vec2){u[0], u[1]}), c->sr.o));
+    return true;
+}
+/* 1 / S where the ray from o along w meets the rectangle (a ray-plane test in its frame). */
+static double pdf_sph_rect_at(void *ctx, vec3 w)
+{
+    struct rect_ctx *c = ctx;
+    vec3 n = v3_cross(c->e1, c->e2);
+    float t = v3_dot(n, v3_sub(c->corner, c->sr.o)) / v3_dot(n, w);
+    if (!(t > 0.0f))
+        return 0.0;
+    vec3 d = v3_sub(v3_add(c->sr.o, v3_scale(w, t)), c->corner);
+    float s1 = v3_dot(d, c->e1) / v3_dot(c->e1, c->e1),
+          s2 = v3_dot(d, c->e2) / v3_dot(c->e2, c->e2);
+    return s1 >= 0.0f && s1 <= 1.0f && s2 >= 0.0f && s2 <= 1.0f ? pdf_spherical_rectangle(&c->sr)
+                                                                : 0.0;
+}
+
+static const float BILINEAR_W[4] = {0.2f, 1.0f, 0.6f, 0.05f};
+static bool draw_bilinear(void *ctx, const float u[3], vec3 *w)
+{
+    (void)ctx;
+    vec2 p = sample_bilinear((vec2){u[0], u[1]}, BILINEAR_W);
+    *w = v3(p.x, p.y, 0.0f);
+    return true;
+}
+static double pdf_bilinear_at(void *ctx, vec3 w)
+{
+    (void)ctx;
+    return pdf_bilinear((vec2){w.x, w.y}, BILINEAR_W);
+}
+
+/* A rectangle seen from o with corner + s e1 + t e2; the frame it is given in is rotated. */
+static struct rect_ctx rect_case(vec3 o, vec3 corner, vec3 e1, vec3 e2)
+{
+    struct rect_ctx c = {.corner = corner, .e1 = e1, .e2 = e2};
+    cr_assert(sample_sph_rect_init(o, corner, e1, e2, &c.sr));
+    return c;
+}
+
+/* Arvo's spherical-triangle map (Arvo 1995) and the spherical-rectangle map (Urena et al. 2013)
+ * are uniform in solid angle: chi-square against 1 / Omega inside the polygon (significance
+ * 0.01 / 5), the pdf integrating to 1 (so Omega is right); the bilinear warp fits its pdf
+ * (PBRT 4e, ch. A.5, SampleBilinear).  A large and a small triangle, a rectangle seen
+ * off-centre, and one seen from beside its edge (a grazing view). */
+Test(sample, spherical_polygons_chi2, .timeout = 60)
+{
+    const int n_tests = 5;
+    struct sample_sph_triangle big, small;
+    cr_assert(sample_sph_triangle_init(v3_normalize(v3(0.1f, 0.2f, 1.0f)),
+                                       v3_normalize(v3(1.0f, -0.3f, 0.4f)),
+                                       v3_normalize(v3(-0.6f, 0.9f, 0.5f)), &big));
+    cr_assert(sample_sph_triangle_init(v3_normalize(v3(0.1f, 0.2f, 1.0f)),
+                                       v3_normalize(v3(0.3f, 0.1f, 1.0f)),
+                                       v3_normalize(v3(0.15f, 0.45f, 1.0f)), &small));
+    struct rect_ctx off = rect_case(v3(0.3f, -0.2f, 0.1f), v3(-1.0f, -0.5f, 1.0f),
+                                    v3(1.6f, 0.0f, 0.0f), v3(0.0f, 1.2f, 0.4f));
+    struct rect_ctx grazing = rect_case(v3(0.0f, 0.0f, 0.0f), v3(0.2f, -1.0f, 0.05f),
+                                        v3(0.0f, 2.0f, 0.0f), v3(1.5f, 0.0f, 0.0f));
+    struct {
+        struct chi2_spec spec;
+        const char *name;
+    } cases[] = {
+        {chi2_sphere(draw_sph_triangle, pdf_sph_triangle_at, &big), "spherical triangle 1 sr"},
+        {chi2_sphere(draw_sph_triangle, pdf_sph_triangle_at, &small), "spherical triangle small"},
+        {chi2_sphere(draw_sph_rect, pdf_sph_rect_at, &off), "spherical rectangle"},
+        {chi2_sphere(draw_sph_rect, pdf_sph_rect_at, &grazing), "spherical rectangle, grazing"},
+        {chi2_plane(draw_bilinear, pdf_bilinear_at, NULL, 0, 1, 0, 1), "bilinear"},
+    };
+    for (int k = 0; k < n_tests; k++) {
+        cases[k].spec.n_samples = 300000;
+        if (k == 1) /* a small triangle: a finer grid, so that cells resolve it */
+            cases[k].spec.n_rows = cases[k].spec.n_cols = 256;
+        struct chi2_result r;
+        chi2_run(&cases[k].spec, &r);
+        cr_assert(chi2_accept(&r, n_tests), "%s: %s", cases[k].name, r.msg);
+        cr_assert(fabs(r.pdf_integral - 1.0) < 3e-3, "%s: pdf integrates to %f", cases[k].name,
+                  r.pdf_integral);
+    }
+}
+
+/* The solid angles against closed forms: an octant triangle is pi / 2 sr; a square of side 2
+ * at distance 1 seen from its centre's normal is 4 asin(1/3) = 2 pi / 3 sr (a cube face). */
+Test(sample, spherical_polygon_areas)
+{
+    float octant = sample_spherical_triangle_area(v3(1, 0, 0), v3(0, 1, 0), v3(0, 0, 1));
+    cr_assert(fabsf(octant - MCPT_PI / 2.0f) < 1e-6f, "octant %.9g", octant);
+    struct sample_sph_rect sr;
+    cr_assert(sample_sph_rect_init(v3(0, 0, 0), v3(-1, -1, -1), v3(2, 0, 0), v3(0, 2, 0), &sr));
+    cr_assert(fabsf(sr.area - 2.0f * MCPT_PI / 3.0f) < 1e-6f, "cube face %.9g", sr.area);
+    /* a tiny triangle keeps its relative precision (the angle excess would lose it) */
+    double h = 1e-3;
+    float tiny = sample_spherical_triangle_area(v3(0, 0, 1), v3_normalize(v3((float)h, 0, 1)),
+                                                v3_normalize(v3(0, (float)h, 1)));
+    cr_assert(fabs(tiny / (0.5 * h * h) - 1.0) < 2e-3, "tiny %.9g vs %.9g", tiny, 0.5 * h * h);
+    /* refused: a degenerate triangle, a non-rectangular parallelogram, a point in the plane */
+    struct sample_sph_triangle st;
+    cr_assert(!sample_sph_triangle_init(v3(1, 0, 0), v3(1, 0, 0), v3(0, 1, 0), &st));
+    cr_assert(!sample_sph_rect_init(v3(0, 0, 0), v3(-1, -1, -1), v3(2, 0, 0), v3(1, 2, 0), &sr));
+    cr_assert(!sample_sph_rect_init(v3(0, 0, -1), v3(-1, -1, -1), v3(2, 0, 0), v3(0, 2, 0), &sr));
+}
+
+/* The inverses round-trip: sample_invert_X(sample_X(u)) = u, for the triangles and rectangles of
+ * the chi-square test and for the bilinear warp. */
+Test(sample, spherical_polygon_inverses_round_trip)
+{
+    struct sample_sph_triangle st;
+    cr_assert(sample_sph_triangle_init(v3_normalize(v3(0.1f, 0.2f, 1.0f)),
+                                       v3_normalize(v3(1.0f, -0.3f, 0.4f)),
+                                       v3_normalize(v3(-0.6f, 0.9f, 0.5f)), &st));
+    struct rect_ctx rc = rect_case(v3(0.3f, -0.2f, 0.1f), v3(-1.0f, -0.5f, 1.0f),
+                                   v3(1.6f, 0.0f, 0.0f), v3(0.0f, 1.2f, 0.4f));
+    struct pcg32 rng;
+    sample_pcg32_seed(&rng, 21u, 5u);
+    for (int i = 0; i < 100000; i++) {
+        vec2 u = {sample_pcg32_float(&rng), sample_pcg32_float(&rng)};
+        if (u.x < 1e-3f || u.x > 1.0f - 1e-3f || u.y < 1e-3f || u.y > 1.0f - 1e-3f)
+            continue; /* the corners, where a vertex has every u0 and the inverse no answer */
+        vec2 got[3];
+        got[0] = sample_invert_spherical_triangle(&st, sample_spherical_triangle(&st, u));
+        got[1] = sample_invert_spherical_rectangle(&rc.sr, sample_spherical_rectangle(&rc.sr, u));
+        got[2] = sample_invert_bilinear(sample_bilinear(u, BILINEAR_W), BILINEAR_W);
+        for (int k = 0; k < 3; k++)
+            cr_assert(fabsf(got[k].x - u.x) < 1e-3f && fabsf(got[k].y - u.y) < 1e-3f,
+                      "warp %d: u (%f, %f) -> (%f, %f)", k, u.x, u.y, got[k].x, got[k].y);
+    }
+}
+
 /* ---- discrete distributions: the alias method ---- */
 
 /* The alias table (Walker 1977; Vose 1991) picks index i with probability w_i / sum w: over a
@@ -702,6 +937,98 @@ Test(adaptive, rule_on_gaussian_streams)
         }
 }
 
+/* The pilot rule's count is the stop rule's predicted stop: with exact moments of the pilot
+ * (an alternating stream of an even count has mean mu and spread sigma) it is the N with
+ * 1.96 sigma / sqrt(N) = T max(mu, floor), rounded up to whole batches and clamped to
+ * [min_spp, max_spp]; no pilot (n = 0) gives the maximum. */
+Test(adaptive, pilot_count_on_exact_moments)
+{
+    const struct {
+        double mu, sigma, tol, floor_lum;
+        uint32_t min_spp, batch, max_spp;
+    } cases[] = {
+        {1.0, 0.5, 0.05, 0.01, 64, 32, 4096},   /* N* = 384.2 -> 416 */
+        {1.0, 2.0, 0.05, 0.01, 64, 32, 4096},   /* N* = 6147 -> the maximum */
+        {0.2, 0.1, 0.10, 0.01, 16, 8, 1024},    /* N* = 96.04 -> 104 */
+        {1e-3, 1e-2, 0.05, 0.01, 64, 32, 4096}, /* dark: N* = 1536.6 with the floor */
+        {0.0, 0.0, 0.05, 0.01, 64, 32, 4096},   /* black: the least */
+        {5.0, 0.01, 0.05, 0.01, 64, 32, 4096},  /* converged at once: the least */
+        {1.0, 0.5, 0.05, 0.01, 64, 1, 4096},    /* batch 1: N* rounded up, 385 */
+    };
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        struct stream st = {cases[c].mu, cases[c].sigma, {0, 1}};
+        double s1 = 0.0, s2 = 0.0;
+        for (uint32_t i = 0; i < 16; i++) {
+            double x = alternating(&st, i);
+            s1 += x;
+            s2 += x * x;
+        }
+        uint32_t got = trace_pilot_spp(s1, s2, 16, cases[c].tol, cases[c].floor_lum,
+                                       cases[c].min_spp, cases[c].max_spp, cases[c].batch);
+        uint32_t want = predicted_stop(cases[c].mu, cases[c].sigma, cases[c].min_spp,
+                                       cases[c].batch, cases[c].max_spp, cases[c].tol,
+                                       cases[c].floor_lum);
+        cr_assert_eq(got, want, "case %zu: pilot count %u, predicted %u", c, got, want);
+    }
+    cr_assert_eq(trace_pilot_spp(0.0, 0.0, 0, 0.05, 0.01, 64, 4096, 32), 4096u, "no pilot");
+}
+
+/* A pixel with a rare bright path: x = 0.5, or 50 with probability 1/100 (mean 0.995).  Over
+ * 20000 pixels: the stop rule (its own samples decide and estimate) returns a mean far below
+ * the truth (a pixel that has not met the bright path shows a mean of 0.5 and no spread, and
+ * stops at min_spp, 52% of them); the pilot rule (Kirk & Arvo 1991: 16 pilot samples decide,
+ * then N fresh samples estimate) returns the truth within 4 standard errors. */
+Test(adaptive, pilot_unbiased_where_stop_rule_is_not)
+{
+    enum { PIXELS = 20000, MIN_SPP = 64, BATCH = 32, MAX_SPP = 1024, PILOT = 16 };
+    const double tol = 0.1, floor_lum = 0.01, truth = 0.99 * 0.5 + 0.01 * 50.0;
+    struct pcg32 rng;
+    sample_pcg32_seed(&rng, 2024u, 5u);
+#define DRAW() (sample_pcg32_float(&rng) < 0.01f ? 50.0 : 0.5)
+    double sum[2] = {0.0, 0.0}, sum_sq[2] = {0.0, 0.0};
+    for (int i = 0; i < PIXELS; i++) {
+        /* the stop rule: test at MIN_SPP + k BATCH, estimate from the same samples */
+        double s1 = 0.0, s2 = 0.0;
+        uint32_t n = 0;
+        while (n < MAX_SPP && !(n >= MIN_SPP && (n - MIN_SPP) % BATCH == 0 &&
+                                trace_adaptive_stop(s1, s2, n, tol, floor_lum))) {
+            double x = DRAW();
+            s1 += x;
+            s2 += x * x;
+            n++;
+        }
+        double est = s1 / n;
+        sum[0] += est;
+        sum_sq[0] += est * est;
+        /* the pilot rule: PILOT samples decide N, N fresh samples estimate */
+        double p1 = 0.0, p2 = 0.0;
+        for (int k = 0; k < PILOT; k++) {
+            double x = DRAW();
+            p1 += x;
+            p2 += x * x;
+        }
+        uint32_t n_spp = trace_pilot_spp(p1, p2, PILOT, tol, floor_lum, MIN_SPP, MAX_SPP, BATCH);
+        double e1 = 0.0;
+        for (uint32_t k = 0; k < n_spp; k++)
+            e1 += DRAW();
+        est = e1 / n_spp;
+        sum[1] += est;
+        sum_sq[1] += est * est;
+    }
+#undef DRAW
+    double mean[2], se[2];
+    for (int r = 0; r < 2; r++) {
+        mean[r] = sum[r] / PIXELS;
+        se[r] = sqrt((sum_sq[r] / PIXELS - mean[r] * mean[r]) / (PIXELS - 1));
+    }
+    cr_log_info("stop rule %.5f +- %.5f, pilot rule %.5f +- %.5f, truth %.5f", mean[0], se[0],
+                mean[1], se[1], truth);
+    cr_assert(mean[0] < truth - 10.0 * se[0], "stop rule %g +- %g: expected its bias, truth %g",
+              mean[0], se[0], truth);
+    cr_assert(fabs(mean[1] - truth) < 4.0 * se[1], "pilot rule %g +- %g, truth %g", mean[1], se[1],
+              truth);
+}
+
 /* ---- samplers in the renderer ---- */
 
 static struct trace_scene *load_scene(const char *path, int width, int height, struct scene *s)
@@ -724,9 +1051,9 @@ static void render_film(const struct trace_scene *ts, const struct trace_options
     cr_assert_eq(res.n_nonfinite, 0u);
 }
 
-/* Every sampler, and adaptive sampling, renders bit-identical films with 1 and 3 threads; an
- * adaptive render split into two calls (maximum 16, then 48) equals one call; and adaptive
- * sampling does stop some pixels early and run others on. */
+/* Every sampler, and adaptive sampling by either rule, renders bit-identical films with 1 and
+ * 3 threads; an adaptive render split into two calls (maximum 16, then 48) equals one call; and
+ * adaptive sampling does stop some pixels early and run others on. */
 Test(sampling, deterministic_for_any_thread_count, .timeout = 120)
 {
     struct scene s;
@@ -735,16 +1062,20 @@ Test(sampling, deterministic_for_any_thread_count, .timeout = 120)
     size_t bytes = sizeof(struct film_pixel) * n_pixels;
     struct mcpt_error err;
     for (int k = 0; k < SAMPLER_COUNT; k++)
-        for (int adaptive = 0; adaptive < 2; adaptive++) {
+        for (int adaptive = 0; adaptive < 3; adaptive++) {
             struct trace_options opt = {.spp = adaptive ? 48 : 8,
                                         .max_depth = 5,
                                         .seed = 42,
                                         .sampler = KINDS[k],
-                                        .adaptive = adaptive,
+                                        .adaptive = adaptive > 0,
+                                        .adaptive_rule = adaptive == 1 ? RENDER_ADAPTIVE_STOP
+                                                                       : RENDER_ADAPTIVE_PILOT,
                                         .tolerance = 0.3f,
                                         .adaptive_floor = 0.01f,
                                         .min_spp = 8,
-                                        .batch = 8};
+                                        .batch = 8,
+                                        .pilot_spp = 8,
+                                        .max_spp = 48};
             struct film a, b, c;
             cr_assert(film_init(&a, s.width, s.height, &err));
             cr_assert(film_init(&b, s.width, s.height, &err));
@@ -775,6 +1106,86 @@ Test(sampling, deterministic_for_any_thread_count, .timeout = 120)
             film_free(&b);
             film_free(&c);
         }
+    trace_free(ts);
+    scene_free(&s);
+}
+
+/* The image mean of pixels' estimates (film means) of a 32 x 32 render of the glass Cornell box
+ * with options opt, channel by channel. */
+static void glass_image_mean(const struct trace_scene *ts, const struct trace_options *opt,
+                             int width, int height, double mean[3], uint64_t *n_samples)
+{
+    struct film film;
+    struct mcpt_error err;
+    cr_assert(film_init(&film, width, height, &err));
+    struct trace_result res;
+    cr_assert(trace_render(ts, opt, &film, &res, &err), "%s", err.msg);
+    *n_samples = res.n_samples + res.n_pilot;
+    for (int c = 0; c < 3; c++) {
+        double sum = 0.0;
+        for (int i = 0; i < width * height; i++)
+            sum += film_mean(&film.pixels[i], c);
+        mean[c] = sum / (width * height);
+    }
+    film_free(&film);
+}
+
+/* Adaptive sampling by the pilot rule is unbiased on the glass Cornell box, whose caustic the
+ * stop rule misses (docs/sampling.md): over 24 seeds, the image mean of adaptive renders (T
+ * 0.2, pilot 8, 8..256 spp) minus that of uniform 64-spp renders of other seeds is within 4
+ * standard errors of 0 (the seeds' scatter) in each channel, while the stop rule with the same
+ * T, min-spp and batch is below by more than 4. */
+Test(sampling, adaptive_pilot_unbiased_on_glass, .timeout = 240)
+{
+    enum { W = 32, H = 32, SEEDS = 24 };
+    struct scene s;
+    struct trace_scene *ts = load_scene("scenes/cornell-glass.txt", W, H, &s);
+    struct trace_options base = {.max_depth = TRACE_DEPTH_INFINITE,
+                                 .sampler = SAMPLER_SOBOL,
+                                 .n_threads = 2,
+                                 .tolerance = 0.2f,
+                                 .adaptive_floor = 0.01f,
+                                 .min_spp = 8,
+                                 .batch = 8,
+                                 .pilot_spp = 8};
+    double sum[2][3] = {{0}}, sum_sq[2][3] = {{0}};
+    uint64_t n_adaptive = 0;
+    for (uint64_t k = 0; k < SEEDS; k++) {
+        double uniform[3], pilot[3], stop[3];
+        uint64_t n;
+        struct trace_options opt = base;
+        opt.seed = 1000 + k;
+        opt.spp = 64;
+        glass_image_mean(ts, &opt, W, H, uniform, &n);
+        opt.seed = 2000 + k;
+        opt.spp = 256;
+        opt.adaptive = true;
+        opt.adaptive_rule = RENDER_ADAPTIVE_PILOT;
+        glass_image_mean(ts, &opt, W, H, pilot, &n);
+        n_adaptive += n;
+        opt.adaptive_rule = RENDER_ADAPTIVE_STOP;
+        glass_image_mean(ts, &opt, W, H, stop, &n);
+        for (int c = 0; c < 3; c++) {
+            double d[2] = {pilot[c] - uniform[c], stop[c] - uniform[c]};
+            for (int r = 0; r < 2; r++) {
+                sum[r][c] += d[r];
+                sum_sq[r][c] += d[r] * d[r];
+            }
+        }
+    }
+    for (int c = 0; c < 3; c++) {
+        double z[2];
+        for (int r = 0; r < 2; r++) {
+            double m = sum[r][c] / SEEDS;
+            double se = sqrt((sum_sq[r][c] / SEEDS - m * m) / (SEEDS - 1));
+            z[r] = m / se;
+        }
+        cr_log_info("channel %d: pilot - uniform %.2f SE, stop - uniform %.2f SE (pilot %.1f spp "
+                    "a pixel with its pilot)",
+                    c, z[0], z[1], (double)n_adaptive / SEEDS / (W * H));
+        cr_assert(fabs(z[0]) < 4.0, "channel %d: pilot rule off by %.2f SE", c, z[0]);
+        cr_assert(z[1] < -4.0, "channel %d: the stop rule's bias, %.2f SE, not seen", c, z[1]);
+    }
     trace_free(ts);
     scene_free(&s);
 }
@@ -880,11 +1291,15 @@ Test(sampling, render_statement_parameters)
     struct scene s;
     struct mcpt_error err;
     cr_assert(load_text(CAM "render spp=8 sampler=stratified adaptive=true tolerance=0.1 "
-                            "adaptive-floor=0.002 batch=16 min-spp=32 max-spp=512\n",
+                            "adaptive-floor=0.002 batch=16 min-spp=32 max-spp=512 "
+                            "adaptive-rule=stop pilot-spp=8 light-sampling=solid-angle\n",
                         &s, &err),
               "%s", err.msg);
     cr_assert_eq(s.render.sampler, SAMPLER_STRATIFIED);
     cr_assert(s.render.adaptive);
+    cr_assert(s.render.has_adaptive_rule && s.render.adaptive_rule == RENDER_ADAPTIVE_STOP);
+    cr_assert_eq(s.render.pilot_spp, 8u);
+    cr_assert_eq(s.render.light_sampling, RENDER_LIGHT_SOLID_ANGLE);
     cr_assert_float_eq(s.render.tolerance, 0.1f, 1e-7f);
     cr_assert_float_eq(s.render.adaptive_floor, 0.002f, 1e-9f);
     cr_assert_eq(s.render.batch, 16u);
@@ -896,6 +1311,8 @@ Test(sampling, render_statement_parameters)
     cr_assert_not(s.render.adaptive);
     cr_assert(s.render.tolerance == 0.0f && s.render.batch == 0 && s.render.min_spp == 0 &&
               s.render.max_spp == 0 && s.render.adaptive_floor < 0.0f);
+    cr_assert(!s.render.has_adaptive_rule && s.render.pilot_spp == 0);
+    cr_assert_eq(s.render.light_sampling, RENDER_LIGHT_AREA);
     scene_free(&s);
 }
 
@@ -914,6 +1331,13 @@ Test(sampling, render_statement_errors)
         {"render tolerance=0\n", 18, "expected 'tolerance' > 0, got 0"},
         {"render batch=0\n", 14, "expected 'batch' in 1..4294967295, got 0"},
         {"render adaptive=yes\n", 17, "expected true or false for 'adaptive', got 'yes'"},
+        {"render adaptive-rule=early\n", 22,
+         "expected pilot or stop for 'adaptive-rule', got "
+         "'early'"},
+        {"render pilot-spp=1\n", 18, "expected 'pilot-spp' >= 2, got 1"},
+        {"render light-sampling=sphere\n", 23,
+         "expected area or solid-angle for "
+         "'light-sampling', got 'sphere'"},
     };
     for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
         char text[256];

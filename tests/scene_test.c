@@ -740,8 +740,9 @@ Test(scene, light_transport_materials)
     cr_assert_eq(sc.render.rr_prob, 0.75f);
     cr_assert_eq(sc.render.rr_depth, 3u);
     scene_free(&sc);
-    load_ok(CAM "render rr=throughput\n", &sc);
+    load_ok(CAM "render rr=throughput rr-threshold=0.5\n", &sc);
     cr_assert_eq(sc.render.rr_prob, 0.0f);
+    cr_assert_eq(sc.render.rr_threshold, 0.5f);
     cr_assert_eq(sc.render.direct, RENDER_DIRECT_MIS, "the default");
     scene_free(&sc);
 }

@@ -165,29 +165,36 @@ Test(shape, triangle_surface_interpolates)
 /* Sampled points lie on their shape to within their error bound: on the plane of a triangle
  * or quad (|(p - p0) . n| <= |n| . p_error) and at distance r from a sphere's centre (seen from
  * outside, cone sampling, and from inside, area sampling; | |p - c| - r | <= |p_error|); wi is
- * the unit direction to p; shape_*_pdf at p is the density the sample returned. */
+ * the unit direction to p; shape_*_pdf at p is the density the sample returned: exactly where
+ * both compute the same formula, to 1e-4 by solid angle (the triangle and the rectangle, whose
+ * density reads the bilinear warp's at the inverse of the spherical map, which rounds). */
 Test(shape, samples_lie_on_the_shape)
 {
     const vec3 tri[3] = {{-1, -1, 2}, {2, -1, 2.5f}, {-1, 2, 2}};
     struct quad q = {.corner = v3(-0.5f, -2, 0.3f), .e1 = v3(1, 0, 0.2f), .e2 = v3(0, 0.3f, 1)};
+    struct quad rect = {.corner = v3(-1, -1.5f, 0.2f),
+                        .e1 = v3(2, 0, 0.4f),
+                        .e2 = v3(0.12f, 0.9f, -0.6f)};
     struct sphere far = {.center = v3(0.5f, 0.3f, 2.5f), .radius = 0.7f};
     struct sphere around = {.center = v3(0.1f, -0.2f, 0.2f), .radius = 1.0f};
     struct surface ref = {.p = v3(0, 0, 0), .ng = v3(0, 0, 1), .ns = v3(0, 0, 1)};
     for (int i = 0; i < 1000; i++) {
         vec2 u = {((float)i + 0.5f) / 1000.0f, (float)((i * 389) % 1000) / 1000.0f};
-        struct shape_sample ss[4];
-        bool ok[4] = {shape_triangle_sample(tri, &ref, u, &ss[0]),
+        struct shape_sample ss[6];
+        bool ok[6] = {shape_triangle_sample(tri, &ref, u, &ss[0]),
                       shape_quad_sample(&q, &ref, u, &ss[1]),
                       shape_sphere_sample(&far, &ref, u, &ss[2]),
-                      shape_sphere_sample(&around, &ref, u, &ss[3])};
-        for (int k = 0; k < 4; k++) {
+                      shape_sphere_sample(&around, &ref, u, &ss[3]),
+                      shape_triangle_sample_solid_angle(tri, &ref, u, &ss[4]),
+                      shape_quad_sample_solid_angle(&rect, &ref, u, &ss[5])};
+        for (int k = 0; k < 6; k++) {
             if (!ok[k])
                 continue;
             const struct shape_sample *s = &ss[k];
             vec3 n_abs = v3(fabsf(s->n.x), fabsf(s->n.y), fabsf(s->n.z));
             double off;
-            if (k < 2) {
-                vec3 p0 = k == 0 ? tri[0] : q.corner;
+            if (k < 2 || k >= 4) {
+                vec3 p0 = k == 0 || k == 4 ? tri[0] : k == 1 ? q.corner : rect.corner;
                 vec3 d = v3_sub(s->p, p0);
                 off = fabs((double)d.x * s->n.x + (double)d.y * s->n.y + (double)d.z * s->n.z);
                 cr_assert(off <= 1.01 * v3_dot(n_abs, s->p_error) + 1e-7, "shape %d: %g", k, off);
@@ -205,8 +212,14 @@ Test(shape, samples_lie_on_the_shape)
             float pdf = k == 0   ? shape_triangle_pdf(tri, &ref, &on, s->wi)
                         : k == 1 ? shape_quad_pdf(&q, &ref, &on, s->wi)
                         : k == 2 ? shape_sphere_pdf(&far, &ref, &on, s->wi)
-                                 : shape_sphere_pdf(&around, &ref, &on, s->wi);
-            cr_assert_eq(pdf, s->pdf_sa, "shape %d", k);
+                        : k == 3 ? shape_sphere_pdf(&around, &ref, &on, s->wi)
+                        : k == 4 ? shape_triangle_pdf_solid_angle(tri, &ref, &on, s->wi)
+                                 : shape_quad_pdf_solid_angle(&rect, &ref, &on, s->wi);
+            if (k >= 4)
+                cr_assert(fabsf(pdf / s->pdf_sa - 1.0f) < 1e-4f, "shape %d: %g vs %g", k, pdf,
+                          s->pdf_sa);
+            else
+                cr_assert_eq(pdf, s->pdf_sa, "shape %d", k);
         }
     }
 }

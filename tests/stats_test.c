@@ -172,6 +172,43 @@ Test(stats, noise_correction_recovers_true_mse)
     film_free(&fr);
 }
 
+/* stats_compare_where keeps only the pixels whose reference luminance 0.2126 R + 0.7152 G +
+ * 0.0722 B is <= the bound: a "lamp" pixel of reference 12 with a large error is left out, and
+ * the metrics are those of the other pixels (error 0.1 in each channel: MSE 0.01, bias 0.1);
+ * with the bound at infinity they are stats_compare's. */
+Test(stats, compare_where_leaves_out_bright_pixels)
+{
+    struct planes pa, pr;
+    struct stats_image a = planes_image(&pa, 4, 2, true), r = planes_image(&pr, 4, 2, true);
+    for (int c = 0; c < 3; c++)
+        for (int i = 0; i < 8; i++) {
+            plane(&pr, c)[i] = i == 5 ? 12.0f : 0.5f;
+            plane(&pa, c)[i] = i == 5 ? 9.0f : 0.6f;
+            plane(&pr, 3 + c)[i] = 1e-4f;
+            plane(&pa, 3 + c)[i] = 2e-4f;
+        }
+    struct stats_metrics m, all, where_inf;
+    struct mcpt_error err;
+    cr_assert(stats_compare_where(&a, &r, 1.0, &m, &err));
+    cr_assert(stats_compare(&a, &r, &all, &err));
+    cr_assert(stats_compare_where(&a, &r, INFINITY, &where_inf, &err));
+    double d = (double)0.6f - 0.5;
+    cr_assert_eq(m.n_values, 21u);
+    cr_assert_eq(m.n_pixels_masked, 1u);
+    cr_assert_float_eq(m.mse, d * d, 1e-12);
+    cr_assert_float_eq(m.bias[1], d, 1e-12);
+    cr_assert_float_eq(m.noise_floor, (double)1e-4f, 1e-12);
+    cr_assert_float_eq(m.mean_variance, (double)2e-4f, 1e-12);
+    cr_assert_eq(all.n_values, 24u);
+    cr_assert_eq(all.n_pixels_masked, 0u);
+    cr_assert(all.mse > 1.0, "the lamp pixel's error counts without the bound");
+    cr_assert_eq(where_inf.mse, all.mse);
+    cr_assert(!stats_compare_where(&a, &r, NAN, &m, &err));
+    cr_assert_str_eq(err.msg, "expected a luminance bound, got nan");
+    free(pa.data);
+    free(pr.data);
+}
+
 /* Images of different sizes are refused with an "expected ..., got ..." message. */
 Test(stats, compare_size_mismatch)
 {
@@ -693,7 +730,7 @@ Test(stats, compare_reproduces_curve_row, .init = setup, .fini = teardown, .time
     cr_assert_str_eq(keys, "image,reference,width,height,n_values,n_skipped,mse,mse_se,rmse,"
                            "relmse,mrse_pbrt,mae,psnr_db,bias,noise_floor,mse_corrected,"
                            "mse_corrected_se,rmse_corrected,relmse_corrected,psnr_corrected_db,"
-                           "mean_variance,relmse_own");
+                           "mean_variance,relmse_own,max_ref_luminance,n_pixels_masked");
     char want[96];
     snprintf(want, sizeof want, "\"mse\": %s,", mse_raw);
     cr_assert(strstr(text, want) != NULL, "want %s in %s", want, text);

@@ -13,7 +13,8 @@
  *   ch. 6, "Robust Spawned Ray Origins").
  * - Per-pixel Z-test with Sidak correction against a stored 65536-spp reference (as Mitsuba's
  *   render tests do): at least 99.75% of the pixel channels pass.
- * - Images are bit-identical for 1 and 2 threads and for any split of the samples into calls. */
+ * - Images are bit-identical for 1 and 2 threads, for any split of the samples into calls, and
+ *   with camera packets or single camera rays. */
 #include <criterion/criterion.h>
 
 #include <stdlib.h>
@@ -584,6 +585,70 @@ Test(trace, deterministic_across_threads_and_splits)
     film_free(&c);
     trace_free(ts);
     scene_free(&s);
+}
+
+/* Camera packets (render_pixel) change how the first hits are found, never what they are: with
+ * trace_options.single_rays every camera ray goes alone, and the film is the same to the bit,
+ * with the same ray count.  Scenes of triangles only, of triangles and a sphere, and of 69k
+ * triangles (the bunny); a lens (the packet's rays leave from different points); every
+ * sampler; 13 spp (a packet of 8, then one of 5); adaptive stops (packets cut at the test
+ * points); 2 threads. */
+Test(trace, camera_packets_match_single_rays, .timeout = 120)
+{
+    static const char *const scenes[] = {"scenes/cornell-box.txt", "scenes/cornell-glass.txt",
+                                         "scenes/bunny.txt"};
+    for (size_t k = 0; k < sizeof scenes / sizeof scenes[0]; k++) {
+        struct scene s;
+        struct mcpt_error err;
+        cr_assert(scene_load(scenes[k], &s, &err), "%s", err.msg);
+        s.width = 20;
+        s.height = 16;
+        for (int lens = 0; lens < 2; lens++) {
+            s.camera.aperture = lens ? 0.05f : 0.0f;
+            struct trace_scene *ts = trace_prepare(&s, 1, &err);
+            cr_assert(ts, "%s", err.msg);
+            struct film a, b;
+            cr_assert(film_init(&a, s.width, s.height, &err));
+            cr_assert(film_init(&b, s.width, s.height, &err));
+            size_t bytes = sizeof(struct film_pixel) * (size_t)s.width * (size_t)s.height;
+            for (int variant = 0; variant < 4; variant++) {
+                struct trace_options opt = default_options(7 + (uint64_t)variant);
+                opt.sampler = variant == 0   ? SAMPLER_INDEPENDENT
+                              : variant == 1 ? SAMPLER_STRATIFIED
+                                             : SAMPLER_SOBOL;
+                uint32_t spp = 13;
+                if (variant == 3) { /* adaptive: tests after 5, 8, 11, ... samples */
+                    opt.adaptive = true;
+                    opt.tolerance = 0.5f;
+                    opt.adaptive_floor = TRACE_ADAPTIVE_FLOOR;
+                    opt.min_spp = 5;
+                    opt.batch = 3;
+                    spp = 29;
+                }
+                struct trace_result ra, rb;
+                opt.spp = spp;
+                opt.n_threads = 2;
+                memset(a.pixels, 0, bytes);
+                memset(b.pixels, 0, bytes);
+                cr_assert(trace_render(ts, &opt, &a, &ra, &err));
+                opt.single_rays = true;
+                cr_assert(trace_render(ts, &opt, &b, &rb, &err));
+                cr_assert(memcmp(a.pixels, b.pixels, bytes) == 0,
+                          "%s, lens %d, variant %d: packets and single rays differ", scenes[k],
+                          lens, variant);
+                cr_assert_eq(ra.n_rays, rb.n_rays, "%s, lens %d, variant %d", scenes[k], lens,
+                             variant);
+                cr_assert_eq(ra.n_samples, rb.n_samples);
+                if (variant == 3)
+                    cr_assert_lt(ra.n_samples, (uint64_t)spp * s.width * s.height,
+                                 "%s: some pixel stops early", scenes[k]);
+            }
+            film_free(&a);
+            film_free(&b);
+            trace_free(ts);
+        }
+        scene_free(&s);
+    }
 }
 
 /* The Cornell box image mean (scenes/cornell-box.txt at size x size, spp) and its SE. */

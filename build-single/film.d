@@ -1,0 +1,3 @@
+build-single/film.o: film.c film.h vec.h
+film.h:
+vec.h:

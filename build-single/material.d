@@ -1,0 +1,6 @@
+build-single/material.o: material.c material.h vec.h sample.h \
+ material_ggx_table.inc
+material.h:
+vec.h:
+sample.h:
+material_ggx_table.inc:

@@ -1,0 +1,8 @@
+build-single/stats.o: stats.c stats.h film.h vec.h image.h sample.h \
+ file.h
+stats.h:
+film.h:
+vec.h:
+image.h:
+sample.h:
+file.h:

@@ -1,0 +1,160 @@
+#!/usr/bin/env python3
+"""bench_cycles.py - mcpt against Blender Cycles at equal error on the Cornell box (`make
+bench-cycles`; only where Blender is installed, never a dependency of mcpt).
+
+Both renderers draw scenes/cornell-box.txt at 256x256 on --threads threads (default 2), in the
+same run, interleaved over R rounds (default 3):
+  - Cycles (scripts/cycles_reference.py builds the scene from the OBJ/MTL, PMJ sampler) at
+    CYCLES_SPP = 256 spp, seed 100 + round: its render time t_C (Blender's own timing of the
+    render call, scene building and start-up left out) and its RMSE e_C;
+  - mcpt (default Sobol' sampler) at MCPT_SPP = 128, 256, 512 and 1024 spp, seed round: the
+    render time mcpt prints (loading, BVH build and writing left out) and RMSE.
+RMSE is sqrt of the noise-corrected MSE against REF (`mcpt compare`), a Cycles render of
+16 x 1024 spp whose own variance is subtracted.  Equal error: per round, a least-squares line
+log RMSE = a + b log t through mcpt's four points, solved for t* at RMSE = e_C; the ratio is
+t* / t_C, its median over the rounds is the figure (goal <= 0.2).  Also printed: the smallest
+spp at which mcpt's RMSE is at most e_C, and the time it took.
+
+The reference: REF (default bench/ref/cornell256-cycles16384.exr) is not in the repository
+(1.5 MB).  When it is absent this script makes it: 16 Cycles renders of 1024 spp (seeds 1..16,
+about 15 minutes on 2 cores), averaged by scripts/exr_average.py into the mean and the variance
+of the mean.  Pass --ref to use an existing one.
+
+usage: scripts/bench_cycles.py [--mcpt ./mcpt] [--blender blender] [--ref REF.exr]
+                               [--runs R] [--threads T] [--json OUT.json]
+Python standard library only.
+"""
+
+import argparse
+import json
+import math
+import os
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+
+SCENE = "scenes/cornell-box.txt"
+OBJ = "scenes/models/CornellBox-Original.obj"
+SIZE = 256
+CYCLES_SPP = 256
+MCPT_SPP = [128, 256, 512, 1024]
+REF_DEFAULT = "bench/ref/cornell256-cycles16384.exr"
+REF_SEEDS = 16
+REF_SPP = 1024
+HERE = os.path.dirname(os.path.abspath(__file__))
+SUMMARY = re.compile(r"render ([0-9.]+) s, ([0-9.]+) Msamples/s")
+CYCLES_SEED = re.compile(r"cycles_reference: seed (\d+): .*\(([0-9.]+) s\)")
+
+
+def cycles(blender, spp, seeds, first_seed, threads, exr_dir):
+    """Renders seeds with Cycles; returns [(path, render seconds)]."""
+    out_json = os.path.join(exr_dir, "cycles.json")
+    cmd = [blender, "-b", "--factory-startup", "--python",
+           os.path.join(HERE, "cycles_reference.py"), "--", "--obj", OBJ, "--out", out_json,
+           "--spp", str(spp), "--size", str(SIZE), "--seeds", str(seeds),
+           "--first-seed", str(first_seed), "--threads", str(threads), "--exr-dir", exr_dir,
+           "--no-checks"]
+    p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    if p.returncode != 0:
+        sys.exit("bench_cycles: Blender failed:\n" + p.stdout[-3000:])
+    runs = [(os.path.join(exr_dir, "seed%s.exr" % m.group(1)), float(m.group(2)))
+            for m in CYCLES_SEED.finditer(p.stdout)]
+    if len(runs) != seeds:
+        sys.exit("bench_cycles: expected %d Cycles renders, got:\n%s" % (seeds, p.stdout[-3000:]))
+    return runs
+
+
+def make_ref(blender, ref, threads):
+    print("bench_cycles: %s is absent; rendering it: %d Cycles renders of %d spp (about 15 "
+          "minutes on 2 cores)" % (ref, REF_SEEDS, REF_SPP), flush=True)
+    d = tempfile.mkdtemp(prefix="cycles-ref-")
+    runs = cycles(blender, REF_SPP, REF_SEEDS, 1, threads, d)
+    os.makedirs(os.path.dirname(ref) or ".", exist_ok=True)
+    subprocess.run([sys.executable, os.path.join(HERE, "exr_average.py"), ref] +
+                   [path for path, _ in runs], check=True)
+
+
+def rmse(mcpt, image, ref):
+    p = subprocess.run([mcpt, "compare", image, ref, "--json"], stdout=subprocess.PIPE,
+                       stderr=subprocess.PIPE, text=True)
+    if p.returncode != 0:
+        sys.exit("bench_cycles: mcpt compare failed: " + p.stderr)
+    mse = json.loads(p.stdout)["mse_corrected"]
+    return math.sqrt(mse) if mse > 0 else float("nan")
+
+
+def mcpt_render(mcpt, spp, seed, threads, out):
+    cmd = [mcpt, SCENE, "--width", str(SIZE), "--height", str(SIZE), "--spp", str(spp),
+           "--seed", str(seed), "--threads", str(threads), "-o", out]
+    p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    m = SUMMARY.search(p.stdout)
+    if p.returncode != 0 or not m:
+        sys.exit("bench_cycles: %s failed:\n%s" % (" ".join(cmd), p.stdout))
+    return float(m.group(1))
+
+
+def fit_time_at(points, target):
+    """t at which the least-squares line log e = a + b log t through points (t, e) gives e =
+    target, and the slope b."""
+    xs = [math.log(t) for t, _ in points]
+    ys = [math.log(e) for _, e in points]
+    mx, my = statistics.mean(xs), statistics.mean(ys)
+    b = sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sum((x - mx) ** 2 for x in xs)
+    a = my - b * mx
+    return math.exp((math.log(target) - a) / b), b
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--mcpt", default="./mcpt")
+    ap.add_argument("--blender", default="blender")
+    ap.add_argument("--ref", default=REF_DEFAULT)
+    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--json", help="write the figures here as JSON")
+    args = ap.parse_args()
+    if not os.path.exists(args.ref):
+        make_ref(args.blender, args.ref, args.threads)
+    tmp = tempfile.mkdtemp(prefix="bench-cycles-")
+    load = os.getloadavg()[0]
+    print("bench_cycles: %d rounds, %d threads, %dx%d, load average %.2f on %d CPUs; "
+          "reference %s" % (args.runs, args.threads, SIZE, SIZE, load, os.cpu_count(), args.ref),
+          flush=True)
+    rounds = []
+    for k in range(1, args.runs + 1):
+        (c_path, t_c), = cycles(args.blender, CYCLES_SPP, 1, 100 + k, args.threads, tmp)
+        e_c = rmse(args.mcpt, c_path, args.ref)
+        points = []
+        for spp in MCPT_SPP:
+            out = os.path.join(tmp, "mcpt-%d.exr" % spp)
+            t = mcpt_render(args.mcpt, spp, k, args.threads, out)
+            points.append((spp, t, rmse(args.mcpt, out, args.ref)))
+        t_star, slope = fit_time_at([(t, e) for _, t, e in points], e_c)
+        first = next(((spp, t) for spp, t, e in points if e <= e_c), None)
+        r = {"cycles_s": t_c, "cycles_rmse": e_c, "mcpt": points, "slope": slope,
+             "t_equal": t_star, "ratio": t_star / t_c,
+             "first_spp_at_or_below": first[0] if first else None,
+             "first_ratio": first[1] / t_c if first else None}
+        rounds.append(r)
+        print("round %d: Cycles %d spp %.2f s RMSE %.3e; mcpt %s; fit slope %.3f: equal error "
+              "at %.2f s, ratio mcpt/Cycles %.3f%s"
+              % (k, CYCLES_SPP, t_c, e_c,
+                 ", ".join("%d spp %.2f s %.3e" % p for p in points), slope, t_star,
+                 t_star / t_c,
+                 "; first spp at or below Cycles' RMSE: %d (%.3f)" % (first[0], first[1] / t_c)
+                 if first else ""), flush=True)
+    ratio = statistics.median(r["ratio"] for r in rounds)
+    print("bench_cycles: equal-error time ratio mcpt/Cycles = %.3f (median of %d rounds; "
+          "Cycles %d spp: %.2f s, RMSE %.3e)"
+          % (ratio, len(rounds), CYCLES_SPP, statistics.median(r["cycles_s"] for r in rounds),
+             statistics.median(r["cycles_rmse"] for r in rounds)))
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"load_avg": load, "ratio": ratio, "rounds": rounds}, f, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
