@@ -27,16 +27,8 @@ import subprocess
 import sys
 import tempfile
 
-
-def parse_seeds(text):
-    seeds = []
-    for part in text.split(","):
-        if "-" in part:
-            lo, hi = part.split("-")
-            seeds.extend(range(int(lo), int(hi) + 1))
-        else:
-            seeds.append(int(part))
-    return seeds
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from seed_mse import mean_se, parse_seeds  # noqa: E402  (the seeds and their statistics)
 
 
 def run(cmd):
@@ -53,12 +45,6 @@ def run(cmd):
 def compare(mcpt, image, ref):
     out, _ = run([mcpt, "compare", image, ref, "--json"])
     return json.loads(out)
-
-
-def mean_se(values):
-    m = statistics.fmean(values)
-    se = statistics.stdev(values) / math.sqrt(len(values)) if len(values) > 1 else float("nan")
-    return m, se
 
 
 def main():
