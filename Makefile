@@ -184,7 +184,8 @@ BENCH_MODELS_DIR ?= ../shared/models
 BENCH_MODELS ?= stanford-bunny stanford-dragon-100k sponza-dabrovic lucy-100k
 BENCH_RUNS ?= 5
 BENCH_DIR := $(BUILD)/bench
-BENCH_OBJS := $(BUILD)/bvh.o $(BUILD)/bvh_wide.o $(BUILD)/obj.o $(BUILD)/camera.o $(BUILD)/sample.o
+BENCH_OBJS := $(BUILD)/bvh.o $(BUILD)/bvh_wide.o $(BUILD)/obj.o $(BUILD)/camera.o $(BUILD)/sample.o \
+    $(BUILD)/file.o
 BENCH_RAYS := $(foreach m,$(BENCH_MODELS),$(BENCH_DIR)/$(m)-primary.bin)
 EMBREE_FOUND := $(shell $(PKG_CONFIG) --exists embree3 2>/dev/null && echo yes || \
                   { test -f /usr/include/embree3/rtcore.h && echo yes; })
