@@ -1427,9 +1427,11 @@ unsigned bvh_layouts(const struct bvh *bvh) { return bvh->layouts; }
  * one can start a few ulps beyond t_hit and be culled.  The reported hit is then one of those
  * triangles, at the same point to within rounding.  The wide traversal (bvh_wide.c) has the
  * same contract.
- * A ray starting on a surface (t_min = 0) may report that surface at t ~ 0 when rounding puts
- * its origin behind the plane; tri_hit only rejects t <= delta_t.  Spawned rays must start at
- * offset_ray_origin (vec.h), which puts the origin on the correct side by the error bound.
+ * A ray starting on a surface (t_min = 0) reports that surface only when its origin lies
+ * measurably in front of the plane (tri_hit decides the side exactly, in double where float
+ * cannot); an origin on the plane within double rounding finds nothing there.  Spawned rays
+ * start at offset_ray_origin (vec.h), which puts the origin on the correct side by the hit
+ * point's error bound.
  * The per-ray constants (struct ray_pre) and the conservative slab test box_hit, which the wide
  * layout uses too, are in bvh_internal.h. */
 
@@ -1445,7 +1447,7 @@ static bool tri_hit(const struct bvh_tri *tri, const struct ray_pre *rp, float t
 
 static bool binary_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *hit)
 {
-    if (bvh->n_nodes == 0)
+    if (bvh->n_nodes == 0 || !ray_is_valid(ray))
         return false;
     struct ray_pre rp;
     ray_setup(ray, &rp);
@@ -1521,7 +1523,7 @@ done:
  * first triangle hit ends the search.  It reports a hit exactly when binary_intersect does. */
 static bool binary_occluded(const struct bvh *bvh, const struct ray *ray)
 {
-    if (bvh->n_nodes == 0)
+    if (bvh->n_nodes == 0 || !ray_is_valid(ray))
         return false;
     struct ray_pre rp;
     ray_setup(ray, &rp);
@@ -1608,16 +1610,40 @@ bool bvh_occluded_layout(const struct bvh *bvh, enum bvh_layout layout, const st
  * sign is unreliable and all three are recomputed in double (the paper's double-precision
  * fallback; the products of floats are exact in double).  Both signs are accepted (no culling).
  *   det = U + V + W,  T = U Az + V Bz + W Cz,  t = T / det,  u = V / det,  v = W / det
- * A hit needs t_min < t < t_max and t > delta_t, PBRT's bound on the rounding error of t (a hit
- * that close may lie behind the origin, so a negative t_min finds nothing behind it either);
- * det == 0 (ray parallel to, or in, the plane) is a miss.  The same test is written a second
- * time, on eight lanes, as woop8 in bvh_wide.c: the same operations in the same order, so its
- * t, u, v are the same bits.  This scalar form is the reference the SIMD one is tested against
- * (every traversal against bvh_intersect_brute, which uses tri_hit). */
+ * det == 0 (ray parallel to, or in, the plane) is a miss.
+ *
+ * Which side of the origin: T and det carry rounding errors bounded by delta_T and delta_det
+ * (PBRT 4e, ch. 6, "Avoiding Intersections Behind Ray Origins", derived again in
+ * docs/theory.md, "Self-intersection").  When |T| > delta_T and |det| > delta_det the signs are
+ * exact and so is the sign of t: the hit is certainly in front of the origin or certainly
+ * behind it.  Otherwise (the origin within rounding of the plane, a grazing ray, or a float
+ * that overflowed or underflowed) the float test cannot say, and PBRT's rule of rejecting
+ * such hits would throw true hits away (a ray leaving a floor near a concave edge meets the
+ * wall at t ~ 1e-5 < delta_t).  Instead the same computation is done again in double,
+ * bvh_tri_hit_double, from the stored vertices, whose own bounds are about 2^29 times
+ * smaller; the float inside/outside decision is kept, so watertightness is unchanged.  Only
+ * hits at t ~ 0, grazing hits and extreme coordinates take that path.  The same test is written
+ * a second time, on eight lanes, as woop8 in bvh_wide.c: the same operations in the same order,
+ * so its t, u, v and its undecided lanes are the same bits, and those lanes go to the same
+ * bvh_tri_hit_double.  This scalar form is the reference the SIMD one is tested against (every
+ * traversal against bvh_intersect_brute, which uses tri_hit). */
 static inline float max_abs3(float a, float b, float c)
 {
     float m = fabsf(a) > fabsf(b) ? fabsf(a) : fabsf(b);
     return fabsf(c) > m ? fabsf(c) : m;
+}
+
+static inline double max_abs3_d(double a, double b, double c)
+{
+    return fmax(fabs(a), fmax(fabs(b), fabs(c)));
+}
+
+/* gamma(n) of double precision, n u / (1 - n u) with u = 2^-53 (PBRT 4e, ch. 6, "Managing
+ * Rounding Error"). */
+static inline double gamma_double(int n)
+{
+    const double u = 0x1p-53;
+    return ((double)n * u) / (1.0 - (double)n * u);
 }
 
 /* The double-precision fallback for one triangle's sheared 2D vertices (woop8 uses it too). */
@@ -1633,6 +1659,114 @@ void bvh_edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx,
     double BxAy = (double)Bx * (double)Ay;
     double ByAx = (double)By * (double)Ax;
     *W = (float)(BxAy - ByAx);
+}
+
+/* Woop's test redone in double for a (ray, triangle) pair whose float result could not decide
+ * the side of the origin (tri_hit, woop8).  Every float input (vertex, origin, direction) is
+ * exact in double; the shear constants, translation, shear, edge functions, T and det are
+ * recomputed, with the same error bounds in units of u = 2^-53.  For float inputs no double
+ * operation here overflows or underflows (products of at most four floats stay within 2^+-600),
+ * so the bounds need no absolute term.  A hit needs t certainly > 0 and t_min < t < t_max, the
+ * latter tested on the float t returned (the double one rounded).  When even double cannot
+ * decide (the origin within about 2^-50 of the plane, relative to the triangle's extent from
+ * it), the hit is rejected: the origin lies on the plane, and t_min is exclusive. */
+bool bvh_tri_hit_double(const struct bvh_tri *tri, const struct ray_pre *rp, const float edge[3],
+                        float t_min, float t_max, float *t_out, float *u_out, float *v_out)
+{
+    const int kx = rp->kx;
+    const int ky = rp->ky;
+    const int kz = rp->kz;
+    const double o[3] = {rp->o[0], rp->o[1], rp->o[2]};
+    /* First the side alone, from the plane, n = (p1 - p0) x (p2 - p0) in double: t has the sign
+     * of n . (p0 - o) / n . d.  With n's components off by gamma(2) of the sums of their terms'
+     * magnitudes (n_abs) and p0 - o by gamma(1), both dot products are within gamma(6) n_abs .
+     * |.| of exact.  A hit certainly behind the origin (a spawned ray's own triangle, most of
+     * this function's calls) needs nothing more. */
+    double e1[3], e2[3], po[3];
+    for (int a = 0; a < 3; a++) {
+        e1[a] = (double)tri->p1[a] - tri->p0[a];
+        e2[a] = (double)tri->p2[a] - tri->p0[a];
+        po[a] = (double)tri->p0[a] - o[a];
+    }
+    double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                   e1[0] * e2[1] - e1[1] * e2[0]};
+    double n_abs[3] = {fabs(e1[1] * e2[2]) + fabs(e1[2] * e2[1]),
+                       fabs(e1[2] * e2[0]) + fabs(e1[0] * e2[2]),
+                       fabs(e1[0] * e2[1]) + fabs(e1[1] * e2[0])};
+    double num = n[0] * po[0] + n[1] * po[1] + n[2] * po[2];
+    double den = n[0] * rp->d[0] + n[1] * rp->d[1] + n[2] * rp->d[2];
+    double num_err = gamma_double(6) *
+                     (n_abs[0] * fabs(po[0]) + n_abs[1] * fabs(po[1]) + n_abs[2] * fabs(po[2]));
+    double den_err = gamma_double(6) * (n_abs[0] * fabs(rp->d[0]) + n_abs[1] * fabs(rp->d[1]) +
+                                        n_abs[2] * fabs(rp->d[2]));
+    if (fabs(num) > num_err && fabs(den) > den_err && (num > 0.0) != (den > 0.0))
+        return false;
+    /* the shear of the ray itself, in double: the float constants turn its direction by up to
+     * 2^-24, which decides the side of a ray that grazes the plane at a smaller angle (within
+     * the bounds below: they cover one rounding of sx, sy and sz) */
+    const double sx = (double)rp->d[kx] / (double)rp->d[kz];
+    const double sy = (double)rp->d[ky] / (double)rp->d[kz];
+    const double sz = 1.0 / (double)rp->d[kz];
+    double a_x = (double)tri->p0[kx] - o[kx];
+    double a_y = (double)tri->p0[ky] - o[ky];
+    double a_z = (double)tri->p0[kz] - o[kz];
+    double b_x = (double)tri->p1[kx] - o[kx];
+    double b_y = (double)tri->p1[ky] - o[ky];
+    double b_z = (double)tri->p1[kz] - o[kz];
+    double c_x = (double)tri->p2[kx] - o[kx];
+    double c_y = (double)tri->p2[ky] - o[ky];
+    double c_z = (double)tri->p2[kz] - o[kz];
+    double Ax = a_x - sx * a_z;
+    double Ay = a_y - sy * a_z;
+    double Bx = b_x - sx * b_z;
+    double By = b_y - sy * b_z;
+    double Cx = c_x - sx * c_z;
+    double Cy = c_y - sy * c_z;
+    double U = Cx * By - Cy * Bx;
+    double V = Ax * Cy - Ay * Cx;
+    double W = Bx * Ay - By * Ax;
+    /* inside: the float signs, as every float test decides them (watertight); an edge function
+     * that is 0 in float (a product underflowed, or the ray meets the edge) takes its sign from
+     * double, so a triangle far below float resolution is not hit through its zeros */
+    double s_U = edge[0] != 0.0f ? (double)edge[0] : U;
+    double s_V = edge[1] != 0.0f ? (double)edge[1] : V;
+    double s_W = edge[2] != 0.0f ? (double)edge[2] : W;
+    if ((s_U < 0.0 || s_V < 0.0 || s_W < 0.0) && (s_U > 0.0 || s_V > 0.0 || s_W > 0.0))
+        return false;
+    double det = U + V + W;
+    double Az = sz * a_z;
+    double Bz = sz * b_z;
+    double Cz = sz * c_z;
+    double T = U * Az + V * Bz + W * Cz;
+    /* the bounds of tri_hit, in double */
+    double max_xt = max_abs3_d(Ax, Bx, Cx);
+    double max_yt = max_abs3_d(Ay, By, Cy);
+    double max_zu = max_abs3_d(a_z, b_z, c_z);
+    double max_zt = max_abs3_d(Az, Bz, Cz);
+    double max_e = max_abs3_d(U, V, W);
+    double delta_x = gamma_double(5) * (max_xt + 2.0 * max_zu);
+    double delta_y = gamma_double(5) * (max_yt + 2.0 * max_zu);
+    double delta_z = gamma_double(4) * max_zt;
+    double delta_e = 2.0 * (gamma_double(3) * max_xt * max_yt + delta_y * max_xt +
+                            delta_x * max_yt + delta_x * delta_y);
+    double delta_T = 3.0 * (gamma_double(4) * max_e * max_zt + delta_z * max_e + delta_e * max_zt +
+                            delta_z * delta_e);
+    double delta_det = 3.0 * (gamma_double(3) * max_e + delta_e);
+    if (!(fabs(T) > delta_T && fabs(det) > delta_det))
+        return false; /* undecided even in double: the origin is on the plane */
+    double t = T / det;
+    if (!(t > 0.0))
+        return false;
+    /* t rounded to float (a positive t that underflows becomes the least positive float), then
+     * tested against the interval as float tests it: the result depends on t_min and t_max only
+     * through that test, so every traversal gets the same bits */
+    float tf = (float)t > 0.0f ? (float)t : FLT_TRUE_MIN;
+    if (!(tf > t_min && tf < t_max))
+        return false;
+    *t_out = tf;
+    *u_out = (float)(V / det);
+    *v_out = (float)(W / det);
+    return true;
 }
 
 static bool tri_hit(const struct bvh_tri *tri, const struct ray_pre *rp, float t_min, float t_max,
@@ -1677,25 +1811,48 @@ static bool tri_hit(const struct bvh_tri *tri, const struct ray_pre *rp, float t
     float T = U * Az + V * Bz + W * Cz;
     float inv_det = 1.0f / det;
     float t = T * inv_det;
-    if (!(t > t_min && t < t_max)) /* written so that a NaN t is a miss */
-        return false;
-    /* PBRT 4e, ch. 6, "Avoiding Intersections Behind Ray Origins": the rounding error of t is at
-     * most delta_t; a hit with t <= delta_t may lie behind the origin and is rejected.  With
-     * offset_ray_origin this keeps spawned rays off their own triangle even for slivers. */
+    /* the rounding errors of T and det (docs/theory.md, "Self-intersection"): X, Y the sheared
+     * extents, Zu the unscaled and Zs the scaled z extent, E the largest edge function;
+     *   delta_x = gamma(5) (X + 2 Zu),  delta_y = gamma(5) (Y + 2 Zu),  delta_z = gamma(4) Zs
+     *   delta_e = 2 (gamma(3) X Y + delta_y X + delta_x Y + delta_x delta_y)
+     *   delta_T = 3 (gamma(4) E Zs + delta_z E + delta_e Zs + delta_z delta_e)
+     *   delta_det = 3 (gamma(3) E + delta_e)
+     * each one gamma above the derivation's, for the rounding of the bound itself; + FLT_MIN
+     * covers the absolute error of a product that underflows (2^-150 at most). */
     float max_xt = max_abs3(Ax, Bx, Cx);
     float max_yt = max_abs3(Ay, By, Cy);
+    float max_zu = max_abs3(a_z, b_z, c_z);
     float max_zt = max_abs3(Az, Bz, Cz);
     float max_e = max_abs3(U, V, W);
-    /* the shear's error scales with the unscaled z (|sx|, |sy| <= 1); PBRT writes max_zt, the
-     * same only for |d[kz]| = 1, and a ray's d need not be unit length here */
-    float max_z = max_abs3(a_z, b_z, c_z);
-    float delta_x = mcpt_gamma(5) * (max_xt + max_z);
-    float delta_y = mcpt_gamma(5) * (max_yt + max_z);
-    float delta_z = mcpt_gamma(3) * max_zt;
-    float delta_e = 2.0f * (mcpt_gamma(2) * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
-    float delta_t = 3.0f * (mcpt_gamma(3) * max_e * max_zt + delta_e * max_zt + delta_z * max_e) *
-                    fabsf(inv_det);
-    if (!(t > delta_t))
+    float delta_x = mcpt_gamma(5) * (max_xt + 2.0f * max_zu) + FLT_MIN;
+    float delta_y = mcpt_gamma(5) * (max_yt + 2.0f * max_zu) + FLT_MIN;
+    float delta_z = mcpt_gamma(4) * max_zt + FLT_MIN;
+    float delta_e = 2.0f * (mcpt_gamma(3) * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt +
+                            delta_x * delta_y) +
+                    FLT_MIN;
+    float delta_T = 3.0f * (mcpt_gamma(4) * max_e * max_zt + delta_z * max_e + delta_e * max_zt +
+                            delta_z * delta_e) +
+                    FLT_MIN;
+    float delta_det = 3.0f * (mcpt_gamma(3) * max_e + delta_e);
+    /* t's own precision: t = sum b_i z_i with b = (U, V, W) / det and sum b_i = 1, so
+     *   |t - t*| |det| <= spread (3 delta_e + delta_det) + delta_z |det|
+     *                  <= 2 spread delta_det + delta_z |det| = err_t     (delta_det >= 3 delta_e)
+     * with spread the extent of Az, Bz, Cz.  A hit in front needs err_t <= 2^-10 |det| (|t| +
+     * |o| |sz|): t known to 2^-10 of the larger of itself and the origin's magnitude, in units
+     * of t (a bound, pessimistic: typically 2^-20 is met).  A triangle huge beside both (a floor
+     * of size 1e7 seen from 1 away, whose float t is off by whole units) goes to double. */
+    float z_lo = min_num(min_num(Az, Bz), Cz);
+    float z_hi = max_num(max_num(Az, Bz), Cz);
+    float err_t = 2.0f * (z_hi - z_lo) * delta_det + delta_z * fabsf(det);
+    /* decided: T finite and both signs exact (a NaN or infinite bound leaves it undecided), and
+     * behind the origin, or in front with a precise t */
+    bool decided = fabsf(T) > delta_T && fabsf(T) <= FLT_MAX && fabsf(det) > delta_det &&
+                   (!(t > 0.0f) || err_t <= 0x1p-10f * (fabsf(T) + fabsf(det) * rp->o_scale));
+    if (!decided) {
+        const float edge[3] = {U, V, W};
+        return bvh_tri_hit_double(tri, rp, edge, t_min, t_max, t_out, u_out, v_out);
+    }
+    if (!(t > 0.0f && t > t_min && t < t_max)) /* written so that a NaN t is a miss */
         return false;
     *t_out = t;
     *u_out = V * inv_det;
@@ -1721,6 +1878,8 @@ void bvh_brute_step(const struct bvh_tri *tri, uint32_t prim, const struct ray_p
 
 bool bvh_intersect_brute(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *hit)
 {
+    if (!ray_is_valid(ray))
+        return false;
     struct ray_pre rp;
     ray_setup(ray, &rp);
     struct bvh_hit best = {ray->t_max, 0.0f, 0.0f, UINT32_MAX};

@@ -104,7 +104,8 @@ struct ray_pre {
     float far_scale;  /* 1 + 2 gamma(3), PBRT 4e, ch. 6, "Conservative Ray-Bounds Intersections" */
     int kx, ky, kz;   /* Woop et al. 2013: kz = argmax |d|, (kx, ky) swapped when d[kz] < 0 */
     float sx, sy, sz; /* shear: sx = d[kx] / d[kz], sy = d[ky] / d[kz], sz = 1 / d[kz] */
-};                    /* 72 bytes */
+    float o_scale;    /* max |o_a| |sz|: the origin's magnitude in units of t (t's precision) */
+};                    /* 76 bytes */
 
 /* max(running, candidate) and min(...) where a NaN candidate leaves running unchanged: fmaxf /
  * fminf semantics for the one operand that can be NaN, written as a comparison so that gcc
@@ -152,6 +153,7 @@ static inline void ray_setup_woop(struct ray_pre *rp)
     rp->sx = d[kx] / d[kz];
     rp->sy = d[ky] / d[kz];
     rp->sz = 1.0f / d[kz];
+    rp->o_scale = fmaxf(fabsf(rp->o[0]), fmaxf(fabsf(rp->o[1]), fabsf(rp->o[2]))) * fabsf(rp->sz);
 }
 
 /* Slab test (Kay, Kajiya 1986, "Ray Tracing Complex Scenes") in the (min - o) * inv_d form of
@@ -183,6 +185,13 @@ static inline bool box_hit(const struct bvh_node *node, const struct ray_pre *rp
     return t0 <= t1;
 }
 
+/* A ray the traversals accept: finite origin and direction, direction not zero.  Any other ray
+ * hits nothing (a NaN ray would pass every slab test, the empty lanes of wide nodes included). */
+static inline bool ray_is_valid(const struct ray *ray)
+{
+    return v3_is_finite(ray->o) && v3_is_finite(ray->d) && !v3_is_zero(ray->d);
+}
+
 /* A traversal stack entry of the closest-hit loops. */
 struct stack_entry {
     uint32_t node_idx; /* node still to visit (binary index or wide reference) */
@@ -205,6 +214,14 @@ void bvh_load_tri(struct bvh_tri *tri, const vec3 *positions, const uint32_t *in
  * 2D vertices A, B, C, each from two exact double products and one rounding. */
 void bvh_edge_functions_double(float Ax, float Ay, float Bx, float By, float Cx, float Cy, float *U,
                                float *V, float *W);
+
+/* Woop's test in double for a (ray, triangle) pair whose float test (tri_hit, woop8) found
+ * inside but could not decide on which side of the origin the hit lies; edge[] are the float
+ * edge functions U, V, W (after Woop's fallback).  True with t in (t_min, t_max), u and v when
+ * the hit is certainly in front (bvh.c, "Watertight ray-triangle test").  rp needs Woop's
+ * constants (ray_setup_woop). */
+bool bvh_tri_hit_double(const struct bvh_tri *tri, const struct ray_pre *rp, const float edge[3],
+                        float t_min, float t_max, float *t_out, float *u_out, float *v_out);
 
 /* Brute force's step: tests tri (the caller's triangle prim) with the scalar watertight test and
  * keeps it in *best when it is hit before best->t (prim_idx UINT32_MAX while nothing is hit). */

@@ -845,14 +845,17 @@ struct woop8_in {
     struct f8 sx;   /* shear constants of each lane's ray */
     struct f8 sy;
     struct f8 sz;
-    struct f8 t_min; /* hit interval (t_min, t_max) */
+    struct f8 o_scale; /* ray_pre's o_scale of each lane's ray */
+    struct f8 t_min;   /* hit interval (t_min, t_max) */
     struct f8 t_max;
 };
 
 struct woop8_out {
     struct f8 t;
-    struct f8 u; /* V / det */
-    struct f8 v; /* W / det */
+    struct f8 u;        /* V / det */
+    struct f8 v;        /* W / det */
+    uint32_t undecided; /* inside lanes whose side of the origin float could not decide */
+    struct f8 edge[3];  /* U, V, W, filled only when undecided != 0 */
 };
 
 static void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, struct f8 Bx, struct f8 By,
@@ -877,9 +880,14 @@ static void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, struct f8
     *W = f8_loadu(w);
 }
 
-static inline uint32_t woop8(const struct woop8_in *in, uint32_t valid, struct woop8_out *out)
+/* Returns the lanes certainly hit in (t_min, t_max); out->undecided gets the inside lanes whose
+ * side of the origin the float bounds leave open, for the caller to decide with
+ * bvh_tri_hit_double (it has the stored vertices, woop8 only their translated copies). */
+static ALWAYS_INLINE uint32_t woop8(const struct woop8_in *in, uint32_t valid,
+                                    struct woop8_out *out)
 {
     const struct f8 zero = f8_set1(0.0f);
+    out->undecided = 0;
     /* shear so each lane's ray direction becomes (0, 0, 1) */
     struct f8 Ax = f8_sub(in->a[0], f8_mul(in->sx, in->a[2]));
     struct f8 Ay = f8_sub(in->a[1], f8_mul(in->sy, in->a[2]));
@@ -897,12 +905,12 @@ static inline uint32_t woop8(const struct woop8_in *in, uint32_t valid, struct w
     /* outside when the edge functions disagree in sign */
     struct m8 any_neg = m8_or(m8_or(f8_lt(U, zero), f8_lt(V, zero)), f8_lt(W, zero));
     struct m8 any_pos = m8_or(m8_or(f8_gt(U, zero), f8_gt(V, zero)), f8_gt(W, zero));
-    uint32_t hit = valid & ~m8_bits(m8_and(any_neg, any_pos));
-    if (!hit)
+    uint32_t inside = valid & ~m8_bits(m8_and(any_neg, any_pos));
+    if (!inside)
         return 0;
     struct f8 det = f8_add(f8_add(U, V), W);
-    hit &= ~m8_bits(f8_eq(det, zero));
-    if (!hit)
+    inside &= ~m8_bits(f8_eq(det, zero));
+    if (!inside)
         return 0;
     struct f8 Az = f8_mul(in->sz, in->a[2]);
     struct f8 Bz = f8_mul(in->sz, in->b[2]);
@@ -910,28 +918,55 @@ static inline uint32_t woop8(const struct woop8_in *in, uint32_t valid, struct w
     struct f8 T = f8_add(f8_add(f8_mul(U, Az), f8_mul(V, Bz)), f8_mul(W, Cz));
     struct f8 inv_det = f8_div(f8_set1(1.0f), det);
     struct f8 t = f8_mul(T, inv_det);
-    hit &= m8_bits(m8_and(f8_gt(t, in->t_min), f8_lt(t, in->t_max)));
-    if (!hit)
-        return 0;
-    /* PBRT 4e, ch. 6, "Avoiding Intersections Behind Ray Origins", as in tri_hit */
+    /* the error bounds of T and det, as in tri_hit (docs/theory.md, "Self-intersection") */
+    const struct f8 tiny = f8_set1(FLT_MIN);
     struct f8 max_xt = f8_max_num(f8_max_num(f8_abs(Ax), f8_abs(Bx)), f8_abs(Cx));
     struct f8 max_yt = f8_max_num(f8_max_num(f8_abs(Ay), f8_abs(By)), f8_abs(Cy));
+    struct f8 max_zu = f8_max_num(f8_max_num(f8_abs(in->a[2]), f8_abs(in->b[2])), f8_abs(in->c[2]));
     struct f8 max_zt = f8_max_num(f8_max_num(f8_abs(Az), f8_abs(Bz)), f8_abs(Cz));
     struct f8 max_e = f8_max_num(f8_max_num(f8_abs(U), f8_abs(V)), f8_abs(W));
-    struct f8 max_z = f8_max_num(f8_max_num(f8_abs(in->a[2]), f8_abs(in->b[2])), f8_abs(in->c[2]));
-    struct f8 delta_x = f8_mul(f8_set1(mcpt_gamma(5)), f8_add(max_xt, max_z));
-    struct f8 delta_y = f8_mul(f8_set1(mcpt_gamma(5)), f8_add(max_yt, max_z));
-    struct f8 delta_z = f8_mul(f8_set1(mcpt_gamma(3)), max_zt);
-    struct f8 delta_e = f8_mul(f8_set1(2.0f),
-                               f8_add(f8_add(f8_mul(f8_mul(f8_set1(mcpt_gamma(2)), max_xt), max_yt),
-                                             f8_mul(delta_y, max_xt)),
-                                      f8_mul(delta_x, max_yt)));
-    struct f8 delta_t = f8_mul(
-        f8_mul(f8_set1(3.0f), f8_add(f8_add(f8_mul(f8_mul(f8_set1(mcpt_gamma(3)), max_e), max_zt),
-                                            f8_mul(delta_e, max_zt)),
-                                     f8_mul(delta_z, max_e))),
-        f8_abs(inv_det));
-    hit &= m8_bits(f8_gt(t, delta_t));
+    struct f8 two_zu = f8_mul(f8_set1(2.0f), max_zu);
+    struct f8 delta_x = f8_add(f8_mul(f8_set1(mcpt_gamma(5)), f8_add(max_xt, two_zu)), tiny);
+    struct f8 delta_y = f8_add(f8_mul(f8_set1(mcpt_gamma(5)), f8_add(max_yt, two_zu)), tiny);
+    struct f8 delta_z = f8_add(f8_mul(f8_set1(mcpt_gamma(4)), max_zt), tiny);
+    struct f8 delta_e =
+        f8_add(f8_mul(f8_set1(2.0f),
+                      f8_add(f8_add(f8_add(f8_mul(f8_mul(f8_set1(mcpt_gamma(3)), max_xt), max_yt),
+                                           f8_mul(delta_y, max_xt)),
+                                    f8_mul(delta_x, max_yt)),
+                             f8_mul(delta_x, delta_y))),
+               tiny);
+    struct f8 delta_T =
+        f8_add(f8_mul(f8_set1(3.0f),
+                      f8_add(f8_add(f8_add(f8_mul(f8_mul(f8_set1(mcpt_gamma(4)), max_e), max_zt),
+                                           f8_mul(delta_z, max_e)),
+                                    f8_mul(delta_e, max_zt)),
+                             f8_mul(delta_z, delta_e))),
+               tiny);
+    struct f8 delta_det = f8_mul(f8_set1(3.0f),
+                                 f8_add(f8_mul(f8_set1(mcpt_gamma(3)), max_e), delta_e));
+    /* t's own precision, as in tri_hit */
+    struct f8 z_lo = f8_min_num(f8_min_num(Az, Bz), Cz);
+    struct f8 z_hi = f8_max_num(f8_max_num(Az, Bz), Cz);
+    struct f8 abs_det = f8_abs(det);
+    struct f8 err_t = f8_add(f8_mul(f8_mul(f8_set1(2.0f), f8_sub(z_hi, z_lo)), delta_det),
+                             f8_mul(delta_z, abs_det));
+    /* decided: T finite, both signs exact, and behind the origin or a precise t, as in tri_hit */
+    struct f8 abs_T = f8_abs(T);
+    struct m8 t_pos = f8_gt(t, zero);
+    struct m8 sign_known = m8_and(m8_and(f8_gt(abs_T, delta_T), f8_le(abs_T, f8_set1(FLT_MAX))),
+                                  f8_gt(abs_det, delta_det));
+    struct m8 precise = f8_le(err_t, f8_mul(f8_set1(0x1p-10f),
+                                            f8_add(abs_T, f8_mul(abs_det, in->o_scale))));
+    uint32_t decided = m8_bits(sign_known) & ~(m8_bits(t_pos) & ~m8_bits(precise));
+    out->undecided = inside & ~decided;
+    if (out->undecided) {
+        out->edge[0] = U;
+        out->edge[1] = V;
+        out->edge[2] = W;
+    }
+    uint32_t hit = inside & decided &
+                   m8_bits(m8_and(m8_and(t_pos, f8_gt(t, in->t_min)), f8_lt(t, in->t_max)));
     out->t = t;
     out->u = f8_mul(V, inv_det);
     out->v = f8_mul(W, inv_det);
@@ -976,7 +1011,9 @@ struct wide_ray8 {
     struct f8 sx;     /* Woop's shear constants */
     struct f8 sy;
     struct f8 sz;
+    struct f8 o_scale;  /* Woop: the origin's magnitude in units of t */
     int k[3];           /* kx, ky, kz */
+    float rp_t_min;     /* the ray's t_min, for bvh_tri_hit_double */
     size_t near_off[3]; /* byte offsets of the near and far bounds rows in a node */
     size_t far_off[3];
     int order_shift;              /* 3 octant: the ray's child order (struct wide_node) */
@@ -1053,6 +1090,7 @@ static inline void wide_ray8_box(const struct bvh *bvh, const struct wide_ray *w
         v->c_far[j] = f8_set1(wr->c_far[j]);
     }
     v->t_min = f8_set1(wr->t_min);
+    v->rp_t_min = wr->t_min;
     const int *is_neg = wr->rp->is_neg;
     v->order_shift = 3 * (is_neg[0] | is_neg[1] << 1 | is_neg[2] << 2);
     v->rp = wr->rp;
@@ -1071,6 +1109,8 @@ static inline void wide_ray8_woop(struct wide_ray8 *v)
     v->sx = f8_set1(rp->sx);
     v->sy = f8_set1(rp->sy);
     v->sz = f8_set1(rp->sz);
+    v->o_scale = f8_set1(rp->o_scale);
+    v->rp = rp;
 }
 
 /* Slab test of one ray against a wide node's children; returns the mask of children hit in
@@ -1098,6 +1138,48 @@ static inline struct m8 wide_box_hit(const struct wide_node *node, const struct 
     return f8_le(t0, t1);
 }
 
+/* Triangle i of the leaf at wide triangle `first` (n triangles), unpacked from SoA. */
+static void leaf_tri(const struct bvh *bvh, uint32_t first, uint32_t n, uint32_t i,
+                     struct bvh_tri *tri)
+{
+    const float *base = bvh->leaf_tris + 9 * (size_t)first;
+    float *p[3] = {tri->p0, tri->p1, tri->p2};
+    for (int k = 0; k < 3; k++)
+        for (int a = 0; a < 3; a++)
+            p[k][a] = base[(size_t)(3 * k + a) * n + i];
+}
+
+/* The lanes woop8 left undecided, decided by bvh_tri_hit_double (rare: hits at t ~ 0, grazing
+ * hits, extreme coordinates): one ray rp against the leaf's triangles in `lanes`.  Their t, u, v
+ * replace the lanes' in *out; returns the lanes hit. */
+static uint32_t leaf_undecided(const struct bvh *bvh, uint32_t first, uint32_t n,
+                               const struct ray_pre *rp, float t_min, float t_max, uint32_t lanes,
+                               struct woop8_out *out)
+{
+    float t[8];
+    float u[8];
+    float v[8];
+    float e[3][8];
+    f8_store(t, out->t);
+    f8_store(u, out->u);
+    f8_store(v, out->v);
+    for (int j = 0; j < 3; j++)
+        f8_store(e[j], out->edge[j]);
+    uint32_t hits = 0;
+    for (uint32_t bits = lanes; bits; bits &= bits - 1) {
+        int i = lowest_bit(bits);
+        struct bvh_tri tri;
+        leaf_tri(bvh, first, n, (uint32_t)i, &tri);
+        const float edge[3] = {e[0][i], e[1][i], e[2][i]};
+        if (bvh_tri_hit_double(&tri, rp, edge, t_min, t_max, &t[i], &u[i], &v[i]))
+            hits |= 1u << i;
+    }
+    out->t = f8_loadu(t);
+    out->u = f8_loadu(u);
+    out->v = f8_loadu(v);
+    return hits;
+}
+
 /* woop8 of one ray against the n (1..8) triangles of the leaf at wide triangle `first`. */
 static inline uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint32_t n,
                                      const struct wide_ray8 *v, float t_max, struct woop8_out *out)
@@ -1113,9 +1195,13 @@ static inline uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint
     in.sx = v->sx;
     in.sy = v->sy;
     in.sz = v->sz;
+    in.o_scale = v->o_scale;
     in.t_min = v->t_min;
     in.t_max = f8_set1(t_max);
-    return woop8(&in, (1u << n) - 1u, out);
+    uint32_t hits = woop8(&in, (1u << n) - 1u, out);
+    if (out->undecided)
+        hits |= leaf_undecided(bvh, first, n, v->rp, v->rp_t_min, t_max, out->undecided, out);
+    return hits;
 }
 
 /* The closest hit so far. */
@@ -1147,6 +1233,24 @@ static inline uint32_t push_ordered(uint32_t *stack_ref, float *stack_t, uint32_
     return i8_lane(refs, k - 1);
 }
 
+/* The interior children a node visit found hit, all four cache lines of each, requested from
+ * memory before the traversal knows which it takes next: incoherent rays wait mostly on node
+ * and leaf loads, and the address of the next node is otherwise known only after the ordering
+ * (push_ordered) and the stack.  Leaves are not prefetched (their rows measured no faster).
+ * Figures in docs/bvh.md, "Levers measured". */
+static inline void prefetch_hit_nodes(const struct wide_node *wide, const struct wide_node *node,
+                                      uint32_t mask)
+{
+    for (; mask; mask &= mask - 1) {
+        uint32_t c = node->child[lowest_bit(mask)];
+        if (!(c & WIDE_LEAF)) {
+            const char *p = (const char *)&wide[c];
+            for (int line = 0; line < 4; line++)
+                __builtin_prefetch(p + 64 * line);
+        }
+    }
+}
+
 /* Closest hit below wide reference `root` (a node or a leaf) for t in (t_min, hit->t). */
 static ALWAYS_INLINE void wide_closest(const struct bvh *bvh, uint32_t root, struct wide_ray8 *v,
                                        struct wide_hit *hit, const bool fast)
@@ -1163,6 +1267,7 @@ static ALWAYS_INLINE void wide_closest(const struct bvh *bvh, uint32_t root, str
             struct f8 t_entry;
             struct m8 hit_m = wide_box_hit(node, v, fast, hit->t, &t_entry);
             uint32_t mask = m8_bits(hit_m);
+            prefetch_hit_nodes(v->wide, node, mask);
             if (mask) {
                 int c0 = lowest_bit(mask);
                 uint32_t rest = mask & (mask - 1);
@@ -1235,6 +1340,7 @@ static ALWAYS_INLINE bool wide_any(const struct bvh *bvh, uint32_t root, struct 
             struct f8 t_entry;
             struct m8 hit_m = wide_box_hit(node, v, fast, t_max, &t_entry);
             uint32_t mask = m8_bits(hit_m);
+            prefetch_hit_nodes(v->wide, node, mask);
             if (mask) {
                 ref = node->child[lowest_bit(mask)];
                 assert(n_stack + 8 <= WIDE_STACK_SIZE);
@@ -1308,6 +1414,8 @@ static inline bool wide_any_ray(const struct bvh *bvh, uint32_t root, const stru
 static inline bool wide_ray_begin(const struct bvh *bvh, const struct ray *ray, struct ray_pre *rp,
                                   struct wide_ray *wr)
 {
+    if (bvh->n_wide == 0 || !ray_is_valid(ray))
+        return false;
     ray_setup_box(ray, rp);
     float t_entry;
     if (!box_hit(&bvh->bounds, rp, ray->t_min, ray->t_max, &t_entry))
@@ -1387,6 +1495,7 @@ static inline bool wide_ray8_fast(const struct bvh *bvh, const struct ray *ray, 
         v->far_off[a] = (size_t)(2 * a + 1 - is_neg_a) * sizeof(float) * BVH_WIDTH;
     }
     v->t_min = f8_set1(ray->t_min);
+    v->rp_t_min = ray->t_min;
     v->order_shift = 3 * neg;
     v->wide = bvh->wide;
     /* what Woop's setup at the first leaf reads */
@@ -1472,6 +1581,7 @@ struct packet_pre {
     struct f8 sx;
     struct f8 sy;
     struct f8 sz;
+    struct f8 o_scale; /* ray_setup_woop's o_scale, per lane */
     struct f8 t_min;
     bool coherent;   /* every lane: same direction signs, fused constants finite */
     int near_row[3]; /* when coherent: bounds rows of the near and far planes */
@@ -1587,6 +1697,10 @@ static void packet_setup_woop(struct packet_pre *pp)
     pp->sx = f8_div(d_k[0], d_k[2]);
     pp->sy = f8_div(d_k[1], d_k[2]);
     pp->sz = f8_div(f8_set1(1.0f), d_k[2]);
+    /* ray_setup_woop's o_scale, max |o_a| |sz| */
+    pp->o_scale = f8_mul(f8_max_num(f8_max_num(f8_abs(pp->o[0]), f8_abs(pp->o[1])),
+                                    f8_abs(pp->o[2])),
+                         f8_abs(pp->sz));
     uint32_t b0 = m8_bits(kz0);
     uint32_t b1 = m8_bits(kz1);
     uint32_t bs = m8_bits(swap);
@@ -1643,6 +1757,7 @@ static inline bool packet_lane_fast(const struct bvh *bvh, const struct bvh_pack
         rp->d[a] = p->d[a][lane];
     }
     v->t_min = f8_splat_lane(pp->t_min, lane);
+    v->rp_t_min = p->t_min[lane];
     v->order_shift = 3 * neg;
     v->wide = bvh->wide;
     v->rp = rp;
@@ -1692,8 +1807,11 @@ static inline struct f8 pick_k(const struct packet_pre *pp, int j, struct f8 x, 
     return f8_select(pp->k_is[j][0], x, f8_select(pp->k_is[j][1], y, z));
 }
 
-/* woop8 of triangle i of the leaf at `first` (n triangles) against the rays in mask. */
-static inline uint32_t packet_tri_hit(const struct bvh *bvh, uint32_t first, uint32_t n, uint32_t i,
+/* woop8 of triangle i of the leaf at `first` (n triangles) against the rays in mask; the lanes
+ * it leaves undecided go to bvh_tri_hit_double with their single-ray constants, which equal the
+ * packet's to the bit (packet_setup). */
+static inline uint32_t packet_tri_hit(const struct bvh *bvh, const struct bvh_packet *packet,
+                                      uint32_t first, uint32_t n, uint32_t i,
                                       const struct packet_pre *pp, struct f8 t_max, uint32_t mask,
                                       struct woop8_out *out)
 {
@@ -1715,9 +1833,40 @@ static inline uint32_t packet_tri_hit(const struct bvh *bvh, uint32_t first, uin
     in.sx = pp->sx;
     in.sy = pp->sy;
     in.sz = pp->sz;
+    in.o_scale = pp->o_scale;
     in.t_min = pp->t_min;
     in.t_max = t_max;
-    return woop8(&in, mask, out);
+    uint32_t hits = woop8(&in, mask, out);
+    if (out->undecided) {
+        struct bvh_tri tri;
+        leaf_tri(bvh, first, n, i, &tri);
+        float t[8];
+        float u[8];
+        float v[8];
+        float t_hi[8];
+        float e[3][8];
+        f8_store(t, out->t);
+        f8_store(u, out->u);
+        f8_store(v, out->v);
+        f8_store(t_hi, t_max);
+        for (int j = 0; j < 3; j++)
+            f8_store(e[j], out->edge[j]);
+        for (uint32_t bits = out->undecided; bits; bits &= bits - 1) {
+            int lane = lowest_bit(bits);
+            struct ray r = packet_lane(packet, lane);
+            struct ray_pre rp;
+            ray_setup_box(&r, &rp);
+            ray_setup_woop(&rp);
+            const float edge[3] = {e[0][lane], e[1][lane], e[2][lane]};
+            if (bvh_tri_hit_double(&tri, &rp, edge, r.t_min, t_hi[lane], &t[lane], &u[lane],
+                                   &v[lane]))
+                hits |= 1u << lane;
+        }
+        out->t = f8_loadu(t);
+        out->u = f8_loadu(u);
+        out->v = f8_loadu(v);
+    }
+    return hits;
 }
 
 struct packet_entry {
@@ -1796,7 +1945,8 @@ static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh, const struct
             uint32_t n = (cur.ref & 7u) + 1;
             for (uint32_t i = 0; i < n; i++) {
                 struct woop8_out out;
-                uint32_t hits = packet_tri_hit(bvh, first, n, i, pp, t_hit8, cur.mask, &out);
+                uint32_t hits = packet_tri_hit(bvh, packet, first, n, i, pp, t_hit8, cur.mask,
+                                               &out);
                 if (!hits)
                     continue;
                 /* a lane's later triangle is tested against the t_hit its earlier one set, as
@@ -1842,10 +1992,23 @@ done:
     return hits;
 }
 
+/* The lanes of active whose rays the traversals accept (ray_is_valid). */
+static uint32_t packet_valid(const struct bvh_packet *packet, uint32_t active)
+{
+    uint32_t valid = 0;
+    for (uint32_t bits = active & ((1u << BVH_PACKET_SIZE) - 1u); bits; bits &= bits - 1) {
+        int lane = lowest_bit(bits);
+        struct ray r = packet_lane(packet, lane);
+        if (ray_is_valid(&r))
+            valid |= 1u << lane;
+    }
+    return valid;
+}
+
 uint32_t bvh_intersect_packet(const struct bvh *bvh, const struct bvh_packet *packet,
                               uint32_t active, struct bvh_packet_hit *hit)
 {
-    active &= (1u << BVH_PACKET_SIZE) - 1u;
+    active = packet_valid(packet, active);
     if (!(bvh->layouts & BVH_LAYOUT_WIDE) || bvh->n_wide == 0) {
         uint32_t hits = 0;
         for (uint32_t bits = active; bits; bits &= bits - 1) {
@@ -1921,8 +2084,8 @@ static ALWAYS_INLINE uint32_t packet_any(const struct bvh *bvh, const struct bvh
             uint32_t n = (cur.ref & 7u) + 1;
             for (uint32_t i = 0; i < n && (cur.mask & ~occluded); i++) {
                 struct woop8_out out;
-                occluded |= packet_tri_hit(bvh, first, n, i, pp, t_max8, cur.mask & ~occluded,
-                                           &out);
+                occluded |= packet_tri_hit(bvh, packet, first, n, i, pp, t_max8,
+                                           cur.mask & ~occluded, &out);
             }
         }
         if (occluded == active || n_stack == 0)
@@ -1934,7 +2097,7 @@ static ALWAYS_INLINE uint32_t packet_any(const struct bvh *bvh, const struct bvh
 uint32_t bvh_occluded_packet(const struct bvh *bvh, const struct bvh_packet *packet,
                              uint32_t active)
 {
-    active &= (1u << BVH_PACKET_SIZE) - 1u;
+    active = packet_valid(packet, active);
     if (!(bvh->layouts & BVH_LAYOUT_WIDE) || bvh->n_wide == 0) {
         uint32_t occluded = 0;
         for (uint32_t bits = active; bits; bits &= bits - 1) {
@@ -1989,13 +2152,9 @@ void bvh_wide_brute(const struct bvh *bvh, const struct ray_pre *rp, float t_min
         }
         uint32_t first = (ref & ~WIDE_LEAF) >> 3;
         uint32_t n = (ref & 7u) + 1;
-        const float *base = bvh->leaf_tris + 9 * (size_t)first;
         for (uint32_t i = 0; i < n; i++) {
             struct bvh_tri tri;
-            float *p[3] = {tri.p0, tri.p1, tri.p2};
-            for (int k = 0; k < 3; k++)
-                for (int a = 0; a < 3; a++)
-                    p[k][a] = base[(size_t)(3 * k + a) * n + i];
+            leaf_tri(bvh, first, n, i, &tri);
             bvh_brute_step(&tri, bvh->wide_prim_idx[first + i], rp, t_min, best);
         }
     }

@@ -537,8 +537,12 @@ static int run_convert(int argc, char **argv)
         return cmd_fail(&err);
     if (is_help)
         return CMD_EXIT_OK;
+    /* the PNG may not overwrite the image it is made from, and must be creatable */
+    struct output_file files[2] = {{.role = "the PNG (OUT)"}, {.role = "the image IN"}};
+    snprintf(files[0].path, sizeof files[0].path, "%s", out);
+    snprintf(files[1].path, sizeof files[1].path, "%s", in);
     struct image img;
-    if (!image_read_exr(in, &img, &err))
+    if (!output_check(files, 1, files + 1, 1, &err) || !image_read_exr(in, &img, &err))
         return cmd_fail(&err);
     int rgb_idx[3] = {image_find_channel(&img, "R"), image_find_channel(&img, "G"),
                       image_find_channel(&img, "B")};

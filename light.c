@@ -59,7 +59,7 @@ static double light_power(const struct scene *scene, const struct light *l, doub
         break;
     case LIGHT_QUAD:
         m = &scene->materials[scene->quads[l->prim_idx].mat_idx];
-        *area = v3_length(v3_cross(scene->quads[l->prim_idx].e1, scene->quads[l->prim_idx].e2));
+        *area = shape_quad_area(&scene->quads[l->prim_idx]);
         break;
     case LIGHT_SPHERE: {
         const struct sphere *s = &scene->spheres[l->prim_idx];
@@ -289,12 +289,21 @@ static bool sample_point(const struct light *l, const struct surface *ref, struc
     return true;
 }
 
-/* Whether the point p_ref lies behind the plane (normal n, through p0) of a flat emitter of
- * material m that emits on its front side only: then no point of it sends light to p_ref
- * (mat_emission), and sampling one would be wasted. */
-static bool is_behind(const struct material *m, vec3 n, vec3 p0, vec3 p_ref)
+/* Whether the point p_ref lies behind the plane through p0 spanned by edges e1 and e2 (front:
+ * e1 x e2) of a flat emitter of material m that emits on its front side only: then no point
+ * of it sends light to p_ref (mat_emission), and sampling one would be wasted.  In double: the
+ * triple product of float differences scales as the cube of the scene's unit, which leaves
+ * float's range (0 below a scale of about 1e-13, inf above 1e13; tests/extremes, Cornell box
+ * from 1e-15 to 1e15). */
+static bool is_behind(const struct material *m, vec3 p0, const double e1[3], const double e2[3],
+                      vec3 p_ref)
 {
-    return !m->two_sided_emission && v3_dot(n, v3_sub(p_ref, p0)) <= 0.0f;
+    if (m->two_sided_emission)
+        return false;
+    double r[3] = {(double)p_ref.x - p0.x, (double)p_ref.y - p0.y, (double)p_ref.z - p0.z};
+    double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                   e1[0] * e2[1] - e1[1] * e2[0]};
+    return n[0] * r[0] + n[1] * r[1] + n[2] * r[2] <= 0.0;
 }
 
 bool light_sample(const struct light_table *lt, uint32_t light_idx, const struct surface *ref,
@@ -317,8 +326,9 @@ bool light_sample(const struct light_table *lt, uint32_t light_idx, const struct
         vec3 p[3];
         triangle_corners(scene, l->prim_idx, p);
         mat_idx = scene->tris[l->prim_idx].mat_idx;
-        vec3 n = v3_cross(v3_sub(p[1], p[0]), v3_sub(p[2], p[0]));
-        if (is_behind(&scene->materials[mat_idx], n, p[0], ref->p))
+        double e1[3] = {(double)p[1].x - p[0].x, (double)p[1].y - p[0].y, (double)p[1].z - p[0].z};
+        double e2[3] = {(double)p[2].x - p[0].x, (double)p[2].y - p[0].y, (double)p[2].z - p[0].z};
+        if (is_behind(&scene->materials[mat_idx], p[0], e1, e2, ref->p))
             return false;
         ok = lt->by_solid_angle ? shape_triangle_sample_solid_angle(p, ref, u, &ss)
                                 : shape_triangle_sample(p, ref, u, &ss);
@@ -327,7 +337,9 @@ bool light_sample(const struct light_table *lt, uint32_t light_idx, const struct
     case LIGHT_QUAD: {
         const struct quad *q = &scene->quads[l->prim_idx];
         mat_idx = q->mat_idx;
-        if (is_behind(&scene->materials[mat_idx], v3_cross(q->e1, q->e2), q->corner, ref->p))
+        const double e1[3] = {q->e1.x, q->e1.y, q->e1.z};
+        const double e2[3] = {q->e2.x, q->e2.y, q->e2.z};
+        if (is_behind(&scene->materials[mat_idx], q->corner, e1, e2, ref->p))
             return false;
         ok = lt->by_solid_angle ? shape_quad_sample_solid_angle(q, ref, u, &ss)
                                 : shape_quad_sample(q, ref, u, &ss);

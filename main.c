@@ -66,7 +66,7 @@ static const char USAGE[] =
     "                         T max(mean, floor) (docs/sampling.md)\n"
     "      --adaptive-rule R  pilot (default: sigma from a discarded pilot; unbiased) or stop\n"
     "                         (stop when the pixel's own interval is narrow; biased low)\n"
-    "      --tolerance T      adaptive: relative tolerance (default 0.05)\n"
+    "      --tolerance T      adaptive: relative tolerance (default 0.1)\n"
     "      --adaptive-floor F adaptive: luminance below which T applies absolutely\n"
     "                         (default 0.01)\n"
     "      --pilot-spp P      adaptive pilot: samples of the pilot (default 16, >= 2)\n"

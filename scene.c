@@ -69,6 +69,7 @@ enum value_kind {
     VAL_SPLIT,          /* full, direct or indirect */
     VAL_ADAPTIVE_RULE,  /* pilot or stop */
     VAL_LIGHT_SAMPLING, /* area or solid-angle */
+    VAL_NORMALS,        /* a mesh's shading normals: file or smooth */
     VAL_RR,             /* 'throughput' (stored as 0) or a probability in (0, 1] */
     VAL_CHECKER,        /* true, false, or a colour (the checker's second albedo) */
 };
@@ -206,6 +207,7 @@ static const struct stmt_spec stmt_specs[STMT_COUNT] = {
                        {"translate", VAL_VEC3, RANGE_ANY, ALL_TYPES, 0},
                        {"rotate", VAL_ROTATION, RANGE_ANY, ALL_TYPES, 0},
                        {"scale", VAL_SCALE, RANGE_NONZERO, ALL_TYPES, 0},
+                       {"normals", VAL_NORMALS, RANGE_ANY, ALL_TYPES, 0},
                    }},
     [STMT_SPHERE] = {"sphere",
                      false,
@@ -766,6 +768,11 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
         p->u = (uint32_t)split;
         return true;
     }
+    case VAL_NORMALS:
+        if (strcmp(p->text, "file") != 0 && strcmp(p->text, "smooth") != 0)
+            return fail(ps, p->val_col, "expected file or smooth for '%s', got '%s'", sp->key, v);
+        p->b = p->text[0] == 's';
+        return true;
     case VAL_RR: {
         float prob = 0.0f;
         if (strcmp(p->text, "throughput") != 0 &&
@@ -1193,6 +1200,61 @@ static char *resolve_path(const char *dir, const char *file)
     return p;
 }
 
+/* Angle-weighted vertex normals (Thürmer & Wüthrich 1998, "Computing Vertex Normals from
+ * Polygonal Facets", J. Graphics Tools 3(1)): n_v = sum over the faces at vertex v of alpha_f n_f,
+ * alpha_f the face's angle at v and n_f its unit normal, so the result does not depend on how a
+ * surface is cut into triangles.  In double, from the world-space positions of the n_tris faces
+ * tris (wound as stored), whose vertices lie in [v_base, v_base + n_v); normals[i] gets vertex
+ * v_base + i's unit normal, or 0 where the sum is 0 (no face with area).  False when out of
+ * memory. */
+static bool angle_weighted_normals(const vec3 *positions, const struct scene_tri *tris,
+                                   uint32_t n_tris, uint32_t v_base, uint32_t n_v, vec3 *normals)
+{
+    double(*sum)[3] = calloc(n_v > 0 ? n_v : 1, sizeof *sum);
+    if (!sum)
+        return false;
+    for (uint32_t i = 0; i < n_tris; i++) {
+        double p[3][3];
+        for (int k = 0; k < 3; k++) {
+            vec3 q = positions[tris[i].v[k]];
+            p[k][0] = q.x;
+            p[k][1] = q.y;
+            p[k][2] = q.z;
+        }
+        double e1[3], e2[3];
+        for (int a = 0; a < 3; a++) {
+            e1[a] = p[1][a] - p[0][a];
+            e2[a] = p[2][a] - p[0][a];
+        }
+        double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                       e1[0] * e2[1] - e1[1] * e2[0]};
+        double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        if (!(len > 0.0) || !isfinite(len))
+            continue; /* no area: no normal, no angle */
+        for (int k = 0; k < 3; k++) {
+            /* the angle at corner k between the edges to the other two corners */
+            const double *c = p[k], *a = p[(k + 1) % 3], *b = p[(k + 2) % 3];
+            double u[3] = {a[0] - c[0], a[1] - c[1], a[2] - c[2]};
+            double w[3] = {b[0] - c[0], b[1] - c[1], b[2] - c[2]};
+            double uxw[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2],
+                             u[0] * w[1] - u[1] * w[0]};
+            double alpha = atan2(sqrt(uxw[0] * uxw[0] + uxw[1] * uxw[1] + uxw[2] * uxw[2]),
+                                 u[0] * w[0] + u[1] * w[1] + u[2] * w[2]);
+            uint32_t idx = tris[i].v[k] - v_base;
+            for (int ax = 0; ax < 3; ax++)
+                sum[idx][ax] += alpha * n[ax] / len;
+        }
+    }
+    for (uint32_t i = 0; i < n_v; i++) {
+        double len = sqrt(sum[i][0] * sum[i][0] + sum[i][1] * sum[i][1] + sum[i][2] * sum[i][2]);
+        normals[i] = len > 0.0 ? (vec3){(float)(sum[i][0] / len), (float)(sum[i][1] / len),
+                                        (float)(sum[i][2] / len)}
+                               : v3_splat(0.0f);
+    }
+    free(sum);
+    return true;
+}
+
 /* Adds *path (malloc'ed; the scene takes it, *path becomes NULL) to the files the scene
  * loaded, which no output of a render may overwrite (main.c). */
 static bool add_loaded(struct parser *ps, char **path)
@@ -1214,6 +1276,7 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
     struct scene *sc = ps->scene;
     const struct param *file = get(st, "file");
     const struct param *mat = get(st, "material");
+    bool is_smooth = get(st, "normals")->key && get(st, "normals")->b;
     struct obj_mesh mesh = {0};
     bool ok = false;
     char buf[SHOW_OUT_BYTES], buf2[SHOW_OUT_BYTES];
@@ -1247,8 +1310,10 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
              show(file->text, buf));
         goto done;
     }
+    /* normals=smooth appends one computed normal per vertex after the file's */
+    uint32_t n_normals_new = mesh.n_normals + (is_smooth ? mesh.n_positions : 0);
     if ((uint64_t)sc->n_positions + mesh.n_positions > UINT32_MAX ||
-        (uint64_t)sc->n_normals + mesh.n_normals > INT32_MAX ||
+        (uint64_t)sc->n_normals + mesh.n_normals + (is_smooth ? mesh.n_positions : 0) > INT32_MAX ||
         (uint64_t)sc->n_uvs + mesh.n_uvs > INT32_MAX) {
         fail(ps, file->val_col,
              "expected at most %u vertices and %d normals and uvs in the "
@@ -1259,8 +1324,8 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
     if (!RESERVE(ps, sc->positions, ps->cap_positions,
                  (uint64_t)sc->n_positions + mesh.n_positions) ||
         !RESERVE(ps, sc->tris, ps->cap_tris, (uint64_t)sc->n_tris + mesh.n_tris) ||
-        (mesh.n_normals > 0 &&
-         !RESERVE(ps, sc->normals, ps->cap_normals, (uint64_t)sc->n_normals + mesh.n_normals)) ||
+        (n_normals_new > 0 &&
+         !RESERVE(ps, sc->normals, ps->cap_normals, (uint64_t)sc->n_normals + n_normals_new)) ||
         (mesh.n_uvs > 0 && !RESERVE(ps, sc->uvs, ps->cap_uvs, (uint64_t)sc->n_uvs + mesh.n_uvs)))
         goto done;
 
@@ -1333,8 +1398,26 @@ static bool do_mesh(struct parser *ps, const struct stmt *st)
                        : t->mat_idx >= 0 ? mtl_base + (uint32_t)t->mat_idx
                                          : (uint32_t)ps->default_mat_idx;
     }
+    /* normals=smooth: faces without normals from the file take the vertices' angle-weighted
+     * normals, stored after the file's (a face with a vertex that has none stays flat) */
+    if (is_smooth) {
+        uint32_t base = sc->n_normals + mesh.n_normals;
+        if (!angle_weighted_normals(sc->positions, sc->tris + sc->n_tris, mesh.n_tris,
+                                    sc->n_positions, mesh.n_positions, sc->normals + base)) {
+            fail_oom(ps, st->kw_col);
+            goto done;
+        }
+        for (uint32_t i = 0; i < mesh.n_tris; i++) {
+            struct scene_tri *out = &sc->tris[sc->n_tris + i];
+            bool has_all = out->vn[0] < 0;
+            for (int k = 0; k < 3; k++)
+                has_all &= !v3_is_zero(sc->normals[base + out->v[k] - sc->n_positions]);
+            for (int k = 0; has_all && k < 3; k++)
+                out->vn[k] = (int32_t)(base + out->v[k] - sc->n_positions);
+        }
+    }
     sc->n_positions += mesh.n_positions;
-    sc->n_normals += mesh.n_normals;
+    sc->n_normals += n_normals_new;
     sc->n_uvs += mesh.n_uvs;
     sc->n_tris += mesh.n_tris;
     ok = add_loaded(ps, &full);

@@ -1,49 +1,180 @@
 /* shape.c - each kind of primitive's geometry: spheres, parallelograms (quads), infinite planes
  * and the surface of triangles; intersection, surface point with its error bound (PBRT 4e, ch. 6,
  * "Managing Rounding Error") and, for the shapes that emit, sampling from a reference point.
- * Sphere: the quadratic in the form of Haines et al. 2019, "Precision Improvements for
- * Ray/Sphere Intersection" (Ray Tracing Gems ch. 7), and PBRT 4e, ch. 6, "Spheres"; the hit point
- * is reprojected onto the surface.  Quad: plane hit, then the planar coordinates (alpha, beta).
- * Sampling: PBRT 4e, ch. 6, "Shape Interface" (Sample(ctx, u), PDF(ctx, wi)); uniform by area
- * and converted to solid angle, or, for a sphere seen from outside, uniform in its cone. */
+ * Robustness (docs/theory.md, "Self-intersection"): intersections, hit points and normals are
+ * computed in double from the float inputs, so a point's error is its rounding to float (half an
+ * ulp) whatever the size of its primitive, and the side of a spawned ray's origin is decided
+ * exactly; the sphere's roots carry an interval (PBRT 4e, ch. 6, "Bounding Intersection Point
+ * Error"), in double.  Sphere: the quadratic of Haines et al. 2019, "Precision Improvements for
+ * Ray/Sphere Intersection" (Ray Tracing Gems ch. 7).  Sampling: PBRT 4e, ch. 6, "Shape
+ * Interface"; uniform by area and converted to solid angle, or, for a sphere seen from outside,
+ * uniform in its cone. */
 #include "shape.h"
+
+#include <float.h>
 
 #include "sample.h"
 
-static vec3 v3_abs(vec3 a) { return (vec3){fabsf(a.x), fabsf(a.y), fabsf(a.z)}; }
+/* ---- double precision ----
+ * Products of two floats are exact in double and no sum of a few of them overflows or
+ * underflows, so these computations are 2^29 times more precise than the float ones and need no
+ * absolute error term.  gamma_d(n) = n u / (1 - n u), u = 2^-53 (PBRT 4e, ch. 6, "Managing
+ * Rounding Error"). */
+struct dvec3 {
+    double x;
+    double y;
+    double z;
+}; /* 24 bytes */
+
+static struct dvec3 d3(vec3 a) { return (struct dvec3){a.x, a.y, a.z}; }
+static struct dvec3 d3_add(struct dvec3 a, struct dvec3 b)
+{
+    return (struct dvec3){a.x + b.x, a.y + b.y, a.z + b.z};
+}
+static struct dvec3 d3_sub(struct dvec3 a, struct dvec3 b)
+{
+    return (struct dvec3){a.x - b.x, a.y - b.y, a.z - b.z};
+}
+static struct dvec3 d3_scale(struct dvec3 a, double s)
+{
+    return (struct dvec3){a.x * s, a.y * s, a.z * s};
+}
+static struct dvec3 d3_abs(struct dvec3 a)
+{
+    return (struct dvec3){fabs(a.x), fabs(a.y), fabs(a.z)};
+}
+static double d3_dot(struct dvec3 a, struct dvec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+static double d3_sum(struct dvec3 a) { return a.x + a.y + a.z; }
+static struct dvec3 d3_cross(struct dvec3 a, struct dvec3 b)
+{
+    return (struct dvec3){a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+/* |a_y b_z| + |a_z b_y|, ...: bounds each component of a x b and scales its rounding error */
+static struct dvec3 d3_cross_abs(struct dvec3 a, struct dvec3 b)
+{
+    return (struct dvec3){fabs(a.y * b.z) + fabs(a.z * b.y), fabs(a.z * b.x) + fabs(a.x * b.z),
+                          fabs(a.x * b.y) + fabs(a.y * b.x)};
+}
+static double d3_length(struct dvec3 a) { return sqrt(d3_dot(a, a)); }
+static vec3 d3_to_float(struct dvec3 a) { return (vec3){(float)a.x, (float)a.y, (float)a.z}; }
+
+static double gamma_d(int n)
+{
+    const double u = 0x1p-53;
+    return ((double)n * u) / (1.0 - (double)n * u);
+}
+
+/* A float that is >= x (x >= 0): the rounded value, moved up when rounding went down. */
+static float float_up(double x)
+{
+    float f = (float)x;
+    return (double)f < x ? next_float_up(f) : f;
+}
+
+/* The float point nearest p_d, where p_d is within err_d (per component) of the exact point,
+ * with the bound of its error: err_d plus the rounding to float, at most 2^-24 |p_d| (half an
+ * ulp) or 2^-150 below FLT_MIN.  eta bounds each component of the error of the unit normal the
+ * caller returns beside the point: offset_ray_origin pushes along that normal by n . p_error,
+ * and 4 eta (sum of the errors) added to every component keeps the push, projected on the exact
+ * normal, beyond the exact distance (docs/theory.md, "Self-intersection"). */
+static vec3 round_point(struct dvec3 p_d, struct dvec3 err_d, double eta, vec3 *p_error)
+{
+    vec3 p = d3_to_float(p_d);
+    struct dvec3 e = d3_add(err_d, d3_add(d3_scale(d3_abs(p_d), 0x1p-24),
+                                          (struct dvec3){0x1p-149, 0x1p-149, 0x1p-149}));
+    double spread = 4.0 * eta * d3_sum(e);
+    *p_error = (vec3){float_up(e.x + spread), float_up(e.y + spread), float_up(e.z + spread)};
+    return p;
+}
+
+/* The point o + a e1 + b e2 of a plane through float point o, e1 and e2 differences of floats,
+ * in double: each term carries at most 2 roundings (e, and the product) and the two sums 2
+ * more, so |p_d - exact| <= gamma_d(4) (|o| + |a e1| + |b e2|) = *err; the exact point lies on
+ * the plane for any a, b. */
+static struct dvec3 plane_point_d(vec3 o, struct dvec3 e1, struct dvec3 e2, double a, double b,
+                                  struct dvec3 *err)
+{
+    struct dvec3 a_e1 = d3_scale(e1, a);
+    struct dvec3 b_e2 = d3_scale(e2, b);
+    *err = d3_scale(d3_add(d3_add(d3_abs(d3(o)), d3_abs(a_e1)), d3_abs(b_e2)), gamma_d(4));
+    return d3_add(d3_add(d3(o), a_e1), b_e2);
+}
+
+/* An upper bound on the sum of the three error bounds round_point will give p_d. */
+static double rounded_error_sum(struct dvec3 p_d, struct dvec3 err_d, double eta)
+{
+    double e = d3_sum(err_d) + 0x1p-24 * d3_sum(d3_abs(p_d)) + 3.0 * 0x1p-149;
+    return e * (1.0 + 12.0 * eta) * (1.0 + 0x1p-20);
+}
+
+/* The unit normal of the plane spanned by e1, e2 (differences of floats) in double, rounded to
+ * float, the length of e1 x e2 (*len, twice a triangle's area), and the bound eta on the error of
+ * each of the normal's components: the cross product's components are off by
+ * gamma_d(3) |e1| |e2| at most, which moves the direction by gamma_d(3) sqrt(3) / sin(angle)
+ * and twice that after normalising, with 1 / sin(angle) = |e1| |e2| / |e1 x e2| <=
+ * (|e1|^2 + |e2|^2) / (2 |e1 x e2|); the rounding to float adds 2^-24 per component.  A
+ * degenerate pair (angle 0) gives ng = 0, *len = 0 and eta = 1. */
+static vec3 plane_normal(struct dvec3 e1, struct dvec3 e2, double *len, double *eta)
+{
+    struct dvec3 c = d3_cross(e1, e2);
+    *len = d3_length(c);
+    if (!(*len > 0.0)) {
+        *eta = 1.0;
+        return v3_splat(0.0f);
+    }
+    double inv_len = 1.0 / *len;
+    *eta = 0x1p-23 + 2.0 * gamma_d(3) * (d3_dot(e1, e1) + d3_dot(e2, e2)) * inv_len;
+    return d3_to_float(d3_scale(c, inv_len));
+}
+
+/* The ray parameter t (a double, whose sign is certain) as a float, when it is > 0 and in
+ * (t_min, t_max) as float compares it (a positive t that underflows becomes the least positive
+ * float). */
+static bool t_to_float(double t, const struct ray *ray, float *t_hit)
+{
+    if (!(t > 0.0))
+        return false;
+    float tf = (float)t > 0.0f ? (float)t : FLT_TRUE_MIN;
+    *t_hit = tf;
+    return tf > ray->t_min && tf < ray->t_max;
+}
 
 /* ---- from area to solid angle ---- */
 
 /* area -> solid angle: pdf_sa = pdf_area * dist^2 / |cos theta_light| for the point at d from
  * the reference point, normal n, seen along unit wi (PBRT 4e, ch. 4, "Radiometric Integrals":
- * dw = |cos theta| dA / r^2); false when seen edge-on. */
-static bool area_to_solid_angle(float pdf_area, vec3 d, vec3 n, vec3 wi, float *pdf_sa)
+ * dw = |cos theta| dA / r^2); false when seen edge-on.  In double: dist^2 and pdf_area scale as
+ * the square and inverse square of the scene's unit, and their product must not pass through
+ * float's range on the way. */
+static bool area_to_solid_angle(double pdf_area, vec3 d, vec3 n, vec3 wi, float *pdf_sa)
 {
     float cos_light = fabsf(v3_dot(n, wi));
     if (!(cos_light > 0.0f))
         return false;
-    *pdf_sa = pdf_area * v3_dot(d, d) / cos_light;
+    struct dvec3 dd = d3(d);
+    *pdf_sa = (float)(pdf_area * d3_dot(dd, dd) / cos_light);
     return true;
 }
 
 /* A point p (error p_error, normal n) sampled with density pdf_area per unit area, as seen from
  * ref: fills *ss with wi and pdf_sa. */
-static bool sample_by_area(vec3 p, vec3 p_error, vec3 n, float pdf_area, const struct surface *ref,
+static bool sample_by_area(vec3 p, vec3 p_error, vec3 n, double pdf_area, const struct surface *ref,
                            struct shape_sample *ss)
 {
-    vec3 d = v3_sub(p, ref->p);
-    float dist2 = v3_dot(d, d);
-    if (!(dist2 > 0.0f))
+    struct dvec3 d = d3_sub(d3(p), d3(ref->p));
+    double dist = d3_length(d);
+    if (!(dist > 0.0))
         return false;
     ss->p = p;
     ss->p_error = p_error;
     ss->n = n;
-    ss->wi = v3_scale(d, 1.0f / sqrtf(dist2));
-    return area_to_solid_angle(pdf_area, d, n, ss->wi, &ss->pdf_sa) && isfinite(ss->pdf_sa);
+    ss->wi = d3_to_float(d3_scale(d, 1.0 / dist));
+    return area_to_solid_angle(pdf_area, v3_sub(p, ref->p), n, ss->wi, &ss->pdf_sa) &&
+           isfinite(ss->pdf_sa);
 }
 
 /* The solid-angle density at the point on where wi meets a shape sampled with pdf_area. */
-static float pdf_by_area(float pdf_area, const struct surface *ref, const struct surface *on,
+static float pdf_by_area(double pdf_area, const struct surface *ref, const struct surface *on,
                          vec3 wi)
 {
     float pdf_sa;
@@ -96,61 +227,196 @@ static bool direction_to(struct shape_sample *ss, vec3 n, const struct surface *
 
 /* ---- sphere ---- */
 
-bool shape_sphere_intersect(const struct sphere *s, const struct ray *ray, float *t_hit)
+/* An interval [lo, hi] of doubles holding an exact value; each operation rounds its bounds
+ * outward, so the result holds the exact result of the exact operands (PBRT 4e,
+ * ch. 6, "Interval Arithmetic"). */
+struct interval {
+    double lo;
+    double hi;
+}; /* 16 bytes */
+
+static struct interval iv_exact(double x) { return (struct interval){x, x}; }
+/* [lo, hi] widened by two ulps at each end: x - |x| 2^-51 is at least 2 ulps below x and exact,
+ * and the least subnormal covers x == 0 (nextafter, a library call, made sphere tests 20 times
+ * slower) */
+static struct interval iv_out(double lo, double hi)
 {
-    /* |o + t d - c|^2 = r^2:  a t^2 + 2 b' t + c' = 0 with f = o - c, a = d.d, b' = f.d,
-     * c' = f.f - r^2.  Discriminant / 4 = a (r^2 - |f - (b'/a) d|^2)  (RTG ch. 7, eq. 10),
-     * which keeps its precision for rays far from the sphere. */
-    vec3 f = v3_sub(ray->o, s->center);
-    float a = v3_dot(ray->d, ray->d);
-    float b = v3_dot(f, ray->d);
-    float c = v3_dot(f, f) - s->radius * s->radius;
-    vec3 l = v3_sub(f, v3_scale(ray->d, b / a));
-    float disc = a * (s->radius - v3_length(l)) * (s->radius + v3_length(l));
-    if (!(disc >= 0.0f))
+    return (struct interval){lo - (fabs(lo) * 0x1p-51 + DBL_TRUE_MIN),
+                             hi + (fabs(hi) * 0x1p-51 + DBL_TRUE_MIN)};
+}
+static struct interval iv_add(struct interval a, struct interval b)
+{
+    return iv_out(a.lo + b.lo, a.hi + b.hi);
+}
+static struct interval iv_sub(struct interval a, struct interval b)
+{
+    return iv_out(a.lo - b.hi, a.hi - b.lo);
+}
+/* the least and greatest of four finite values (comparisons, not fmin/fmax: library calls) */
+static double min4(const double v[4])
+{
+    double a = v[0] < v[1] ? v[0] : v[1];
+    double b = v[2] < v[3] ? v[2] : v[3];
+    return a < b ? a : b;
+}
+static double max4(const double v[4])
+{
+    double a = v[0] > v[1] ? v[0] : v[1];
+    double b = v[2] > v[3] ? v[2] : v[3];
+    return a > b ? a : b;
+}
+static struct interval iv_mul(struct interval a, struct interval b)
+{
+    double p[4] = {a.lo * b.lo, a.lo * b.hi, a.hi * b.lo, a.hi * b.hi};
+    return iv_out(min4(p), max4(p));
+}
+/* a / b for b not containing 0 (the caller checks) */
+static struct interval iv_div(struct interval a, struct interval b)
+{
+    double q[4] = {a.lo / b.lo, a.lo / b.hi, a.hi / b.lo, a.hi / b.hi};
+    return iv_out(min4(q), max4(q));
+}
+/* sqrt of the non-negative part */
+static struct interval iv_sqrt(struct interval a)
+{
+    return iv_out(sqrt(a.lo > 0.0 ? a.lo : 0.0), sqrt(a.hi > 0.0 ? a.hi : 0.0));
+}
+static struct interval iv_neg(struct interval a) { return (struct interval){-a.hi, -a.lo}; }
+static bool iv_has_zero(struct interval a) { return a.lo <= 0.0 && a.hi >= 0.0; }
+static double iv_mid(struct interval a) { return 0.5 * (a.lo + a.hi); }
+static struct interval iv_dot(const struct interval a[3], const struct interval b[3])
+{
+    return iv_add(iv_add(iv_mul(a[0], b[0]), iv_mul(a[1], b[1])), iv_mul(a[2], b[2]));
+}
+
+/* |o + t d - c|^2 = r^2:  a t^2 + 2 b' t + c' = 0 with f = o - c, a = d.d, b' = f.d,
+ * c' = f.f - r^2.  Discriminant / 4 = a (r^2 - |f - (b'/a) d|^2)  (RTG ch. 7, eq. 10), which
+ * keeps its precision for rays far from the sphere; q = -(b' + sign(b') sqrt(disc)), roots
+ * q / a and c' / q (Numerical Recipes form).  Here every value is an interval in double, so
+ * each root is known with its error (PBRT 4e, ch. 6, "Bounding Intersection Point Error"): a
+ * root is taken only when its whole interval lies inside (t_min, t_max), and one whose interval
+ * reaches t_min is not taken (the origin may lie on the surface: a spawned ray, offset by its
+ * own error bound, never has such a root). */
+static bool sphere_hit_interval(const struct sphere *s, const struct ray *ray, float *t_hit)
+{
+    const float o[3] = {ray->o.x, ray->o.y, ray->o.z};
+    const float d_f[3] = {ray->d.x, ray->d.y, ray->d.z};
+    const float c_f[3] = {s->center.x, s->center.y, s->center.z};
+    struct interval f[3];
+    struct interval d[3];
+    for (int k = 0; k < 3; k++) {
+        f[k] = iv_sub(iv_exact(o[k]), iv_exact(c_f[k]));
+        d[k] = iv_exact(d_f[k]);
+    }
+    struct interval r = iv_exact(s->radius);
+    struct interval a = iv_dot(d, d);
+    if (iv_has_zero(a))
         return false;
-    /* q = -(b' + sign(b') sqrt(disc)); roots q / a and c' / q (Numerical Recipes form) */
-    float q = -(b + copysignf(sqrtf(disc), b));
-    float t0 = q / a;
-    float t1 = q != 0.0f ? c / q : t0;
-    if (t0 > t1) {
-        float tmp = t0;
+    struct interval b = iv_dot(f, d);
+    struct interval c = iv_sub(iv_dot(f, f), iv_mul(r, r));
+    struct interval b_over_a = iv_div(b, a);
+    struct interval l[3];
+    for (int k = 0; k < 3; k++)
+        l[k] = iv_sub(f[k], iv_mul(b_over_a, d[k]));
+    struct interval len_l = iv_sqrt(iv_dot(l, l));
+    struct interval disc = iv_mul(a, iv_mul(iv_sub(r, len_l), iv_add(r, len_l)));
+    if (disc.hi < 0.0)
+        return false;
+    struct interval root = iv_sqrt(disc);
+    struct interval q = iv_mid(b) < 0.0 ? iv_sub(root, b) : iv_neg(iv_add(b, root));
+    struct interval t0 = iv_div(q, a);
+    if (iv_has_zero(q))
+        return false; /* a grazing ray through the origin's own point: nothing certain */
+    struct interval t1 = iv_div(c, q);
+    if (t0.lo > t1.lo) {
+        struct interval tmp = t0;
         t0 = t1;
         t1 = tmp;
     }
-    if (t0 > ray->t_min && t0 < ray->t_max) {
-        *t_hit = t0;
-        return true;
-    }
-    if (t1 > ray->t_min && t1 < ray->t_max) {
-        *t_hit = t1;
-        return true;
-    }
-    return false;
+    double t_lo = ray->t_min > 0.0f ? ray->t_min : 0.0;
+    struct interval t = t0;
+    if (!(t.lo > t_lo))
+        t = t1;
+    if (!(t.lo > t_lo && t.hi < (double)ray->t_max))
+        return false;
+    return t_to_float(iv_mid(t), ray, t_hit);
 }
 
-/* The point at offset pc (length r) from the centre: error gamma(5) |pc| of the reprojection
- * (PBRT 4e, ch. 6, "Spheres"), plus the rounding of adding the centre back. */
-static vec3 sphere_point(const struct sphere *s, vec3 pc, vec3 *p_error)
+/* The same quadratic in plain double first (intervals cost several times as much, and scenes
+ * with spheres test every sphere on every ray), with running error bounds: with u = 2^-53 and
+ * S2 = 2 (f.f + r^2) >= (|f| + r)^2, the errors of b', c' and disc are at most 4 u sum |f_i d_i|,
+ * 8 u S2 and 128 u a S2 (docs/theory.md, "Self-intersection"), so
+ *   dq = db + ddisc / sqrt(disc) + 2 u |q|,  dt0 = dq / a + 4 u |t0|,
+ *   dt1 = (dc + |t1| dq) / |q| + 4 u |t1|
+ * (the square root's error bound needs disc well above ddisc).  A root farther than twice its
+ * bound from t_min is on its side of it; a near-tangent ray, disc <= 2^-40 a S2, or a root
+ * closer to t_min is decided by the intervals. */
+bool shape_sphere_intersect(const struct sphere *s, const struct ray *ray, float *t_hit)
 {
-    vec3 p = v3_add(s->center, pc);
-    *p_error = v3_add(v3_scale(v3_abs(pc), mcpt_gamma(5)), v3_scale(v3_abs(p), mcpt_gamma(1)));
-    return p;
+    const double u = 0x1p-53;
+    struct dvec3 f = d3_sub(d3(ray->o), d3(s->center));
+    struct dvec3 d = d3(ray->d);
+    double r = s->radius;
+    double a = d3_dot(d, d);
+    if (!(a > 0.0))
+        return false;
+    double inv_a = 1.0 / a;
+    double b = d3_dot(f, d);
+    double c = d3_dot(f, f) - r * r;
+    struct dvec3 l = d3_sub(f, d3_scale(d, b * inv_a));
+    double len_l = d3_length(l);
+    double disc = a * (r - len_l) * (r + len_l);
+    double scale2 = 2.0 * (d3_dot(f, f) + r * r);
+    double disc_err = 128.0 * u * a * scale2;
+    if (disc < -disc_err)
+        return false; /* certainly past the sphere */
+    if (!(disc > 0x1p-40 * a * scale2))
+        return sphere_hit_interval(s, ray, t_hit); /* near tangent */
+    double root = sqrt(disc);
+    double q = -(b + copysign(root, b));
+    double inv_q = 1.0 / q;
+    double q_err = 4.0 * u * d3_dot(d3_abs(f), d3_abs(d)) + disc_err / root + 2.0 * u * fabs(q);
+    double t0 = q * inv_a;
+    double t1 = c * inv_q;
+    double t0_err = q_err * inv_a + 4.0 * u * fabs(t0);
+    double t1_err = (8.0 * u * scale2 + fabs(t1) * q_err) * fabs(inv_q) + 4.0 * u * fabs(t1);
+    if (t0 > t1) {
+        double tmp = t0;
+        t0 = t1;
+        t1 = tmp;
+        tmp = t0_err;
+        t0_err = t1_err;
+        t1_err = tmp;
+    }
+    double t_lo = ray->t_min > 0.0f ? ray->t_min : 0.0;
+    if (fabs(t0 - t_lo) <= 2.0 * t0_err || fabs(t1 - t_lo) <= 2.0 * t1_err)
+        return sphere_hit_interval(s, ray, t_hit);
+    double t = t0 > t_lo ? t0 : t1;
+    if (!(t > t_lo && t < (double)ray->t_max))
+        return false;
+    return t_to_float(t, ray, t_hit);
+}
+
+/* The point at direction n (not exactly unit) from the centre, on the sphere: c + r n / |n| in
+ * double, within gamma_d(8) (|c|_1 + r) of the exact point; the unit normal n / |n| rounded to
+ * float, each component within 2^-23 of it. */
+static vec3 sphere_point(const struct sphere *s, struct dvec3 n, vec3 *ng, vec3 *p_error)
+{
+    double len = d3_length(n);
+    struct dvec3 u = len > 0.0 ? d3_scale(n, 1.0 / len) : (struct dvec3){0.0, 1.0, 0.0};
+    struct dvec3 c = d3(s->center);
+    struct dvec3 p = d3_add(c, d3_scale(u, s->radius));
+    double e = gamma_d(8) * (d3_sum(d3_abs(c)) + s->radius);
+    *ng = d3_to_float(u);
+    return round_point(p, (struct dvec3){e, e, e}, 0x1p-23, p_error);
 }
 
 struct surface shape_sphere_surface(const struct sphere *s, const struct ray *ray, float t_hit)
 {
     struct surface sf;
-    vec3 p = v3_add(ray->o, v3_scale(ray->d, t_hit));
-    /* reproject onto the sphere */
-    vec3 pc = v3_sub(p, s->center);
-    float len = v3_length(pc);
-    if (len > 0.0f)
-        pc = v3_scale(pc, s->radius / len);
-    else
-        pc = v3(0.0f, s->radius, 0.0f);
-    sf.p = sphere_point(s, pc, &sf.p_error);
-    sf.ng = v3_scale(pc, 1.0f / s->radius);
+    /* o + t d in double, reprojected onto the sphere (PBRT 4e, ch. 6, "Spheres") */
+    struct dvec3 p = d3_add(d3(ray->o), d3_scale(d3(ray->d), t_hit));
+    sf.p = sphere_point(s, d3_sub(p, d3(s->center)), &sf.ng, &sf.p_error);
     sf.ns = sf.ng;
     float phi = atan2f(sf.ng.z, sf.ng.x);
     sf.uv = (vec2){(phi < 0.0f ? phi + 2.0f * MCPT_PI : phi) * (0.5f * MCPT_INV_PI),
@@ -160,9 +426,9 @@ struct surface shape_sphere_surface(const struct sphere *s, const struct ray *ra
 }
 
 /* Uniform area sampling of the whole sphere: pdf_area = 1 / (4 pi r^2). */
-static float sphere_pdf_area(const struct sphere *s)
+static double sphere_pdf_area(const struct sphere *s)
 {
-    return 1.0f / (4.0f * MCPT_PI * s->radius * s->radius);
+    return 1.0 / (4.0 * MCPT_PI * (double)s->radius * s->radius);
 }
 
 /* The cone of directions in which ref sees sphere s, from ref->p offset towards the centre, so
@@ -173,22 +439,23 @@ static bool sphere_cone(const struct sphere *s, const struct surface *ref, vec3 
 {
     vec3 origin = offset_ray_origin(ref->p, ref->p_error, ref->ng, v3_sub(s->center, ref->p));
     *wc = v3_sub(s->center, origin);
-    float dist2 = v3_dot(*wc, *wc);
-    if (dist2 <= s->radius * s->radius)
+    struct dvec3 w = d3(*wc);
+    double dist2 = d3_dot(w, w);
+    double r2 = (double)s->radius * s->radius;
+    if (dist2 <= r2)
         return false;
-    *cone = sample_cone_from_sin2(s->radius * s->radius / dist2);
+    *cone = sample_cone_from_sin2((float)(r2 / dist2));
     return true;
 }
 
 bool shape_sphere_sample(const struct sphere *s, const struct surface *ref, vec2 u,
                          struct shape_sample *ss)
 {
-    vec3 wc, p_error;
+    vec3 wc, p_error, n;
     struct sample_cone cone;
     if (!sphere_cone(s, ref, &wc, &cone)) {
         /* inside: uniform by area */
-        vec3 n = sample_uniform_sphere(u);
-        vec3 p = sphere_point(s, v3_scale(n, s->radius), &p_error);
+        vec3 p = sphere_point(s, d3(sample_uniform_sphere(u)), &n, &p_error);
         return sample_by_area(p, p_error, n, sphere_pdf_area(s), ref, ss);
     }
     /* outside: a direction uniform in the cone (sample.c), pdf_sa = 1 / (2 pi (1 - cos
@@ -202,17 +469,18 @@ bool shape_sphere_sample(const struct sphere *s, const struct surface *ref, vec2
                       cos_theta * sqrtf(fmaxf(0.0f, 1.0f - sin2_theta / sin2_theta_max));
     float sin_alpha = sqrtf(fmaxf(0.0f, 1.0f - cos_alpha * cos_alpha));
     float phi = 2.0f * MCPT_PI * u.y;
-    vec3 wz = v3_scale(wc, -1.0f / sqrtf(v3_dot(wc, wc))); /* centre -> reference point */
+    struct dvec3 w = d3(wc);
+    vec3 wz = d3_to_float(d3_scale(w, -1.0 / d3_length(w))); /* centre -> reference point */
     vec3 wx, wy;
     v3_basis(wz, &wx, &wy);
-    vec3 n = v3_from_local(v3(sin_alpha * cosf(phi), sin_alpha * sinf(phi), cos_alpha), wx, wy, wz);
-    ss->n = n;
-    ss->p = sphere_point(s, v3_scale(n, s->radius), &ss->p_error);
-    vec3 d = v3_sub(ss->p, ref->p);
-    float dist = v3_length(d);
-    if (!(dist > 0.0f))
+    vec3 dir = v3_from_local(v3(sin_alpha * cosf(phi), sin_alpha * sinf(phi), cos_alpha), wx, wy,
+                             wz);
+    ss->p = sphere_point(s, d3(dir), &ss->n, &ss->p_error);
+    struct dvec3 d = d3_sub(d3(ss->p), d3(ref->p));
+    double dist = d3_length(d);
+    if (!(dist > 0.0))
         return false;
-    ss->wi = v3_scale(d, 1.0f / dist);
+    ss->wi = d3_to_float(d3_scale(d, 1.0 / dist));
     ss->pdf_sa = pdf_uniform_cone(&cone);
     return ss->pdf_sa > 0.0f;
 }
@@ -227,69 +495,120 @@ float shape_sphere_pdf(const struct sphere *s, const struct surface *ref, const 
     return pdf_by_area(sphere_pdf_area(s), ref, on, wi);
 }
 
-/* ---- quad ---- */
+/* ---- planes: a quad's and an infinite plane's intersection ---- */
 
-bool shape_quad_intersect(const struct quad *q, const struct ray *ray, float *t_hit)
+/* The ray's intersection with the plane through point q with normal n (both exact in double:
+ * n_abs bounds the terms each component of n was formed from, and n carries at most gamma_d(2)
+ * of it), in double: t = n . (q - o) / n . d.  The numerator is n times the distance of the
+ * origin from the plane; when its error bound covers it (the origin on the plane to double
+ * precision) or the denominator's covers it (the ray in the plane), there is no hit: a spawned
+ * origin lies 2^-24 |p| off its plane, 2^29 times farther. */
+static bool plane_t(struct dvec3 q, struct dvec3 n, struct dvec3 n_abs, const struct ray *ray,
+                    double *t)
 {
-    vec3 n = v3_cross(q->e1, q->e2);
-    float denom = v3_dot(n, ray->d);
-    if (denom == 0.0f)
+    struct dvec3 qo = d3_sub(q, d3(ray->o));
+    struct dvec3 d = d3(ray->d);
+    double num = d3_dot(n, qo);
+    double den = d3_dot(n, d);
+    /* n_i: gamma_d(2) n_abs_i; q - o: gamma_d(1); each product and the sum: gamma_d(3) more */
+    double num_err = gamma_d(6) * d3_dot(n_abs, d3_abs(qo));
+    double den_err = gamma_d(6) * d3_dot(n_abs, d3_abs(d));
+    if (!(fabs(num) > num_err && fabs(den) > den_err))
         return false;
-    float t = v3_dot(n, v3_sub(q->corner, ray->o)) / denom;
-    if (!(t > ray->t_min && t < ray->t_max))
-        return false;
-    /* planar coordinates: pd = alpha e1 + beta e2, alpha = (pd x e2).n / n.n,
-     * beta = (e1 x pd).n / n.n */
-    vec3 pd = v3_sub(v3_add(ray->o, v3_scale(ray->d, t)), q->corner);
-    float inv_nn = 1.0f / v3_dot(n, n);
-    float alpha = v3_dot(v3_cross(pd, q->e2), n) * inv_nn;
-    float beta = v3_dot(v3_cross(q->e1, pd), n) * inv_nn;
-    if (!(alpha >= 0.0f && alpha <= 1.0f && beta >= 0.0f && beta <= 1.0f))
-        return false;
-    *t_hit = t;
+    *t = num / den;
     return true;
 }
 
-/* p = corner + alpha e1 + beta e2, rebuilt from the parameterisation: error of a 3-term sum,
- * gamma(3) per term; the products alpha e1, beta e2 add one rounding each. */
-static vec3 quad_point(const struct quad *q, float alpha, float beta, vec3 *p_error)
+/* ---- quad ---- */
+
+/* The quad's planar coordinates of the ray's hit, in double: pd = o + t d - corner =
+ * alpha e1 + beta e2, alpha = (pd x e2) . n / n . n, beta = (e1 x pd) . n / n . n. */
+static bool quad_hit(const struct quad *q, const struct ray *ray, double *t, double *alpha,
+                     double *beta)
 {
-    vec3 a_e1 = v3_scale(q->e1, alpha), b_e2 = v3_scale(q->e2, beta);
-    *p_error = v3_scale(v3_add(v3_add(v3_abs(q->corner), v3_abs(a_e1)), v3_abs(b_e2)),
-                        mcpt_gamma(4));
-    return v3_add(v3_add(q->corner, a_e1), b_e2);
+    struct dvec3 e1 = d3(q->e1);
+    struct dvec3 e2 = d3(q->e2);
+    struct dvec3 n = d3_cross(e1, e2);
+    if (!plane_t(d3(q->corner), n, d3_cross_abs(e1, e2), ray, t))
+        return false;
+    struct dvec3 pd = d3_sub(d3_add(d3(ray->o), d3_scale(d3(ray->d), *t)), d3(q->corner));
+    double inv_nn = 1.0 / d3_dot(n, n);
+    *alpha = d3_dot(d3_cross(pd, e2), n) * inv_nn;
+    *beta = d3_dot(d3_cross(e1, pd), n) * inv_nn;
+    return true;
+}
+
+bool shape_quad_intersect(const struct quad *q, const struct ray *ray, float *t_hit)
+{
+    double t, alpha, beta;
+    if (!quad_hit(q, ray, &t, &alpha, &beta))
+        return false;
+    if (!(alpha >= 0.0 && alpha <= 1.0 && beta >= 0.0 && beta <= 1.0))
+        return false;
+    return t_to_float(t, ray, t_hit);
+}
+
+/* The quad's point corner + alpha e1 + beta e2 with its error bound and unit normal, pulled
+ * inside the quad as triangle_point pulls a triangle's: alpha, beta clamped to
+ * [eps, 1 - eps] with eps = 2 E / h, h the quad's width across the edges alpha = 0, 1 (or
+ * beta = 0, 1), so quads that close a box keep spawned origins off each other's planes. */
+static vec3 quad_point(const struct quad *q, double alpha, double beta, vec3 *ng, vec3 *p_error)
+{
+    struct dvec3 e1 = d3(q->e1);
+    struct dvec3 e2 = d3(q->e2);
+    double area, eta;
+    *ng = plane_normal(e1, e2, &area, &eta);
+    struct dvec3 err;
+    struct dvec3 p = plane_point_d(q->corner, e1, e2, alpha, beta, &err);
+    double E = rounded_error_sum(p, err, eta);
+    /* widths: area / |e2| across the alpha edges, area / |e1| across the beta edges */
+    double eps_alpha = area > 0.0 ? 2.0 * E * d3_length(e2) / area : 0.5;
+    double eps_beta = area > 0.0 ? 2.0 * E * d3_length(e1) / area : 0.5;
+    if (!(alpha >= eps_alpha && alpha <= 1.0 - eps_alpha && beta >= eps_beta &&
+          beta <= 1.0 - eps_beta)) {
+        alpha = eps_alpha < 0.5 ? fmin(1.0 - eps_alpha, fmax(eps_alpha, alpha)) : 0.5;
+        beta = eps_beta < 0.5 ? fmin(1.0 - eps_beta, fmax(eps_beta, beta)) : 0.5;
+        p = plane_point_d(q->corner, e1, e2, alpha, beta, &err);
+    }
+    return round_point(p, err, eta, p_error);
 }
 
 struct surface shape_quad_surface(const struct quad *q, const struct ray *ray, float t_hit)
 {
     struct surface sf;
-    vec3 n = v3_cross(q->e1, q->e2);
-    vec3 pd = v3_sub(v3_add(ray->o, v3_scale(ray->d, t_hit)), q->corner);
-    float inv_nn = 1.0f / v3_dot(n, n);
-    float alpha = fminf(1.0f, fmaxf(0.0f, v3_dot(v3_cross(pd, q->e2), n) * inv_nn));
-    float beta = fminf(1.0f, fmaxf(0.0f, v3_dot(v3_cross(q->e1, pd), n) * inv_nn));
-    sf.p = quad_point(q, alpha, beta, &sf.p_error);
-    sf.ng = v3_normalize(n);
+    /* the planar coordinates of o + t_hit d; the point is rebuilt on the plane from them */
+    struct dvec3 e1 = d3(q->e1);
+    struct dvec3 e2 = d3(q->e2);
+    struct dvec3 n = d3_cross(e1, e2);
+    struct dvec3 pd = d3_sub(d3_add(d3(ray->o), d3_scale(d3(ray->d), t_hit)), d3(q->corner));
+    double inv_nn = 1.0 / d3_dot(n, n);
+    double alpha = fmin(1.0, fmax(0.0, d3_dot(d3_cross(pd, e2), n) * inv_nn));
+    double beta = fmin(1.0, fmax(0.0, d3_dot(d3_cross(e1, pd), n) * inv_nn));
+    sf.p = quad_point(q, alpha, beta, &sf.ng, &sf.p_error);
     sf.ns = sf.ng;
-    sf.uv = (vec2){alpha, beta};
+    sf.uv = (vec2){(float)alpha, (float)beta};
     sf.mat_idx = q->mat_idx;
     return sf;
+}
+
+float shape_quad_area(const struct quad *q)
+{
+    return (float)d3_length(d3_cross(d3(q->e1), d3(q->e2)));
 }
 
 bool shape_quad_sample(const struct quad *q, const struct surface *ref, vec2 u,
                        struct shape_sample *ss)
 {
     /* uniform by area: p = corner + u0 e1 + u1 e2, pdf_area = 1 / |e1 x e2| */
-    vec3 p_error;
-    vec3 p = quad_point(q, u.x, u.y, &p_error);
-    vec3 c = v3_cross(q->e1, q->e2);
-    return sample_by_area(p, p_error, v3_normalize(c), 1.0f / v3_length(c), ref, ss);
+    vec3 n, p_error;
+    vec3 p = quad_point(q, u.x, u.y, &n, &p_error);
+    return sample_by_area(p, p_error, n, 1.0 / d3_length(d3_cross(d3(q->e1), d3(q->e2))), ref, ss);
 }
 
 float shape_quad_pdf(const struct quad *q, const struct surface *ref, const struct surface *on,
                      vec3 wi)
 {
-    return pdf_by_area(1.0f / v3_length(v3_cross(q->e1, q->e2)), ref, on, wi);
+    return pdf_by_area(1.0 / d3_length(d3_cross(d3(q->e1), d3(q->e2))), ref, on, wi);
 }
 
 /* Whether the quad q is sampled by solid angle from ref: a rectangle whose solid angle is at
@@ -323,10 +642,8 @@ bool shape_quad_sample_solid_angle(const struct quad *q, const struct surface *r
     vec3 pr = v3_sub(sample_spherical_rectangle(&sr, u), q->corner);
     float alpha = fminf(1.0f, fmaxf(0.0f, v3_dot(pr, q->e1) / v3_dot(q->e1, q->e1)));
     float beta = fminf(1.0f, fmaxf(0.0f, v3_dot(pr, q->e2) / v3_dot(q->e2, q->e2)));
-    ss->p = quad_point(q, alpha, beta, &ss->p_error);
-    vec3 c = v3_cross(q->e1, q->e2);
-    ss->n = v3_normalize(c);
-    return direction_to(ss, c, ref, pdf_u * pdf_spherical_rectangle(&sr));
+    ss->p = quad_point(q, alpha, beta, &ss->n, &ss->p_error);
+    return direction_to(ss, ss->n, ref, pdf_u * pdf_spherical_rectangle(&sr));
 }
 
 float shape_quad_pdf_solid_angle(const struct quad *q, const struct surface *ref,
@@ -345,55 +662,114 @@ float shape_quad_pdf_solid_angle(const struct quad *q, const struct surface *ref
 
 bool shape_plane_intersect(const struct plane *pl, const struct ray *ray, float *t_hit)
 {
-    float denom = v3_dot(pl->n, ray->d);
-    if (denom == 0.0f)
+    /* the plane is {x : n . (x - point) = 0} with the float n and point exactly */
+    struct dvec3 n = d3(pl->n);
+    double t;
+    if (!plane_t(d3(pl->point), n, d3_abs(n), ray, &t))
         return false;
-    float t = v3_dot(pl->n, v3_sub(pl->point, ray->o)) / denom;
-    if (!(t > ray->t_min && t < ray->t_max))
-        return false;
-    *t_hit = t;
-    return true;
+    return t_to_float(t, ray, t_hit);
 }
 
 struct surface shape_plane_surface(const struct plane *pl, const struct ray *ray, float t_hit)
 {
     struct surface sf;
-    vec3 p = v3_add(ray->o, v3_scale(ray->d, t_hit));
-    /* project back onto the plane: p -= ((p - point) . n) n */
-    vec3 pp = v3_sub(p, pl->point);
-    p = v3_sub(p, v3_scale(pl->n, v3_dot(pp, pl->n)));
-    sf.p = p;
-    sf.p_error = v3_scale(v3_add(v3_abs(p), v3_abs(pl->point)), mcpt_gamma(7));
+    /* o + t d in double, projected back onto the plane: p -= (n . (p - point) / n . n) n; the
+     * projection leaves it within gamma_d(8) (|p| + |point|) of the plane, and the plane's
+     * normal is the float n itself (no normal error) */
+    struct dvec3 n = d3(pl->n);
+    struct dvec3 q = d3(pl->point);
+    struct dvec3 p = d3_add(d3(ray->o), d3_scale(d3(ray->d), t_hit));
+    struct dvec3 pp = d3_sub(p, q);
+    p = d3_sub(p, d3_scale(n, d3_dot(pp, n) / d3_dot(n, n)));
+    double e = gamma_d(8) * (d3_length(p) + d3_length(q));
+    sf.p = round_point(p, (struct dvec3){e, e, e}, 0.0, &sf.p_error);
     sf.ng = pl->n;
     sf.ns = pl->n;
     vec3 t, b;
     v3_basis(pl->n, &t, &b);
-    sf.uv = (vec2){v3_dot(pp, t), v3_dot(pp, b)};
+    vec3 ppf = d3_to_float(pp);
+    sf.uv = (vec2){v3_dot(ppf, t), v3_dot(ppf, b)};
     sf.mat_idx = pl->mat_idx;
     return sf;
 }
 
 /* ---- triangle (the BVH finds the hit) ---- */
 
-/* p = b0 p0 + b1 p1 + b2 p2 and sum |b_i p_i|, which bounds its rounding error (PBRT 4e,
- * ch. 6, "Managing Rounding Error": gamma(7) times it after an intersection, gamma(6) for exact
- * sampled barycentrics). */
-static vec3 barycentric_point(const vec3 p[3], float b0, float b1, float b2, vec3 *abs_sum)
+/* The triangle's point p0 + b1 e1 + b2 e2 (e1 = p1 - p0, e2 = p2 - p0 in double) with its
+ * error bound and unit normal (plane_point_d, plane_normal), pulled inside the triangle: where
+ * some b_i is below eps_i = 2 E / h_i, with E the sum of the point's error bounds and h_i the
+ * height over edge i, the barycentrics are clamped to the triangle and shrunk towards its centre,
+ * b_i' = eps_i + (1 - sum eps) b_i.  So the rounded point lies inside every edge by at least its
+ * error, as offset_ray_origin puts it off the plane: at a concave edge a spawned ray then meets
+ * the neighbour in front of its origin, not at t = 0.  A point more than eps outside (only from
+ * the ray's point of a huge triangle, whose float inside test is off by u times its size) is
+ * left where it is.  h_i = 2 area / |edge_i| >= 2 area / (sqrt(3) |edge_i|_max). */
+static vec3 triangle_point(const vec3 p[3], struct dvec3 e1, struct dvec3 e2, double b1, double b2,
+                           vec3 *ng, vec3 *p_error)
 {
-    vec3 bp0 = v3_scale(p[0], b0), bp1 = v3_scale(p[1], b1), bp2 = v3_scale(p[2], b2);
-    *abs_sum = v3_add(v3_add(v3_abs(bp0), v3_abs(bp1)), v3_abs(bp2));
-    return v3_add(v3_add(bp0, bp1), bp2);
+    double area2, eta;
+    *ng = plane_normal(e1, e2, &area2, &eta);
+    struct dvec3 err;
+    struct dvec3 pd = plane_point_d(p[0], e1, e2, b1, b2, &err);
+    if (area2 > 0.0) {
+        double k = 2.0 * 1.7320508075688774 * rounded_error_sum(pd, err, eta) / area2;
+        struct dvec3 e3 = d3_abs(d3_sub(e2, e1));
+        struct dvec3 a1 = d3_abs(e1);
+        struct dvec3 a2 = d3_abs(e2);
+        double eps[3] = {k * fmax(e3.x, fmax(e3.y, e3.z)), k * fmax(a2.x, fmax(a2.y, a2.z)),
+                         k * fmax(a1.x, fmax(a1.y, a1.z))};
+        double b[3] = {1.0 - b1 - b2, b1, b2};
+        bool inside = b[0] >= eps[0] && b[1] >= eps[1] && b[2] >= eps[2];
+        bool near = b[0] >= -eps[0] && b[1] >= -eps[1] && b[2] >= -eps[2];
+        if (!inside && near) {
+            double eps_sum = eps[0] + eps[1] + eps[2];
+            if (!(eps_sum < 1.0)) {
+                b1 = b2 = 1.0 / 3.0; /* smaller than its error: the centre */
+            } else {
+                double sum = 0.0;
+                for (int i = 0; i < 3; i++) {
+                    b[i] = fmax(0.0, b[i]);
+                    sum += b[i];
+                }
+                b1 = eps[1] + (1.0 - eps_sum) * b[1] / sum;
+                b2 = eps[2] + (1.0 - eps_sum) * b[2] / sum;
+            }
+            pd = plane_point_d(p[0], e1, e2, b1, b2, &err);
+        }
+    }
+    return round_point(pd, err, eta, p_error);
 }
 
-struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec2 *uv, float b1,
-                                      float b2, uint32_t mat_idx)
+struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec2 *uv,
+                                      const struct ray *ray, float t_hit, float b1, float b2,
+                                      uint32_t mat_idx)
 {
+    struct dvec3 e1 = d3_sub(d3(p[1]), d3(p[0]));
+    struct dvec3 e2 = d3_sub(d3(p[2]), d3(p[0]));
+    double b1_d = b1;
+    double b2_d = b2;
+    /* float barycentrics place the point to about 2^-24 of the triangle's size, the ray's t to
+     * 2^-24 of the hit distance when the BVH decided it in double, which it does where the
+     * triangle is large beside both the distance and the point's magnitude (bvh.c, "the hit's
+     * own precision"): for a triangle 2^8 times larger than t |d| + |o| (a huge floor seen from
+     * nearby) the barycentrics of o + t d, in double, are the more precise */
+    struct dvec3 d = ray ? d3(ray->d) : (struct dvec3){0.0, 0.0, 0.0};
+    double o_max = ray ? fmax(fabs(ray->o.x), fmax(fabs(ray->o.y), fabs(ray->o.z))) : 0.0;
+    double near = 0x1p8 * ((double)t_hit * sqrt(d3_dot(d, d)) + o_max);
+    if (ray && fmax(d3_dot(e1, e1), d3_dot(e2, e2)) > near * near) {
+        struct dvec3 q = d3_sub(d3_add(d3(ray->o), d3_scale(d, t_hit)), d3(p[0]));
+        struct dvec3 n = d3_cross(e1, e2);
+        double nn = d3_dot(n, n);
+        if (nn > 0.0) {
+            b1_d = d3_dot(d3_cross(q, e2), n) / nn;
+            b2_d = d3_dot(d3_cross(e1, q), n) / nn;
+            b1 = (float)b1_d;
+            b2 = (float)b2_d;
+        }
+    }
     float b0 = 1.0f - b1 - b2;
     struct surface sf;
-    vec3 abs_sum;
-    sf.p = barycentric_point(p, b0, b1, b2, &abs_sum);
-    sf.p_error = v3_scale(abs_sum, mcpt_gamma(7));
-    sf.ng = v3_normalize(v3_cross(v3_sub(p[1], p[0]), v3_sub(p[2], p[0])));
+    sf.p = triangle_point(p, e1, e2, b1_d, b2_d, &sf.ng, &sf.p_error);
     sf.ns = sf.ng;
     if (ns) {
         vec3 n = v3_add(v3_add(v3_scale(ns[0], b0), v3_scale(ns[1], b1)), v3_scale(ns[2], b2));
@@ -411,30 +787,41 @@ struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec
     return sf;
 }
 
+/* Twice the area, |(p1 - p0) x (p2 - p0)|, in double. */
+static double triangle_area2(const vec3 p[3])
+{
+    return d3_length(d3_cross(d3_sub(d3(p[1]), d3(p[0])), d3_sub(d3(p[2]), d3(p[0]))));
+}
+
 float shape_triangle_area(const vec3 p[3], vec3 *ng)
 {
-    vec3 c = v3_cross(v3_sub(p[1], p[0]), v3_sub(p[2], p[0]));
-    float len = v3_length(c);
-    if (ng)
-        *ng = len > 0.0f ? v3_scale(c, 1.0f / len) : v3_splat(0.0f);
-    return 0.5f * len;
+    if (ng) {
+        double len, eta;
+        *ng = plane_normal(d3_sub(d3(p[1]), d3(p[0])), d3_sub(d3(p[2]), d3(p[0])), &len, &eta);
+    }
+    return (float)(0.5 * triangle_area2(p));
 }
 
 bool shape_triangle_sample(const vec3 p[3], const struct surface *ref, vec2 u,
                            struct shape_sample *ss)
 {
-    /* uniform by area: barycentrics by the square-root warp (sample.c), pdf_area = 1 / A */
+    /* uniform by area: barycentrics (b0, b1, b2) = (b.x, b.y, 1 - b.x - b.y) by the square-root
+     * warp (sample.c), pdf_area = 1 / A */
     vec2 b = sample_uniform_triangle(u);
-    vec3 abs_sum, n;
-    vec3 pt = barycentric_point(p, b.x, b.y, 1.0f - b.x - b.y, &abs_sum);
-    float area = shape_triangle_area(p, &n);
-    return sample_by_area(pt, v3_scale(abs_sum, mcpt_gamma(6)), n, 1.0f / area, ref, ss);
+    vec3 n, p_error;
+    vec3 pt = triangle_point(p, d3_sub(d3(p[1]), d3(p[0])), d3_sub(d3(p[2]), d3(p[0])), b.y,
+                             1.0 - (double)b.x - (double)b.y, &n, &p_error);
+    double area = 0.5 * triangle_area2(p);
+    if (!(area > 0.0))
+        return false;
+    return sample_by_area(pt, p_error, n, 1.0 / area, ref, ss);
 }
 
 float shape_triangle_pdf(const vec3 p[3], const struct surface *ref, const struct surface *on,
                          vec3 wi)
 {
-    return pdf_by_area(1.0f / shape_triangle_area(p, NULL), ref, on, wi);
+    double area = 0.5 * triangle_area2(p);
+    return area > 0.0 ? pdf_by_area(1.0 / area, ref, on, wi) : 0.0f;
 }
 
 /* Whether the triangle p[3] is sampled by solid angle from ref: its solid angle lies between
@@ -483,10 +870,8 @@ bool shape_triangle_sample_solid_angle(const vec3 p[3], const struct surface *re
         b1 /= sum;
         b2 /= sum;
     }
-    vec3 abs_sum;
-    ss->p = barycentric_point(p, 1.0f - b1 - b2, b1, b2, &abs_sum);
-    ss->p_error = v3_scale(abs_sum, mcpt_gamma(6));
-    shape_triangle_area(p, &ss->n);
+    ss->p = triangle_point(p, d3_sub(d3(p[1]), d3(p[0])), d3_sub(d3(p[2]), d3(p[0])), b1, b2,
+                           &ss->n, &ss->p_error);
     return direction_to(ss, ss->n, ref, pdf_u * pdf_spherical_triangle(&st));
 }
 

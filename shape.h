@@ -51,13 +51,19 @@ struct surface shape_sphere_surface(const struct sphere *s, const struct ray *ra
 struct surface shape_quad_surface(const struct quad *q, const struct ray *ray, float t_hit);
 struct surface shape_plane_surface(const struct plane *pl, const struct ray *ray, float t_hit);
 
-/* Surface of the triangle with corners p[3] at barycentrics (1 - b1 - b2, b1, b2) of a hit;
- * ns[3] and uv[3] are the corners' shading normals and uvs, each NULL when the mesh has none. */
-struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec2 *uv, float b1,
-                                      float b2, uint32_t mat_idx);
-/* Area of the triangle with corners p[3]; *ng (may be NULL) receives its unit normal
- * (p1 - p0) x (p2 - p0), or 0 when the triangle is degenerate. */
+/* Surface of the triangle with corners p[3] at barycentrics (1 - b1 - b2, b1, b2) of a hit of
+ * ray at t_hit; ns[3] and uv[3] are the corners' shading normals and uvs, each NULL when the
+ * mesh has none.  For a triangle larger than the hit distance the point is that of the ray at
+ * t_hit (float barycentrics are the less precise there); ray NULL: from b1, b2 alone. */
+struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec2 *uv,
+                                      const struct ray *ray, float t_hit, float b1, float b2,
+                                      uint32_t mat_idx);
+/* Area of the triangle with corners p[3] (computed in double, so it neither overflows nor
+ * underflows on the way); *ng (may be NULL) receives its unit normal (p1 - p0) x (p2 - p0), or
+ * 0 when the triangle is degenerate. */
 float shape_triangle_area(const vec3 p[3], vec3 *ng);
+/* Area |e1 x e2| of a quad, likewise. */
+float shape_quad_area(const struct quad *q);
 
 /* ---- sampling a shape from a reference point (area lights) ----
  * PBRT 4e, ch. 6, "Shape Interface": Shape::Sample(ctx, u) and Shape::PDF(ctx, wi).  Triangles,

@@ -162,7 +162,12 @@ static vec3 radiance(const struct trace_scene *ts, const struct trace_options *o
         if (!hit || n_bounces++ == max_bounces)
             break;
 
-        /* the vertex: its material (albedo texture looked up) and local shading frame */
+        /* the vertex: its material (albedo texture looked up) and local shading frame; a
+         * shading normal that puts wo on the other side than the geometric one does (seen
+         * near a smooth mesh's silhouette) gives way to the geometric normal, so no sampled
+         * direction is thrown away for being on the wrong side of the surface */
+        if (v3_dot(wo_world, hr.sf.ns) * v3_dot(wo_world, hr.sf.ng) <= 0.0f)
+            hr.sf.ns = hr.sf.ng;
         struct material m_textured;
         struct vertex v = make_vertex(&hr.sf, &scene->materials[hr.sf.mat_idx], wo_world,
                                       &m_textured);
@@ -710,9 +715,9 @@ static void count_ray(const struct trace_options *opt, const struct ray *ray, bo
         opt->ray_hook(opt->ray_hook_user, ray, is_shadow);
 }
 
-/* The surface of scene triangle tri_idx at the barycentrics (b1, b2) of a hit. */
-static struct surface triangle_surface(const struct scene *scene, uint32_t tri_idx, float b1,
-                                       float b2)
+/* The surface of scene triangle tri_idx where ray hit it, at t_hit and barycentrics (b1, b2). */
+static struct surface triangle_surface(const struct scene *scene, uint32_t tri_idx,
+                                       const struct ray *ray, float t_hit, float b1, float b2)
 {
     const struct scene_tri *tri = &scene->tris[tri_idx];
     vec3 p[3], ns[3];
@@ -725,7 +730,8 @@ static struct surface triangle_surface(const struct scene *scene, uint32_t tri_i
         ns[k] = tri->vn[k] >= 0 ? scene->normals[tri->vn[k]] : v3_splat(0.0f);
         uv[k] = tri->vt[k] >= 0 ? scene->uvs[tri->vt[k]] : (vec2){0.0f, 0.0f};
     }
-    return shape_triangle_surface(p, has_ns ? ns : NULL, has_uv ? uv : NULL, b1, b2, tri->mat_idx);
+    return shape_triangle_surface(p, has_ns ? ns : NULL, has_uv ? uv : NULL, ray, t_hit, b1, b2,
+                                  tri->mat_idx);
 }
 
 enum hit_kind { HIT_NONE, HIT_TRI, HIT_SPHERE, HIT_QUAD, HIT_PLANE };
@@ -767,7 +773,7 @@ static bool closest_hit(const struct trace_scene *ts, const struct ray *ray_in,
     case HIT_NONE:
         return false;
     case HIT_TRI:
-        hr->sf = triangle_surface(scene, idx, bh->u, bh->v);
+        hr->sf = triangle_surface(scene, idx, &ray, bh->t, bh->u, bh->v);
         hr->light_idx = light_idx_of(ts->lights, LIGHT_TRIANGLE, idx);
         return true;
     case HIT_SPHERE:

@@ -81,11 +81,11 @@ struct trace_options {
  * "Per-sample error"). */
 #define TRACE_RR_THRESHOLD_DEFAULT 0.25f
 
-#define TRACE_ADAPTIVE_TOLERANCE 0.05f /* default T */
-#define TRACE_ADAPTIVE_FLOOR 0.01f     /* default floor, luminance in the image's linear units */
-#define TRACE_ADAPTIVE_BATCH 32u       /* default batch */
-#define TRACE_ADAPTIVE_MIN_SPP 64u     /* default minimum spp */
-#define TRACE_ADAPTIVE_PILOT_SPP 16u   /* default pilot samples */
+#define TRACE_ADAPTIVE_TOLERANCE 0.1f /* default T (docs/sampling.md: why) */
+#define TRACE_ADAPTIVE_FLOOR 0.01f    /* default floor, luminance in the image's linear units */
+#define TRACE_ADAPTIVE_BATCH 32u      /* default batch */
+#define TRACE_ADAPTIVE_MIN_SPP 64u    /* default minimum spp */
+#define TRACE_ADAPTIVE_PILOT_SPP 16u  /* default pilot samples */
 
 /* The adaptive stopping rule on one pixel's n samples of luminance x, s1 = sum x and
  * s2 = sum x^2: mu = s1 / n, sigma^2 = s2 / n - mu^2, I = 1.96 sigma / sqrt(n) (the half-width

@@ -3,6 +3,8 @@
 # fuzz_checkpoint, fuzz_partial; or those named) for SECONDS seconds from the repo root, seeded
 # with scenes/, tests/data/, tests/extremes/ and the bad corpus tests/bad/.
 # FUZZ_RUNS=N runs each for N executions instead (-runs=N; SECONDS then bounds the time).
+# FUZZ_TIMEOUT=S: an input running longer than S seconds of wall time is a hang (default 10;
+# raise it on a loaded machine, where the seed scenes with the big models take longer).
 # New inputs accumulate in BUILD/corpus-*/ between runs.  Prints each harness's final line
 # (executions "#N", coverage "cov:", features "ft:", corpus size) and fails when a harness
 # found a crash, leak or hang: the input is BUILD/crash-*; turn it into a tests/bad/ case.
@@ -12,6 +14,7 @@ B=${2:-build-fuzz}
 [ $# -ge 2 ] && shift 2 || shift $#
 harnesses=${*:-scene obj checkpoint partial}
 runs=${FUZZ_RUNS:--1}
+timeout=${FUZZ_TIMEOUT:-10}
 status=0
 
 # seed_copy DEST FILE...: copies each file under a name made from its path (names repeat)
@@ -56,7 +59,7 @@ for h in $harnesses; do
     rc=0
     dict=""
     [ -f "fuzz/$h.dict" ] && dict="-dict=fuzz/$h.dict"
-    "$B/fuzz_$h" -max_total_time="$secs" -runs="$runs" -timeout=10 -rss_limit_mb=2048 $dict \
+    "$B/fuzz_$h" -max_total_time="$secs" -runs="$runs" -timeout="$timeout" -rss_limit_mb=2048 $dict \
         -artifact_prefix="$B/crash-$h-" -print_final_stats=1 \
         "$B/corpus-$h" "$B/seeds-$h" >"$log" 2>&1 || rc=$?
     grep -E '^#[0-9]+[[:space:]]+(INITED|DONE)' "$log" | tail -n 2

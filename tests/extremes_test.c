@@ -145,6 +145,59 @@ Test(extremes, smallpt_radius_1e5_walls, .timeout = 120)
     assert_same_scenes(DIR "smallpt-planes.txt", DIR "smallpt-spheres.txt");
 }
 
+/* Issue 12: the Cornell box at scales 1e-15, 1e-6, 1e6 and 1e15 (camera scaled too) renders the
+ * image of scale 1, one statistic per scale: the image's mean luminance against scale 1's
+ * (independent seeds), within N_SE combined standard errors.  Ray offsets are the hit points'
+ * rounding errors, areas and pdfs are formed in double, and what float cannot decide is decided
+ * in double (docs/theory.md, "Self-intersection"). */
+static struct estimate image_luminance(const struct film *f)
+{
+    double sum = 0.0, var = 0.0;
+    size_t n = (size_t)f->width * (size_t)f->height;
+    for (size_t i = 0; i < n; i++) {
+        const struct film_pixel *p = &f->pixels[i];
+        double m = film_sum_lum(p) / p->n;
+        double s2 = (p->sum_lum_sq - film_sum_lum(p) * m) / (p->n - 1);
+        sum += m;
+        var += fmax(0.0, s2) / p->n;
+    }
+    return (struct estimate){sum / (double)n, var / ((double)n * (double)n)};
+}
+
+Test(extremes, cornell_scale_1e_minus_15_to_1e15, .timeout = 180)
+{
+    const char *scales[] = {"1e-15", "1e-6", "1e6", "1e15"};
+    struct film f1;
+    struct trace_result r1;
+    render_file(DIR "cornell-1.txt", 1, &f1, &r1);
+    struct estimate e1 = image_luminance(&f1);
+    for (int k = 0; k < 4; k++) {
+        char path[128];
+        snprintf(path, sizeof path, DIR "cornell-%s.txt", scales[k]);
+        struct film f;
+        struct trace_result r;
+        render_file(path, (uint64_t)(2 + k), &f, &r);
+        cr_assert_eq(r.n_nonfinite, 0, "%s", path);
+        struct estimate e = image_luminance(&f);
+        double se = sqrt(e.var + e1.var);
+        cr_log_info("scale %s: mean luminance %.6f, scale 1: %.6f, %.2f SE", scales[k], e.mean,
+                    e1.mean, (e.mean - e1.mean) / se);
+        cr_assert(fabs(e.mean - e1.mean) <= N_SE * se, "scale %s: %.6f vs %.6f (%.1f SE)",
+                  scales[k], e.mean, e1.mean, (e.mean - e1.mean) / se);
+        film_free(&f);
+    }
+    film_free(&f1);
+}
+
+/* Issue 12: a floor of two triangles of size 1e6 or 1e7 renders as the same floor given as a
+ * plane: their hit points are as precise as the plane's (the ray's, where a triangle is larger
+ * than the hit distance) and their error bounds as small. */
+Test(extremes, huge_triangle_floor_is_the_plane, .timeout = 120)
+{
+    assert_same_scenes(DIR "floor-plane.txt", DIR "floor-1e6.txt");
+    assert_same_scenes(DIR "floor-plane.txt", DIR "floor-1e7.txt");
+}
+
 /* ---- triangles: slivers, tiny, duplicated, coplanar, closed ---- */
 
 /* A floor of 400 slivers renders as the same floor of 2 triangles. */
@@ -172,6 +225,222 @@ Test(extremes, duplicated_and_coplanar_faces, .timeout = 120)
 
 /* A camera inside a closed black mesh under a white sky sees exactly 0 everywhere. */
 Test(extremes, camera_inside_closed_mesh_sees_no_sky) { assert_black(DIR "inside-mesh.txt"); }
+
+/* Issue 12: the camera inside a closed cube of 12 triangles (diffuse, albedo 0.5) under a white
+ * sky, wound outward and inward: every pixel is exactly 0.  A ray leaving a wall near a concave
+ * edge meets the next wall at t ~ 1e-5, which the float test cannot place; it is decided in
+ * double, never thrown away. */
+Test(extremes, closed_cube_sees_no_sky, .timeout = 120)
+{
+    assert_black(DIR "cube-outward.txt");
+    assert_black(DIR "cube-inward.txt");
+}
+
+/* The same cube with each face cut into n strips of two triangles (slivers of aspect n), wound
+ * outward or inward, written into dir; the scene's path goes to scene_path.  The strips of
+ * neighbouring faces meet in T-junctions whose vertices lie exactly on the other face's edge
+ * (the cube is axis-aligned, every coordinate k/n exact in float), so the mesh is closed. */
+static void write_strip_cube(const char *dir, int n, bool inward, char *scene_path, size_t bytes)
+{
+    char obj_path[300];
+    snprintf(obj_path, sizeof obj_path, "%s/cube-%d-%s.obj", dir, n, inward ? "in" : "out");
+    FILE *f = fopen(obj_path, "w");
+    cr_assert_not_null(f);
+    int n_v = 0;
+    for (int axis = 0; axis < 3; axis++)
+        for (int sign = -1; sign <= 1; sign += 2) {
+            int u = (axis + 1) % 3, w = (axis + 2) % 3;
+            for (int i = 0; i <= n; i++)
+                for (int j = 0; j < 2; j++) {
+                    float p[3];
+                    p[axis] = (float)sign;
+                    p[u] = -1.0f + 2.0f * (float)i / (float)n;
+                    p[w] = (float)(2 * j - 1);
+                    fprintf(f, "v %.9g %.9g %.9g\n", p[0], p[1], p[2]);
+                }
+            /* (u, w) x-ordered: u x w = axis, so (a, b, c) faces +axis */
+            bool flip = (sign > 0) == inward;
+            for (int i = 0; i < n; i++) {
+                int a = n_v + 2 * i + 1, b = a + 2, c = a + 3, d = a + 1;
+                if (flip)
+                    fprintf(f, "f %d %d %d\nf %d %d %d\n", a, c, b, a, d, c);
+                else
+                    fprintf(f, "f %d %d %d\nf %d %d %d\n", a, b, c, a, c, d);
+            }
+            n_v += 2 * (n + 1);
+        }
+    fclose(f);
+    snprintf(scene_path, bytes, "%s/cube-%d-%s.txt", dir, n, inward ? "in" : "out");
+    f = fopen(scene_path, "w");
+    cr_assert_not_null(f);
+    fprintf(f,
+            "camera eye=0.1,0.05,0.02 look-at=0.5,0.3,-1 up=0,1,0 fov=100\n"
+            "film width=48 height=48\nrender spp=64 sampler=independent\n"
+            "material name=m type=diffuse albedo=0.5,0.5,0.5\n"
+            "mesh file=%s material=m\nsky type=constant radiance=1,1,1\n",
+            obj_path);
+    fclose(f);
+}
+
+/* Issue 12: the cube of 100 and 1000 strips per face (triangles of aspect 100 and 1000), wound
+ * outward and inward, camera inside: every pixel is exactly 0. */
+Test(extremes, strip_cubes_see_no_sky, .timeout = 240)
+{
+    char dir[64], scene_path[400];
+    test_make_dir(dir, sizeof dir, "strips");
+    const int strips[] = {100, 1000};
+    for (int k = 0; k < 2; k++)
+        for (int inward = 0; inward < 2; inward++) {
+            write_strip_cube(dir, strips[k], inward, scene_path, sizeof scene_path);
+            assert_black(scene_path);
+        }
+    test_remove_dir(dir);
+}
+
+/* Issue 12: parallelograms whose edges meet at 10, 3, 1, 0.3 and 0.1 degrees in a general
+ * orientation, and the issue's own 1 degree quad, albedo 0.8 under a constant sky of 2: the
+ * estimator has zero variance, light sample and BSDF sample each add 0.8 with MIS weight 1/2,
+ * so every pixel is 1.6 up to float rounding (1e-5); a spawned ray hitting the quad again
+ * takes 0.8 from a sample.  The quad's plane is decided in double (shape.c). */
+Test(extremes, sheared_quads_render_exactly, .timeout = 120)
+{
+    const char *paths[] = {DIR "quad-shear-10deg.txt",  DIR "quad-shear-3deg.txt",
+                           DIR "quad-shear-1deg.txt",   DIR "quad-shear-0.3deg.txt",
+                           DIR "quad-shear-0.1deg.txt", DIR "quad-shear-issue12.txt"};
+    for (int k = 0; k < 6; k++) {
+        struct film f;
+        struct trace_result r;
+        render_file(paths[k], 1, &f, &r);
+        cr_assert_eq(r.n_nonfinite, 0, "%s", paths[k]);
+        for (size_t i = 0; i < (size_t)f.width * (size_t)f.height; i++)
+            for (int c = 0; c < 3; c++) {
+                double m = film_mean(&f.pixels[i], c);
+                cr_assert(fabs(m - 1.6) <= 1e-5, "%s: pixel %zu channel %d: %.9f", paths[k], i, c,
+                          m);
+            }
+        film_free(&f);
+    }
+}
+
+/* ---- smooth shading normals ---- */
+
+/* A UV sphere of radius 1 about the origin, n_stacks x n_slices (poles fanned), written as an
+ * OBJ without normals to dir/name; a scene around it goes to scene_path, its statements
+ * (camera, material, film...) from head, its mesh with normals=smooth, under a constant sky 1. */
+static void write_smooth_sphere(const char *dir, const char *name, int n_stacks, int n_slices,
+                                const char *head, char *scene_path, size_t bytes)
+{
+    char obj_path[300];
+    snprintf(obj_path, sizeof obj_path, "%s/%s.obj", dir, name);
+    FILE *f = fopen(obj_path, "w");
+    cr_assert_not_null(f);
+    fprintf(f, "v 0 1 0\nv 0 -1 0\n");
+    for (int i = 1; i < n_stacks; i++)
+        for (int j = 0; j < n_slices; j++) {
+            double theta = M_PI * i / n_stacks, phi = 2.0 * M_PI * j / n_slices;
+            fprintf(f, "v %.9g %.9g %.9g\n", sin(theta) * cos(phi), cos(theta),
+                    -sin(theta) * sin(phi));
+        }
+    /* vertex (i, j), i = 1 .. n_stacks - 1, is 3 + (i - 1) n_slices + j; outward winding */
+    for (int i = 1; i < n_stacks; i++)
+        for (int j = 0; j < n_slices; j++) {
+            int jn = (j + 1) % n_slices;
+            int a = 3 + (i - 1) * n_slices + j, b = 3 + (i - 1) * n_slices + jn;
+            if (i == 1)
+                fprintf(f, "f 1 %d %d\n", a, b);
+            if (i == n_stacks - 1)
+                fprintf(f, "f 2 %d %d\n", b, a);
+            else
+                fprintf(f, "f %d %d %d\nf %d %d %d\n", a, a + n_slices, b + n_slices, a,
+                        b + n_slices, b);
+        }
+    fclose(f);
+    snprintf(scene_path, bytes, "%s/%s.txt", dir, name);
+    f = fopen(scene_path, "w");
+    cr_assert_not_null(f);
+    fprintf(f, "%smesh file=%s material=m normals=smooth\nsky type=constant radiance=1,1,1\n", head,
+            obj_path);
+    fclose(f);
+}
+
+/* The largest angle between a triangle's geometric normal and the shading normal of one of its
+ * corners, over the scene's triangles. */
+static double max_shading_angle(const char *path)
+{
+    struct scene sc;
+    struct mcpt_error err;
+    cr_assert(scene_load(path, &sc, &err), "%s: %s", path, err.msg);
+    double angle = 0.0;
+    for (uint32_t i = 0; i < sc.n_tris; i++) {
+        const struct scene_tri *t = &sc.tris[i];
+        vec3 p0 = sc.positions[t->v[0]];
+        vec3 ng = v3_normalize(
+            v3_cross(v3_sub(sc.positions[t->v[1]], p0), v3_sub(sc.positions[t->v[2]], p0)));
+        for (int k = 0; k < 3; k++) {
+            cr_assert_geq(t->vn[k], 0, "triangle %u has no smooth normal", i);
+            double c = v3_dot(ng, sc.normals[t->vn[k]]);
+            angle = fmax(angle, acos(fmin(1.0, c)));
+        }
+    }
+    scene_free(&sc);
+    return angle;
+}
+
+/* Issue 12: smooth shading normals in a white furnace.  A convex sphere of 80 triangles with
+ * angle-weighted normals, albedo 1, under a constant sky 1.  With the geometric normal every
+ * pixel is exactly 1 (light and BSDF samples each add 1/2).  A shading normal tilted by theta
+ * from the face sends the share (1 - cos theta) / 2 of its cosine lobe below the face, and the
+ * geometric-side test drops those samples (the fraction of the projected unit disc outside the
+ * ellipse of semi-axes cos theta and 1): so no sample exceeds 1 (no light gained or leaked,
+ * exact up to float rounding), the image mean is at least 1 - (1 - cos theta_max) / 2 (4 SE),
+ * and no pixel is black: a view direction on the wrong side of the shading normal (near the
+ * silhouette) takes the geometric normal, so every pixel keeps at least half its samples'
+ * worth (>= 0.5; the chance that most of 64 samples lose both halves is negligible). */
+Test(extremes, smooth_sphere_in_white_furnace, .timeout = 60)
+{
+    char dir[64], path[400];
+    test_make_dir(dir, sizeof dir, "smooth");
+    write_smooth_sphere(dir, "furnace", 6, 8,
+                        "camera eye=0.3,0.2,3.2 look-at=0,0,0 up=0,1,0 fov=42\n"
+                        "film width=32 height=32\nrender spp=64 sampler=independent\n"
+                        "material name=m type=diffuse albedo=1,1,1\n",
+                        path, sizeof path);
+    double theta_max = max_shading_angle(path);
+    cr_assert_gt(theta_max, 0.1, "the shading normals differ from the faces'");
+    struct film f;
+    struct trace_result r;
+    render_file(path, 1, &f, &r);
+    cr_assert_eq(r.n_nonfinite, 0);
+    size_t n = (size_t)f.width * (size_t)f.height;
+    for (size_t i = 0; i < n; i++)
+        for (int c = 0; c < 3; c++) {
+            double m = film_mean(&f.pixels[i], c);
+            cr_assert(m <= 1.0 + 1e-5, "pixel %zu channel %d: %.9f > 1", i, c, m);
+            cr_assert(m >= 0.5, "pixel %zu channel %d: %.6f, black", i, c, m);
+        }
+    struct estimate e = region(&f, 0, 0, f.width, f.height, 1);
+    double bound = 1.0 - (1.0 - cos(theta_max)) / 2.0;
+    cr_log_info("smooth furnace: theta_max %.1f deg, mean %.5f (SE %.2g), bound %.5f",
+                theta_max * 180.0 / M_PI, e.mean, sqrt(e.var), bound);
+    cr_assert(e.mean >= bound - N_SE * sqrt(e.var), "mean %.6f below %.6f", e.mean, bound);
+    film_free(&f);
+    test_remove_dir(dir);
+}
+
+/* Issue 12: the camera inside the same smooth sphere (diffuse, albedo 0.5) under a white sky:
+ * shading normals let no light in, every pixel is exactly 0. */
+Test(extremes, smooth_sphere_lets_no_sky_in, .timeout = 60)
+{
+    char dir[64], path[400];
+    test_make_dir(dir, sizeof dir, "smooth");
+    write_smooth_sphere(dir, "inside", 6, 8,
+                        "camera eye=0.1,0.2,0.3 look-at=0.5,-0.2,-1 up=0,1,0 fov=100\n"
+                        "film width=32 height=32\nrender spp=64 sampler=independent\n"
+                        "material name=m type=diffuse albedo=0.5,0.5,0.5\n",
+                        path, sizeof path);
+    assert_black(path);
+    test_remove_dir(dir);
+}
 
 /* Rays aimed exactly at the vertices and at points along every edge of a mesh hit it: from the
  * centre of the closed icosphere (every edge shared by two faces), and from above the sliver fan
@@ -572,4 +841,29 @@ Test(nonfinite, nan_material_dropped_and_counted)
     film_free(&f);
     trace_free(ts);
     scene_free(&scene);
+}
+
+/* ---- no scene aborts ---- */
+
+/* Issue 12: scenes that once reached an assertion or invite one: the Cornell box at 1e-12 (a
+ * normal that underflowed made a NaN ray, which passed every slab test and looped through the
+ * wide nodes' empty lanes until the stack assertion), the BVH at its depth cap, zero-area faces
+ * only, coordinates from 1e-30 to 1e18 in one mesh.  Each renders through the binary and exits
+ * 0: no signal, no assertion; the traversal stacks are sized by the build's depth cap. */
+Test(extremes, no_scene_aborts, .timeout = 240)
+{
+    const char *scenes[] = {DIR "cornell-1e-12.txt", DIR "depth-cap.txt", DIR "degenerate-only.txt",
+                            DIR "extreme-coordinates.txt", DIR "nan-invitations.txt"};
+    char out[] = "/tmp/mcpt_abort_XXXXXX.exr", err[4096];
+    int fd = mkstemps(out, 4);
+    cr_assert(fd >= 0);
+    close(fd);
+    for (int k = 0; k < 5; k++) {
+        int rc = run_mcpt(scenes[k], out, err, sizeof err);
+        cr_assert_eq(rc, 0, "%s: exit status %d: %s", scenes[k], rc, err);
+    }
+    char cmd[400];
+    snprintf(cmd, sizeof cmd, "rm -f '%s' '%.*s.png' '%s.stderr'", out, (int)strlen(out) - 4, out,
+             out);
+    cr_assert_eq(system(cmd), 0);
 }

@@ -222,7 +222,8 @@ static bool same_pixels(const char *a, const char *b)
 /* An output naming an input or another output is refused before anything is written: -o or
  * --curve naming the scene (also by another spelling, or a hard link), -o naming the
  * --reference, --heatmap equal to -o or to its preview, -o naming the checkpoint of --resume,
- * the subcommands' outputs naming their inputs (merge -o a part, compare --heatmap an image),
+ * the subcommands' outputs naming their inputs (merge -o a part, convert's PNG its EXR,
+ * compare --heatmap an image),
  * and -o naming the file given as the scene on standard input.  Exit 2, one line naming the
  * output and what it would overwrite; every input keeps its bytes. */
 Test(clobber, outputs_never_overwrite_inputs, .init = setup, .fini = teardown)
@@ -260,6 +261,9 @@ Test(clobber, outputs_never_overwrite_inputs, .init = setup, .fini = teardown)
     char ckpt_link[300]; /* the checkpoint by an image's name */
     snprintf(ckpt_link, sizeof ckpt_link, "%s/c-link.exr", tmpdir);
     cr_assert_eq(link(ckpt, ckpt_link), 0);
+    char ref_link[300]; /* the reference by a PNG's name */
+    snprintf(ref_link, sizeof ref_link, "%s/ref-link.png", tmpdir);
+    cr_assert_eq(link(ref, ref_link), 0);
 
     struct {
         const char *args[12];
@@ -297,6 +301,9 @@ Test(clobber, outputs_never_overwrite_inputs, .init = setup, .fini = teardown)
         {{"merge", part, "-o", part, NULL},
          part,
          "expected the merged image (-o) to be a file of its own, got the same file as a part"},
+        {{"convert", ref, ref_link, NULL},
+         ref_link,
+         "expected the PNG (OUT) to be a file of its own, got the same file as the image IN"},
         {{"compare", ref, part, "--heatmap", ref, NULL},
          ref,
          "expected the heat map (--heatmap) to be a file of its own, got the same file as the "

@@ -363,6 +363,34 @@ Test(scene, normals_inverse_transpose)
     scene_free(&sc);
 }
 
+/* normals=smooth: angle-weighted vertex normals (Thurmer & Wuthrich 1998).  At each corner of
+ * a box the three faces meet at right angles, so each adds pi/2 times its normal whether it is
+ * cut into one or two triangles there: the corner normal is (+-1, +-1, +-1) / sqrt(3), pointing
+ * out, although the 12-triangle cube has corners with 1 triangle of a face and corners with 2
+ * (a face-count or area weighting would tilt it).  The box is stretched 2x along x after
+ * loading: the normals are those of the world-space faces.  A bad value names both choices. */
+Test(scene, normals_smooth_angle_weighted)
+{
+    struct scene sc;
+    struct mcpt_error err = {0};
+    cr_assert(scene_load("tests/data/scene/smooth-cube.txt", &sc, &err), "%s:%d:%d: %s", err.file,
+              err.line, err.col, err.msg);
+    cr_assert_eq(sc.n_tris, 12);
+    cr_assert_eq(sc.n_normals, 8, "one normal per vertex, the OBJ has none");
+    const float s = 0.57735026919f; /* 1 / sqrt(3) */
+    for (uint32_t i = 0; i < sc.n_tris; i++)
+        for (int k = 0; k < 3; k++) {
+            cr_assert_geq(sc.tris[i].vn[k], 0);
+            vec3 p = sc.positions[sc.tris[i].v[k]];
+            vec3 n = sc.normals[sc.tris[i].vn[k]];
+            assert_vec3_near(n, copysignf(s, p.x), copysignf(s, p.y), copysignf(s, p.z),
+                             "corner normal");
+        }
+    scene_free(&sc);
+    check_error(CAM MAT "mesh file=x.obj material=red normals=round\n",
+                "scene.txt:3:38: error: expected file or smooth for 'normals', got 'round'");
+}
+
 /* scenes/cornell-box.txt: the standard view of McGuire's CornellBox-Original; 18 quads = 36
  * triangles, 8 MTL materials (every face has a usemtl, so no "default"), and the two triangles
  * of the light quad (y = 1.98, Ke 17 12 4) are the only lights. */

@@ -74,3 +74,83 @@ for _ in range(2):
     F = F2
 obj('icosphere.obj', V, [(a + 1, b + 1, c + 1) for a, b, c in F],
     f'a closed unit icosphere: {len(V)} vertices, {len(F)} faces, outward winding')
+
+# issue 12: the closed 2x2x2 cube, two triangles per face, wound outward and inward
+cube_v = [(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
+cube_f = [(1, 3, 4), (1, 4, 2),  # x = -1 (each face wound inward)
+          (5, 6, 8), (5, 8, 7),  # x = +1
+          (1, 2, 6), (1, 6, 5),  # y = -1
+          (3, 7, 8), (3, 8, 4),  # y = +1
+          (1, 5, 7), (1, 7, 3),  # z = -1
+          (2, 4, 8), (2, 8, 6)]  # z = +1
+obj('cube-inward.obj', cube_v, cube_f, 'the cube [-1,1]^3, 12 triangles, normals inward')
+obj('cube-outward.obj', cube_v, [(a, c, b) for a, b, c in cube_f],
+    'the cube [-1,1]^3, 12 triangles, normals outward')
+
+# issue 12: floors of two triangles, [-S,S]^2 at y = 0, S = 1e6 and 1e7
+for s in ('1e6', '1e7'):
+    S = float(s)
+    obj(f'floor-{s}.obj', [(-S, 0, -S), (S, 0, -S), (S, 0, S), (-S, 0, S)],
+        [(1, 4, 3), (1, 3, 2)], f'the square [-{s},{s}]^2 at y = 0 as two triangles, facing +y')
+
+
+# issue 12: parallelograms whose edges meet at 10, 3, 1, 0.3 and 0.1 degrees, in a general
+# orientation, seen face-on from a camera close enough that every pixel sees the quad
+def quad_scene(deg):
+    a = math.radians(deg)
+    # a fixed rotation: the orthonormal frame of two fixed vectors (Gram-Schmidt)
+    u = [0.37, -0.62, 0.69]
+    n = math.sqrt(sum(x * x for x in u))
+    u = [x / n for x in u]
+    v = [0.81, 0.23, -0.11]
+    d = sum(u[i] * v[i] for i in range(3))
+    v = [v[i] - d * u[i] for i in range(3)]
+    n = math.sqrt(sum(x * x for x in v))
+    v = [x / n for x in v]
+    w = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+    e1 = [1.3 * x for x in u]
+    e2 = [0.4 * (math.cos(a) * u[i] + math.sin(a) * v[i]) for i in range(3)]
+    centre = [0.41, 4.49, -0.16]
+    corner = [centre[i] - 0.5 * (e1[i] + e2[i]) for i in range(3)]
+    # the quad is 0.4 sin(a) wide: the camera's 0.5 degree field, tilted 20 degrees off the
+    # normal, covers a quarter of that
+    width = 0.4 * math.sin(a)
+    dist = 0.25 * width * math.cos(math.radians(20)) / (2 * math.tan(math.radians(0.25)) * 1.5)
+    view = [math.cos(math.radians(20)) * w[i] + math.sin(math.radians(20)) * u[i]
+            for i in range(3)]
+    eye = [centre[i] + dist * view[i] for i in range(3)]
+
+    def vec(p):
+        return ','.join('%.9g' % x for x in p)
+    with open(f'{D}/quad-shear-{deg:g}deg.txt', 'w') as f:
+        f.write(f'# A parallelogram whose edges meet at {deg:g} degrees, general orientation, '
+                'albedo 0.8 under a\n# constant sky of 2: every pixel is 2 x 0.8 = 1.6 (zero '
+                'variance) unless rays spawned\n# from it hit it again.  '
+                'Written by make_meshes.py.\n')
+        f.write(f'camera eye={vec(eye)} look-at={vec(centre)} up={vec(v)} fov=0.5\n')
+        f.write('film width=16 height=16\nrender spp=16 sampler=independent\n')
+        f.write('material name=f type=diffuse albedo=0.8,0.8,0.8\n')
+        f.write(f'quad corner={vec(corner)} edge1={vec(e1)} edge2={vec(e2)} material=f\n')
+        f.write('sky type=constant radiance=2,2,2\n')
+
+
+for deg in (10, 3, 1, 0.3, 0.1):
+    quad_scene(deg)
+
+# issue 12, scenes that must not abort: only zero-area faces; and three chains of 126 triangles
+# at 2^-k along x, y and z, which the binned SAH peels one at a time down to the depth cap
+obj('degenerate-only.obj', [(0, 0, 0), (1, 0, 0), (2, 0, 0), (0, 1, 0)],
+    [(1, 2, 3), (1, 1, 4), (4, 4, 4)], 'zero-area faces only: collinear, repeated vertices')
+dv, df = [], []
+for axis in range(3):
+    for k in range(126):
+        x = 2.0 ** -k
+        s = x / 8
+        c = [x if a == axis else 0.0 for a in range(3)]
+        for off in ((-s, -s, s), (s, -s, -s), (-s, s, -s)):
+            dv.append(tuple(c[a] + off[a] for a in range(3)))
+        df.append((len(dv) - 2, len(dv) - 1, len(dv)))
+with open(f'{D}/depth-cap.obj', 'w') as f:
+    f.write('# three chains of 126 triangles at 2^-k along x, y, z: the BVH reaches its depth cap\n')
+    f.write(''.join('v %r %r %r\n' % v for v in dv))
+    f.write(''.join('f %d %d %d\n' % t for t in df))

@@ -1,3 +1,0 @@
-build-single/obj.o: obj.c obj.h vec.h
-obj.h:
-vec.h:

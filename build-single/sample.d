@@ -1,4 +1,0 @@
-build-single/sample.o: sample.c sample.h vec.h sobol_matrices.h
-sample.h:
-vec.h:
-sobol_matrices.h:
