@@ -47,7 +47,7 @@ REF_DEFAULT = "bench/ref/cornell256-cycles16384.exr"
 REF_SEEDS = 16
 REF_SPP = 1024
 HERE = os.path.dirname(os.path.abspath(__file__))
-SUMMARY = re.compile(r"render ([0-9.]+) s, ([0-9.]+) Msamples/s")
+SUMMARY = re.compile(r"render ([0-9.]+) s(?: wall, [0-9.]+ s CPU)?, ([0-9.]+) Msamples/s")
 CYCLES_SEED = re.compile(r"cycles_reference: seed (\d+): .*\(([0-9.]+) s\)")
 
 

@@ -51,7 +51,8 @@ SCENES = [
 REF_FACTOR = 16
 REF_SEED = 1000003
 REF_DIR = "bench/ref"
-SUMMARY = re.compile(r"render ([0-9.]+) s, ([0-9.]+) Msamples/s, ([0-9.]+) Mrays/s")
+SUMMARY = re.compile(r"render ([0-9.]+) s(?: wall, [0-9.]+ s CPU)?, ([0-9.]+) Msamples/s, "
+                     r"([0-9.]+) Mrays/s")
 
 
 def run_timed(cmd):
