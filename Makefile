@@ -75,7 +75,7 @@ test: mcpt $(BUILD)/tests/run_tests
 
 check-sanitize:
 	$(MAKE) BUILD=build-san OPT_FLAGS="-O1 -fno-omit-frame-pointer" \
-	    EXTRA_CFLAGS="-fsanitize=address,undefined -fno-sanitize-recover=undefined" \
+	    EXTRA_CFLAGS="-fsanitize=address,undefined -fno-sanitize-recover=undefined -DTEST_TIMEOUT_SCALE=10" \
 	    build-san/tests/run_tests build-san/mcpt
 	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
 	    LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp \

@@ -53,7 +53,7 @@ static char *trim(char *s)
 
 /* Every case of the corpus: status, one stderr line with the prefix, no stdout, no file made or
  * changed in the output folder. */
-Test(bad, corpus, .init = setup, .fini = teardown, .timeout = 600)
+Test(bad, corpus, .init = setup, .fini = teardown, .timeout = TEST_TIMEOUT_S(600))
 {
     FILE *f = fopen(CASES_PATH, "r");
     cr_assert_not_null(f, "cannot open " CASES_PATH);
@@ -154,7 +154,8 @@ Test(bad, every_file_listed)
  * open() for a writer that will not come.  Mesh and MTL must be regular files (exit 2, one
  * line at the scene or OBJ line naming the FIFO); the scene may be a pipe, and one with no
  * writer reads as empty.  FIFOs cannot live in git, so they are made here. */
-Test(bad, fifo_inputs_refused_at_once, .init = setup, .fini = teardown, .timeout = 60)
+Test(bad, fifo_inputs_refused_at_once, .init = setup, .fini = teardown,
+     .timeout = TEST_TIMEOUT_S(60))
 {
     char path[400], out_path[400], err_path[400], err[1024];
     const char *fifos[] = {"pipe.obj", "pipe.mtl", "pipe.txt"};

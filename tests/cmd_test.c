@@ -68,7 +68,7 @@ static int run_mcpt(const char *const *args, char *err_out, size_t err_bytes)
 
 /* Each subcommand: --help 0; an unknown option, a missing file 2; a write into a missing folder
  * 2, found before any work (issue 15), with one line naming the file. */
-Test(cmd, subcommand_exit_statuses, .init = setup, .fini = teardown, .timeout = 60)
+Test(cmd, subcommand_exit_statuses, .init = setup, .fini = teardown, .timeout = TEST_TIMEOUT_S(60))
 {
     char img[300], bad_out[300], part[300], err[4096], want[800];
     snprintf(img, sizeof img, "%s/img.exr", tmpdir);

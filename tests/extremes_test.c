@@ -132,7 +132,7 @@ static void assert_black(const char *path)
 
 /* The Cornell box at scale 1e-4 and 1e4 (camera scaled too) renders the image of scale 1:
  * ray offsets scale with the geometry, with no epsilon in scene units. */
-Test(extremes, cornell_scale_1e_minus_4_and_1e4, .timeout = 120)
+Test(extremes, cornell_scale_1e_minus_4_and_1e4, .timeout = TEST_TIMEOUT_S(120))
 {
     assert_same_scenes(DIR "cornell-1.txt", DIR "cornell-1e-4.txt");
     assert_same_scenes(DIR "cornell-1.txt", DIR "cornell-1e4.txt");
@@ -140,7 +140,7 @@ Test(extremes, cornell_scale_1e_minus_4_and_1e4, .timeout = 120)
 
 /* smallpt's box with walls of radius-1e5 spheres renders as the same box with planes: no
  * self-intersection (acne) from the large hit-point error, no light leaking past the walls. */
-Test(extremes, smallpt_radius_1e5_walls, .timeout = 120)
+Test(extremes, smallpt_radius_1e5_walls, .timeout = TEST_TIMEOUT_S(120))
 {
     assert_same_scenes(DIR "smallpt-planes.txt", DIR "smallpt-spheres.txt");
 }
@@ -164,7 +164,7 @@ static struct estimate image_luminance(const struct film *f)
     return (struct estimate){sum / (double)n, var / ((double)n * (double)n)};
 }
 
-Test(extremes, cornell_scale_1e_minus_15_to_1e15, .timeout = 180)
+Test(extremes, cornell_scale_1e_minus_15_to_1e15, .timeout = TEST_TIMEOUT_S(180))
 {
     const char *scales[] = {"1e-15", "1e-6", "1e6", "1e15"};
     struct film f1;
@@ -192,7 +192,7 @@ Test(extremes, cornell_scale_1e_minus_15_to_1e15, .timeout = 180)
 /* Issue 12: a floor of two triangles of size 1e6 or 1e7 renders as the same floor given as a
  * plane: their hit points are as precise as the plane's (the ray's, where a triangle is larger
  * than the hit distance) and their error bounds as small. */
-Test(extremes, huge_triangle_floor_is_the_plane, .timeout = 120)
+Test(extremes, huge_triangle_floor_is_the_plane, .timeout = TEST_TIMEOUT_S(120))
 {
     assert_same_scenes(DIR "floor-plane.txt", DIR "floor-1e6.txt");
     assert_same_scenes(DIR "floor-plane.txt", DIR "floor-1e7.txt");
@@ -201,7 +201,7 @@ Test(extremes, huge_triangle_floor_is_the_plane, .timeout = 120)
 /* ---- triangles: slivers, tiny, duplicated, coplanar, closed ---- */
 
 /* A floor of 400 slivers renders as the same floor of 2 triangles. */
-Test(extremes, sliver_floor_renders_as_two_triangles, .timeout = 120)
+Test(extremes, sliver_floor_renders_as_two_triangles, .timeout = TEST_TIMEOUT_S(120))
 {
     assert_same_scenes(DIR "floor-once.txt", DIR "floor-slivers.txt");
 }
@@ -210,14 +210,14 @@ Test(extremes, sliver_floor_renders_as_two_triangles, .timeout = 120)
 Test(extremes, sliver_floor_does_not_leak) { assert_black(DIR "slivers-black.txt"); }
 
 /* Triangles of area 1e-12 down to exactly 0, some emissive, change nothing and make no NaN. */
-Test(extremes, tiny_and_zero_area_triangles, .timeout = 120)
+Test(extremes, tiny_and_zero_area_triangles, .timeout = TEST_TIMEOUT_S(120))
 {
     assert_same_scenes(DIR "floor-once.txt", DIR "floor-tiny.txt");
 }
 
 /* Every face duplicated, and a coplanar copy triangulated the other way, render as if each
  * surface were there once: no stripes, no darkening from hitting the twin after a bounce. */
-Test(extremes, duplicated_and_coplanar_faces, .timeout = 120)
+Test(extremes, duplicated_and_coplanar_faces, .timeout = TEST_TIMEOUT_S(120))
 {
     assert_same_scenes(DIR "floor-once.txt", DIR "floor-duplicated.txt");
     assert_same_scenes(DIR "floor-once.txt", DIR "floor-coplanar.txt");
@@ -230,7 +230,7 @@ Test(extremes, camera_inside_closed_mesh_sees_no_sky) { assert_black(DIR "inside
  * sky, wound outward and inward: every pixel is exactly 0.  A ray leaving a wall near a concave
  * edge meets the next wall at t ~ 1e-5, which the float test cannot place; it is decided in
  * double, never thrown away. */
-Test(extremes, closed_cube_sees_no_sky, .timeout = 120)
+Test(extremes, closed_cube_sees_no_sky, .timeout = TEST_TIMEOUT_S(120))
 {
     assert_black(DIR "cube-outward.txt");
     assert_black(DIR "cube-inward.txt");
@@ -284,7 +284,7 @@ static void write_strip_cube(const char *dir, int n, bool inward, char *scene_pa
 
 /* Issue 12: the cube of 100 and 1000 strips per face (triangles of aspect 100 and 1000), wound
  * outward and inward, camera inside: every pixel is exactly 0. */
-Test(extremes, strip_cubes_see_no_sky, .timeout = 240)
+Test(extremes, strip_cubes_see_no_sky, .timeout = TEST_TIMEOUT_S(240))
 {
     char dir[64], scene_path[400];
     test_make_dir(dir, sizeof dir, "strips");
@@ -302,7 +302,7 @@ Test(extremes, strip_cubes_see_no_sky, .timeout = 240)
  * estimator has zero variance, light sample and BSDF sample each add 0.8 with MIS weight 1/2,
  * so every pixel is 1.6 up to float rounding (1e-5); a spawned ray hitting the quad again
  * takes 0.8 from a sample.  The quad's plane is decided in double (shape.c). */
-Test(extremes, sheared_quads_render_exactly, .timeout = 120)
+Test(extremes, sheared_quads_render_exactly, .timeout = TEST_TIMEOUT_S(120))
 {
     const char *paths[] = {DIR "quad-shear-10deg.txt",  DIR "quad-shear-3deg.txt",
                            DIR "quad-shear-1deg.txt",   DIR "quad-shear-0.3deg.txt",
@@ -396,7 +396,7 @@ static double max_shading_angle(const char *path)
  * and no pixel is black: a view direction on the wrong side of the shading normal (near the
  * silhouette) takes the geometric normal, so every pixel keeps at least half its samples'
  * worth (>= 0.5; the chance that most of 64 samples lose both halves is negligible). */
-Test(extremes, smooth_sphere_in_white_furnace, .timeout = 60)
+Test(extremes, smooth_sphere_in_white_furnace, .timeout = TEST_TIMEOUT_S(60))
 {
     char dir[64], path[400];
     test_make_dir(dir, sizeof dir, "smooth");
@@ -429,7 +429,7 @@ Test(extremes, smooth_sphere_in_white_furnace, .timeout = 60)
 
 /* Issue 12: the camera inside the same smooth sphere (diffuse, albedo 0.5) under a white sky:
  * shading normals let no light in, every pixel is exactly 0. */
-Test(extremes, smooth_sphere_lets_no_sky_in, .timeout = 60)
+Test(extremes, smooth_sphere_lets_no_sky_in, .timeout = TEST_TIMEOUT_S(60))
 {
     char dir[64], path[400];
     test_make_dir(dir, sizeof dir, "smooth");
@@ -496,14 +496,14 @@ Test(extremes, rays_through_vertices_and_edges_hit)
 /* ---- materials ---- */
 
 /* Glass of IOR 1 is invisible: Fresnel reflectance 0, no bending, radiance scale eta^2 = 1. */
-Test(extremes, ior_1_glass_is_invisible, .timeout = 120)
+Test(extremes, ior_1_glass_is_invisible, .timeout = TEST_TIMEOUT_S(120))
 {
     assert_same_scenes(DIR "ior1-without.txt", DIR "ior1-glass.txt");
 }
 
 /* Roughness 0: a GGX conductor with alpha below MAT_ALPHA_SMOOTH and F0 = 1 is a perfect
  * mirror (PBRT 4e, ch. 9, "Roughness Using Microfacet Theory": effectively smooth). */
-Test(extremes, roughness_0_conductor_is_a_mirror, .timeout = 120)
+Test(extremes, roughness_0_conductor_is_a_mirror, .timeout = TEST_TIMEOUT_S(120))
 {
     assert_same_scenes(DIR "mirror-ball.txt", DIR "conductor-roughness-0.txt");
 }
@@ -512,7 +512,7 @@ Test(extremes, roughness_0_conductor_is_a_mirror, .timeout = 120)
  * and plastics of albedo 1 stay finite and never exceed 1 (single-scattering microfacets lose
  * energy, they never create it: GGX at alpha = 1 keeps only about 0.3 to 0.5 of it, Kulla and
  * Conty 2017, "Revisiting Physically Based Shading at Imageworks"), but do not go black. */
-Test(extremes, roughness_0_and_1_in_white_furnace, .timeout = 120)
+Test(extremes, roughness_0_and_1_in_white_furnace, .timeout = TEST_TIMEOUT_S(120))
 {
     const char *paths[] = {DIR "furnace-conductor-roughness-1.txt",
                            DIR "furnace-plastic-roughness-0.txt",
@@ -589,7 +589,7 @@ Test(extremes, albedo_1_white_furnace)
  * drops, so only the path-length cap (TRACE_DEPTH_CAP segments) ends a path: each of them
  * gathers about Le per segment.  The image is finite and at most Le (cap + 1), up to float
  * rounding. */
-Test(extremes, albedo_1_closed_emitter_is_finite, .timeout = 120)
+Test(extremes, albedo_1_closed_emitter_is_finite, .timeout = TEST_TIMEOUT_S(120))
 {
     struct film f;
     struct trace_result r;
@@ -638,7 +638,7 @@ Test(extremes, emission_1e_minus_6_and_1e8_scale_linearly)
 /* One pixel accumulating 1e6 real radiance samples (trace_radiance on precision.txt) keeps its
  * sum to 1e-12 of a long-double reference sum, its variance of the mean to 1e-9 of a two-pass
  * long-double reference, and its float mean equal to the rounded reference. */
-Test(extremes, million_samples_match_long_double_sum, .timeout = 180)
+Test(extremes, million_samples_match_long_double_sum, .timeout = TEST_TIMEOUT_S(180))
 {
     struct scene scene;
     struct mcpt_error err;
@@ -688,7 +688,7 @@ Test(extremes, million_samples_match_long_double_sum, .timeout = 180)
 
 /* The same pixel rendered to 20000 spp in one call and in 20 calls of 1000 holds the same
  * bytes: each sample is added in sample-index order whatever the split (film.h). */
-Test(extremes, split_accumulation_is_bit_identical, .timeout = 120)
+Test(extremes, split_accumulation_is_bit_identical, .timeout = TEST_TIMEOUT_S(120))
 {
     struct scene scene;
     struct mcpt_error err;
@@ -850,7 +850,7 @@ Test(nonfinite, nan_material_dropped_and_counted)
  * wide nodes' empty lanes until the stack assertion), the BVH at its depth cap, zero-area faces
  * only, coordinates from 1e-30 to 1e18 in one mesh.  Each renders through the binary and exits
  * 0: no signal, no assertion; the traversal stacks are sized by the build's depth cap. */
-Test(extremes, no_scene_aborts, .timeout = 240)
+Test(extremes, no_scene_aborts, .timeout = TEST_TIMEOUT_S(240))
 {
     const char *scenes[] = {DIR "cornell-1e-12.txt", DIR "depth-cap.txt", DIR "degenerate-only.txt",
                             DIR "extreme-coordinates.txt", DIR "nan-invitations.txt"};

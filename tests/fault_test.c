@@ -575,7 +575,8 @@ static void assert_no_temporaries(const char *dir)
  * what was written (the new image, and the old preview removed, as it showed the old image);
  * a disk that holds neither: exit 1, the old pair untouched.  No temporary is left in either
  * case.  A tmpfs of 1 MiB is the disk; skipped, saying so, where this process may not mount. */
-Test(diskfull, image_and_preview_stay_a_pair, .init = setup, .fini = teardown, .timeout = 120)
+Test(diskfull, image_and_preview_stay_a_pair, .init = setup, .fini = teardown,
+     .timeout = TEST_TIMEOUT_S(120))
 {
     char mnt[300], out[320], png[320], fill[320], new_exr[300], new_png[300], old_exr[300],
         old_png[300], err[4096];
@@ -667,7 +668,8 @@ static int age_temporaries(const char *dir, int ago_s)
  * its preview are still a pair, both old or both new, never the new image beside the old
  * preview; the next run removes the dead process's temporaries (here aged past FILE_STALE_S,
  * as a later run would find them) and writes the pair. */
-Test(kill9, during_the_preview_leaves_a_pair, .init = setup, .fini = teardown, .timeout = 120)
+Test(kill9, during_the_preview_leaves_a_pair, .init = setup, .fini = teardown,
+     .timeout = TEST_TIMEOUT_S(120))
 {
     char out[300], png[300], new_exr[300], new_png[300], old_exr[300], old_png[300], err[4096];
     snprintf(out, sizeof out, "%s/out.exr", tmpdir);
@@ -796,7 +798,7 @@ static unsigned long long inode_of(const char *path)
  * the very image an uninterrupted run gives, bit for bit (on another thread count), and the
  * finished render removes the checkpoint. */
 Test(kill9, periodic_checkpoints_resume_bit_identical, .init = setup, .fini = teardown,
-     .timeout = 240)
+     .timeout = TEST_TIMEOUT_S(240))
 {
     char full[300], out[300], ckpt[320], err[4096];
     snprintf(full, sizeof full, "%s/full.exr", tmpdir);
@@ -832,7 +834,7 @@ Test(kill9, periodic_checkpoints_resume_bit_identical, .init = setup, .fini = te
 /* A render that ends normally leaves no periodic checkpoint behind, and one whose checkpoint
  * cannot be written (its folder removed mid-render) warns once and goes on to its image. */
 Test(kill9, periodic_checkpoint_failure_is_a_warning, .init = setup, .fini = teardown,
-     .timeout = 120)
+     .timeout = TEST_TIMEOUT_S(120))
 {
     char dir[300], out[300], ckpt[340], err[4096];
     snprintf(dir, sizeof dir, "%s/ck", tmpdir);
@@ -863,7 +865,8 @@ Test(kill9, periodic_checkpoint_failure_is_a_warning, .init = setup, .fini = tea
 /* A checkpoint names its scene by the bytes of the scene file and of every mesh and MTL file
  * it loads: resuming after the MTL was edited is refused (an image of two scenes, otherwise),
  * and accepted again once the MTL is as it was. */
-Test(trust, checkpoint_notices_an_edited_mtl, .init = setup, .fini = teardown, .timeout = 120)
+Test(trust, checkpoint_notices_an_edited_mtl, .init = setup, .fini = teardown,
+     .timeout = TEST_TIMEOUT_S(120))
 {
     char scene[300], obj[300], mtl[300], out[300], ckpt[320], err[4096];
     snprintf(scene, sizeof scene, "%s/mesh.txt", tmpdir);

@@ -244,7 +244,7 @@ Test(file, remove_temporaries_now, .init = setup, .fini = teardown)
 /* Inputs: a regular file opens; a FIFO with no writer, a directory and a character device are
  * refused at once, named (a FIFO is accepted when pipes are allowed); a missing file gives
  * errno. */
-Test(file, open_input_never_blocks, .init = setup, .fini = teardown, .timeout = 10)
+Test(file, open_input_never_blocks, .init = setup, .fini = teardown, .timeout = TEST_TIMEOUT_S(10))
 {
     char reg[300], fifo[300], missing[300];
     snprintf(reg, sizeof reg, "%s/a.txt", tmpdir);

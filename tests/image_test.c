@@ -8,6 +8,7 @@
 #define _XOPEN_SOURCE 700
 
 #include "image.h"
+#include "test_util.h"
 
 #include <criterion/criterion.h>
 #include <dirent.h>
@@ -572,7 +573,7 @@ Test(image, refused_write_keeps_existing_file)
 /* A write that fails in the middle (the file size limit RLIMIT_FSIZE makes write() fail with
  * EFBIG after 4 KiB) reports strerror, leaves the existing file intact and removes the
  * temporary: the EXR and both PNG writers. */
-Test(image, failed_write_midway_keeps_existing_file, .timeout = 30)
+Test(image, failed_write_midway_keeps_existing_file, .timeout = TEST_TIMEOUT_S(30))
 {
     char exr_path[256];
     char png_path[256];

@@ -17,6 +17,7 @@
 #include "chi2.h"
 #include "light.h"
 #include "trace.h"
+#include "test_util.h"
 
 /* A light scene built in code: a two-sided emissive triangle, quad, sphere (seen from outside)
  * and sphere enclosing the reference point, and a gradient sky. */
@@ -201,7 +202,7 @@ static double light_density(void *ctx, vec3 w)
  * outside (cone sampling) and from inside (uniform area), and the sky (cosine about n_sky); each
  * density integrates to 1 (Bonferroni over the 9 tests: five lights, then the triangle and quad
  * of the two scenes by solid angle). */
-Test(light, chi2_sampling, .timeout = 120)
+Test(light, chi2_sampling, .timeout = TEST_TIMEOUT_S(120))
 {
     for (int variant = 0; variant < 3; variant++) {
         struct scene s = light_scene_variant(variant);

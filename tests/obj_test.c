@@ -682,7 +682,8 @@ Test(obj, mtllib_names_with_spaces_and_quotes, .init = tmp_setup, .fini = tmp_te
 
 /* A FIFO (no writer) as OBJ or as MTL is refused at once, not waited on in open(); so are a
  * directory and a character device as MTL.  UTF-16 is named as such. */
-Test(obj, fifo_and_other_files_refused, .init = tmp_setup, .fini = tmp_teardown, .timeout = 10)
+Test(obj, fifo_and_other_files_refused, .init = tmp_setup, .fini = tmp_teardown,
+     .timeout = TEST_TIMEOUT_S(10))
 {
     char fifo[400];
     snprintf(fifo, sizeof fifo, "%s/pipe.obj", tmp_dir);
@@ -735,7 +736,8 @@ Test(obj, chunks_join_and_stop_at_the_first_nul, .init = tmp_setup, .fini = tmp_
 /* A 3 GiB sparse file of NUL bytes (no disk used): the error comes at 1:1 after reading one
  * chunk, and the process holds far less than the file (it held 3.1 GB when the reader read
  * whole files). */
-Test(obj, sparse_3gib_of_nuls_stops_at_once, .init = tmp_setup, .fini = tmp_teardown, .timeout = 20)
+Test(obj, sparse_3gib_of_nuls_stops_at_once, .init = tmp_setup, .fini = tmp_teardown,
+     .timeout = TEST_TIMEOUT_S(20))
 {
     char path[400];
     snprintf(path, sizeof path, "%s/zeros.obj", tmp_dir);
@@ -751,7 +753,8 @@ Test(obj, sparse_3gib_of_nuls_stops_at_once, .init = tmp_setup, .fini = tmp_tear
 
 /* A statement longer than 16 MiB (here one line of 20 MB without a newline) is refused
  * instead of growing the buffer without bound. */
-Test(obj, overlong_statement_refused, .init = tmp_setup, .fini = tmp_teardown, .timeout = 30)
+Test(obj, overlong_statement_refused, .init = tmp_setup, .fini = tmp_teardown,
+     .timeout = TEST_TIMEOUT_S(30))
 {
     size_t n = 20u << 20;
     char *text = malloc(n);
@@ -800,7 +803,7 @@ Test(obj, name_table_is_linear)
  * loads in well under a second.  The timeout is the hang cap, set far above the linear time
  * (sanitizer builds are ~10x slower) and far below the quadratic one. */
 Test(obj, many_materials_load_in_linear_time, .init = tmp_setup, .fini = tmp_teardown,
-     .timeout = 60)
+     .timeout = TEST_TIMEOUT_S(60))
 {
     enum { N = 200000 };
     size_t cap = (size_t)N * 32, n_mtl = 0, n_obj = 0;

@@ -14,6 +14,7 @@
 
 #include "image.h"
 #include "partial.h"
+#include "test_util.h"
 
 static char g_dir[256];
 
@@ -374,7 +375,7 @@ static int assert_within_rounding(const struct image *merged, const struct image
  * sampler and for the stratified one (whose strata span the whole render, so a range must use
  * the whole render's sets). */
 Test(distributed, gnu_parallel_four_ranges_equal_one_process, .init = setup, .fini = teardown,
-     .timeout = 120)
+     .timeout = TEST_TIMEOUT_S(120))
 {
     cr_assert_eq(shell("parallel --version 2>/dev/null | grep -q 'GNU parallel'"), 0,
                  "this test needs GNU parallel (Debian package 'parallel': apt-get install "

@@ -200,7 +200,7 @@ Test(resume, mismatch_refused, .init = setup, .fini = teardown)
  * (exit 143), then resumed without naming the scene; the final EXR has the same bytes as an
  * uninterrupted run on another thread count. */
 Test(interrupt, sigint_then_sigterm_then_bit_identical, .init = setup, .fini = teardown,
-     .timeout = 240)
+     .timeout = TEST_TIMEOUT_S(240))
 {
     char full[300], part[300], ckpt[300], final[300], err_path[300], err[4096];
     snprintf(full, sizeof full, "%s/full.exr", tmpdir);
@@ -260,7 +260,8 @@ Test(interrupt, sigint_then_sigterm_then_bit_identical, .init = setup, .fini = t
  * writes, and leaves no corrupt file: OUT.exr is the earlier file or a whole new image, and a
  * checkpoint, if one was written, loads.  The two signals differ (SIGTERM, then SIGINT) because
  * a second SIGINT sent while the first is still pending would merge with it. */
-Test(interrupt, second_signal_exits_at_once, .init = setup, .fini = teardown, .timeout = 180)
+Test(interrupt, second_signal_exits_at_once, .init = setup, .fini = teardown,
+     .timeout = TEST_TIMEOUT_S(180))
 {
     char out[300], ckpt[300], err_path[300], err[4096];
     snprintf(out, sizeof out, "%s/out.exr", tmpdir);
@@ -306,7 +307,7 @@ Test(interrupt, second_signal_exits_at_once, .init = setup, .fini = teardown, .t
  * temporary is being written): mcpt exits at once and leaves no temporary behind.  The film is
  * 1500x1500, so the checkpoint is 144 MB and takes long enough to be caught mid-write. */
 Test(interrupt, second_signal_mid_checkpoint_leaves_no_temporary, .init = setup, .fini = teardown,
-     .timeout = 180)
+     .timeout = TEST_TIMEOUT_S(180))
 {
     char out[300], err_path[300], err[4096];
     snprintf(out, sizeof out, "%s/out.exr", tmpdir);
@@ -340,7 +341,7 @@ Test(interrupt, second_signal_mid_checkpoint_leaves_no_temporary, .init = setup,
 /* SIGINT when the checkpoint cannot be written (its folder was removed during the render):
  * the partial image is still written, and the one error line says so; exit 1. */
 Test(interrupt, checkpoint_unwritable_still_writes_the_image, .init = setup, .fini = teardown,
-     .timeout = 180)
+     .timeout = TEST_TIMEOUT_S(180))
 {
     char dir[300], ckpt[340], out[300], err_path[300], err[4096];
     snprintf(dir, sizeof dir, "%s/ck", tmpdir);
@@ -369,7 +370,8 @@ Test(interrupt, checkpoint_unwritable_still_writes_the_image, .init = setup, .fi
 /* A render stopped (SIGSTOP) for 1.5 s and continued (SIGCONT) reports its wall time, which
  * counts the stop, and its CPU time, which does not: "render W s wall, C s CPU", W - C >= 1.5
  * on one thread. */
-Test(interrupt, stopped_time_is_wall_not_cpu, .init = setup, .fini = teardown, .timeout = 180)
+Test(interrupt, stopped_time_is_wall_not_cpu, .init = setup, .fini = teardown,
+     .timeout = TEST_TIMEOUT_S(180))
 {
     char out[300], out_path[300], err_path[300], text[4096];
     snprintf(out, sizeof out, "%s/out.exr", tmpdir);

@@ -18,6 +18,7 @@
 #include "scene.h"
 #include "sobol_matrices.h"
 #include "trace.h"
+#include "test_util.h"
 
 /* pcg32-demo of the PCG C reference (pcg32_srandom_r(42, 54)) prints these first six values. */
 Test(sample, pcg32_reference_output)
@@ -555,7 +556,7 @@ static void check_chi2(struct chi2_spec spec, const char *name)
 /* Each warp's samples fit its pdf (Pearson's chi-square on a 2D histogram against the pdf
  * integrated over each cell, significance 0.01 / 8, as Mitsuba's chi2 tests), and each pdf
  * integrates to 1 over its domain. */
-Test(sample, warps_chi2, .timeout = 60)
+Test(sample, warps_chi2, .timeout = TEST_TIMEOUT_S(60))
 {
     check_chi2(chi2_sphere(draw_uniform_sphere, pdf_sphere_at, NULL), "uniform sphere");
     check_chi2(chi2_sphere(draw_uniform_hemisphere, pdf_hemisphere_at, NULL), "uniform hemisphere");
@@ -706,7 +707,7 @@ static struct rect_ctx rect_case(vec3 o, vec3 corner, vec3 e1, vec3 e2)
  * 0.01 / 5), the pdf integrating to 1 (so Omega is right); the bilinear warp fits its pdf
  * (PBRT 4e, ch. A.5, SampleBilinear).  A large and a small triangle, a rectangle seen
  * off-centre, and one seen from beside its edge (a grazing view). */
-Test(sample, spherical_polygons_chi2, .timeout = 60)
+Test(sample, spherical_polygons_chi2, .timeout = TEST_TIMEOUT_S(60))
 {
     const int n_tests = 5;
     struct sample_sph_triangle big, small;
@@ -1054,7 +1055,7 @@ static void render_film(const struct trace_scene *ts, const struct trace_options
 /* Every sampler, and adaptive sampling by either rule, renders bit-identical films with 1 and
  * 3 threads; an adaptive render split into two calls (maximum 16, then 48) equals one call; and
  * adaptive sampling does stop some pixels early and run others on. */
-Test(sampling, deterministic_for_any_thread_count, .timeout = 120)
+Test(sampling, deterministic_for_any_thread_count, .timeout = TEST_TIMEOUT_S(120))
 {
     struct scene s;
     struct trace_scene *ts = load_scene("scenes/cornell-box.txt", 24, 20, &s);
@@ -1135,7 +1136,7 @@ static void glass_image_mean(const struct trace_scene *ts, const struct trace_op
  * 0.2, pilot 8, 8..256 spp) minus that of uniform 64-spp renders of other seeds is within 4
  * standard errors of 0 (the seeds' scatter) in each channel, while the stop rule with the same
  * T, min-spp and batch is below by more than 4. */
-Test(sampling, adaptive_pilot_unbiased_on_glass, .timeout = 240)
+Test(sampling, adaptive_pilot_unbiased_on_glass, .timeout = TEST_TIMEOUT_S(240))
 {
     enum { W = 32, H = 32, SEEDS = 24 };
     struct scene s;
@@ -1201,7 +1202,7 @@ Test(sampling, adaptive_pilot_unbiased_on_glass, .timeout = 240)
  * (ratio 1), so a sampler that loses its stratification, or half its gain, fails it.  (The
  * ratio of image MSEs, 0.21 and 0.65, is dominated by a few pixels and too noisy at 8 seeds
  * to test: Sobol' ranged 0.39-1.00.) */
-Test(sampling, stratified_and_sobol_beat_independent, .timeout = 120)
+Test(sampling, stratified_and_sobol_beat_independent, .timeout = TEST_TIMEOUT_S(120))
 {
     enum { W = 16, H = 16, SEEDS = 8, SPP = 16 };
     const double ratio_max[SAMPLER_COUNT] = {1.0, 2.0 * 0.0280, 2.0 * 0.0615}; /* by KINDS */

@@ -15,6 +15,7 @@
 #include "scene.h"
 
 #include "obj.h"
+#include "test_util.h"
 
 #include <criterion/criterion.h>
 #include <fcntl.h>
@@ -876,7 +877,7 @@ Test(scene, byte_order_mark_and_encodings)
 /* A mesh that cannot be opened is reported at the scene line and the file= value, with the
  * path looked for when it differs from what was written: missing, a folder, a FIFO (refused at
  * once, not waited on), a device. */
-Test(scene, mesh_file_errors_point_at_the_scene, .timeout = 10)
+Test(scene, mesh_file_errors_point_at_the_scene, .timeout = TEST_TIMEOUT_S(10))
 {
     char dir[] = "/tmp/mcpt-scene-test-XXXXXX";
     cr_assert_not_null(mkdtemp(dir));
@@ -909,7 +910,7 @@ Test(scene, mesh_file_errors_point_at_the_scene, .timeout = 10)
 
 /* The scene file itself: a folder is refused; a FIFO is read as a pipe, and one with no
  * writer reads as empty at once instead of blocking in open(). */
-Test(scene, scene_file_kinds, .timeout = 10)
+Test(scene, scene_file_kinds, .timeout = TEST_TIMEOUT_S(10))
 {
     check_file_error("tests/data/scene", "tests/data/scene: error: expected a regular file, got "
                                          "a directory");
@@ -1060,7 +1061,7 @@ Test(scene, mesh_warnings_reach_the_scene)
  * (2e10 string compares, minutes; issue 15 measured 17 s for 100k); hashed, this loads in well
  * under a second.  The timeout is the hang cap, far above the linear time even under the
  * sanitizers and far below the quadratic one. */
-Test(scene, many_materials_load_in_linear_time, .timeout = 60)
+Test(scene, many_materials_load_in_linear_time, .timeout = TEST_TIMEOUT_S(60))
 {
     enum { N = 200000 };
     size_t cap = (size_t)N * 120 + 100, n = 0;

@@ -589,7 +589,8 @@ static void assert_same_exr_data(const char *a, const char *b)
  * identical EXR bytes, for every sampler (the stratified one's strata must be those of the final
  * spp), and with --seeds the image is the first seed's.  SOURCE_DATE_EPOCH leaves the render
  * time out of the EXR header, the one attribute in which two runs may differ. */
-Test(stats, snapshot_run_equals_plain_run, .init = setup, .fini = teardown, .timeout = 60)
+Test(stats, snapshot_run_equals_plain_run, .init = setup, .fini = teardown,
+     .timeout = TEST_TIMEOUT_S(60))
 {
     cr_assert_eq(setenv("SOURCE_DATE_EPOCH", "0", 1), 0); /* inherited by the mcpt runs */
     const char *samplers[] = {"sobol", "stratified", "independent"};
@@ -669,7 +670,8 @@ Test(stats, snapshot_run_equals_plain_run, .init = setup, .fini = teardown, .tim
 
 /* mcpt compare on a snapshot against the reference of its run prints, as JSON, the documented
  * keys and exactly the CSV row's mse_raw (the same floats, the same formula). */
-Test(stats, compare_reproduces_curve_row, .init = setup, .fini = teardown, .timeout = 60)
+Test(stats, compare_reproduces_curve_row, .init = setup, .fini = teardown,
+     .timeout = TEST_TIMEOUT_S(60))
 {
     char ref[300], out[300], curve[300], snap4[300], heat[300];
     snprintf(ref, sizeof ref, "%s/ref.exr", tmpdir);

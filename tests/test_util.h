@@ -16,6 +16,13 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+/* A Criterion timeout is a hang cap, not a speed assertion: `make check-sanitize` compiles with
+ * -DTEST_TIMEOUT_SCALE=10, because an ASan + UBSan build at -O1 renders 10-40 times slower. */
+#ifndef TEST_TIMEOUT_SCALE
+#define TEST_TIMEOUT_SCALE 1
+#endif
+#define TEST_TIMEOUT_S(s) ((s)*TEST_TIMEOUT_SCALE)
+
 #define TEST_MAX_ARGS 62 /* arguments test_start_mcpt passes after the program name */
 
 /* Makes a new empty folder "/tmp/mcpt_<name>_XXXXXX" (mkdtemp) and writes its path to dir. */

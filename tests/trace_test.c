@@ -23,6 +23,7 @@
 #include "image.h"
 #include "scene.h"
 #include "trace.h"
+#include "test_util.h"
 
 /* Image mean per channel over pixels [x0, x1) x [y0, y1) and its standard error: the pixels
  * are independent, so Var(mean) = sum_i Var(mean_i) / N^2. */
@@ -119,7 +120,7 @@ static void setup_free(struct setup *s)
  * --direct mode: the image mean within 4 SE, and every pixel within 5 of its SE (exactly 1
  * where the estimator has no variance: MIS and light sampling here).  The uniform-sampling
  * Lambert kind too. */
-Test(trace, white_furnace_every_mode, .timeout = 60)
+Test(trace, white_furnace_every_mode, .timeout = TEST_TIMEOUT_S(60))
 {
     struct setup s;
     setup_load(&s, "tests/data/trace/furnace.txt");
@@ -148,7 +149,7 @@ Test(trace, white_furnace_every_mode, .timeout = 60)
 /* The furnace with energy-losing materials: a GGX conductor with F0 = 1 and a white plastic
  * never exceed 1 (image mean within 4 SE), and the plastic stays close to 1 (it only loses
  * the coat's multiple scattering). */
-Test(trace, furnace_rough_materials_at_most_one, .timeout = 60)
+Test(trace, furnace_rough_materials_at_most_one, .timeout = TEST_TIMEOUT_S(60))
 {
     struct setup s;
     setup_load(&s, "tests/data/trace/furnace.txt");
@@ -175,7 +176,7 @@ Test(trace, furnace_rough_materials_at_most_one, .timeout = 60)
 /* A diffuse plane of albedo rho under a constant sky L is rho L; under a gradient sky
  * (horizon h, zenith z) it is rho int L cos / pi = rho (h / 3 + 2 z / 3).  Every mode, image
  * mean per channel within 4 SE. */
-Test(trace, diffuse_plane_under_sky, .timeout = 60)
+Test(trace, diffuse_plane_under_sky, .timeout = TEST_TIMEOUT_S(60))
 {
     struct setup s;
     setup_load(&s, "tests/data/trace/plane-sky.txt");
@@ -302,7 +303,7 @@ Test(trace, closed_sphere_analytic)
  * image) per channel agree with MIS within 4 combined SE, for light, BSDF, cosine and
  * hemisphere sampling, 4 light samples per vertex, and fixed-probability roulette from the
  * first bounce. */
-Test(trace, every_estimator_converges_to_the_same_image, .timeout = 120)
+Test(trace, every_estimator_converges_to_the_same_image, .timeout = TEST_TIMEOUT_S(120))
 {
     struct setup s;
     setup_load(&s, "tests/data/trace/modes.txt");
@@ -427,7 +428,7 @@ Test(trace, shading_normals_do_not_leak)
 
 /* The Cornell box scaled by 1e-4 and by 1e4 (geometry and camera) renders the same image
  * mean as at scale 1, within 4 combined SE per channel: no scene-tuned epsilon anywhere. */
-Test(trace, scale_invariance, .timeout = 120)
+Test(trace, scale_invariance, .timeout = TEST_TIMEOUT_S(120))
 {
     double mean[3][3], se[3][3];
     const float scales[3] = {1.0f, 1e-4f, 1e4f};
@@ -496,7 +497,7 @@ static double binomial_upper_tail(int n, double p, int k)
  * of a skewed pixel (glass, lamp hits by BSDF sampling) is not normal that far out.  Over 300
  * seeds the worst |z| reached 13 and such a test failed on 10.7% of seeds, while at 3.29 the
  * normal bound holds: 2.03 failing pixels per image on average (at most 6), this seed 5. */
-Test(trace, regression_against_reference_image, .timeout = 120)
+Test(trace, regression_against_reference_image, .timeout = TEST_TIMEOUT_S(120))
 {
     struct setup s;
     setup_load(&s, "tests/data/trace/regression.txt");
@@ -593,7 +594,7 @@ Test(trace, deterministic_across_threads_and_splits)
  * triangles (the bunny); a lens (the packet's rays leave from different points); every
  * sampler; 13 spp (a packet of 8, then one of 5); adaptive stops (packets cut at the test
  * points); 2 threads. */
-Test(trace, camera_packets_match_single_rays, .timeout = 120)
+Test(trace, camera_packets_match_single_rays, .timeout = TEST_TIMEOUT_S(120))
 {
     static const char *const scenes[] = {"scenes/cornell-box.txt", "scenes/cornell-glass.txt",
                                          "scenes/bunny.txt"};
@@ -673,7 +674,7 @@ static void cornell_mean(int size, uint32_t spp, uint64_t seed, double mean[3], 
 /* The Cornell box image mean at 32x32, 64 spp against a 128x128, 8192-spp mcpt render
  * (independent sampler, seed 100; RGB and SE below), within 4 combined SE per channel.  The
  * image mean does not depend on resolution: it is the film-plane average of the radiance. */
-Test(trace, cornell_box_mean_matches_reference, .timeout = 120)
+Test(trace, cornell_box_mean_matches_reference, .timeout = TEST_TIMEOUT_S(120))
 {
     static const double ref[3] = {0.186615, 0.120840, 0.034399};
     static const double ref_se[3] = {0.000029, 0.000020, 0.000007};
@@ -710,7 +711,7 @@ static bool json_triple(const char *text, const char *key, double out[3])
  * scripts/cycles_reference.py with the same conventions: Lambert rho / pi, Ke as the emitted
  * radiance on the front side, box pixel filter) within 1% per channel, and within 4 combined
  * SE.  64x64 at 1024 spp makes the SE about 0.25%, so that 1% is a real test. */
-Test(trace, cornell_box_mean_matches_cycles, .timeout = 120)
+Test(trace, cornell_box_mean_matches_cycles, .timeout = TEST_TIMEOUT_S(120))
 {
     FILE *f = fopen("tests/data/reference/cornell-box-cycles.json", "rb");
     cr_assert(f, "tests/data/reference/cornell-box-cycles.json is missing");

@@ -152,7 +152,8 @@ Test(ux, skipped_tests_are_listed_with_their_reason, .init = setup, .fini = tear
 /* setup.sh --render renders when the image is missing or older than the binary or the scene,
  * and skips the render otherwise.  The binary is a wrapper that logs each call and renders
  * with the real mcpt at 16x16, 1 spp. */
-Test(ux, setup_skips_a_fresh_render, .init = setup, .fini = teardown, .timeout = 120)
+Test(ux, setup_skips_a_fresh_render, .init = setup, .fini = teardown,
+     .timeout = TEST_TIMEOUT_S(120))
 {
     cr_assert_eq(shell("cd %s && mkdir -p scripts scenes/models && cp '%s/scripts/setup.sh' "
                        "scripts/ && cp '%s/scenes/cornell-box.txt' scenes/ && "
@@ -269,7 +270,7 @@ static void render_on_pty(int columns, struct screen *s)
  * column (so none wraps or scrolls), one line feed ends it, and the fields that fit are there:
  * elapsed time and ETA at 80 and 60, the speed at 80; percent always. */
 Test(ux, progress_line_fits_80_and_60_columns_on_a_pty, .init = setup, .fini = teardown,
-     .timeout = 120)
+     .timeout = TEST_TIMEOUT_S(120))
 {
     const int widths[] = {80, 60, 40, 24};
     for (size_t i = 0; i < sizeof widths / sizeof widths[0]; i++) {
@@ -292,7 +293,7 @@ Test(ux, progress_line_fits_80_and_60_columns_on_a_pty, .init = setup, .fini = t
 /* The same in a real terminal emulator (tmux) 80 and 60 columns wide: after the render the
  * screen holds one progress line, at 100%, and the shell's next line right below it. */
 Test(ux, progress_line_fits_80_and_60_columns_in_tmux, .init = setup, .fini = teardown,
-     .timeout = 120)
+     .timeout = TEST_TIMEOUT_S(120))
 {
     if (!has_program("tmux"))
         cr_skip_test("tmux is not installed (Debian package tmux, which scripts/setup.sh "
@@ -620,7 +621,7 @@ Test(ux, exr_header_as_exrheader_reads_it, .init = setup, .fini = teardown)
  * the installed docs and scenes), the docs and the scenes with their models in place; the
  * installed scene renders from its installed path; make uninstall leaves no file behind. */
 Test(ux, install_renders_the_installed_scene_and_uninstall_removes_all, .init = setup,
-     .fini = teardown, .timeout = 120)
+     .fini = teardown, .timeout = TEST_TIMEOUT_S(120))
 {
     char dest[300], path[600], text[1 << 16];
     scratch(dest, sizeof dest, "dest");
