@@ -197,12 +197,12 @@ bench/raybench: bench/raybench.c bench/bench.c bench/bench.h $(BENCH_OBJS) $(FLA
 	$(CC) $(BENCH_CFLAGS) -o $@ bench/raybench.c bench/bench.c $(BENCH_OBJS) -lpthread -lm
 
 # bench/raydump: the rays of a render as ray files for raybench (links the renderer)
-bench/raydump: bench/raydump.c bench/bench.c bench/bench.h $(LIB_OBJS) $(FLAGS_STAMP)
-	$(CC) $(BENCH_CFLAGS) -o $@ bench/raydump.c bench/bench.c $(LIB_OBJS) $(LDLIBS_ALL)
+bench/raydump: bench/raydump.c bench/bench.c bench/bench.h bench/bench_scene.c bench/bench_scene.h $(LIB_OBJS) $(FLAGS_STAMP)
+	$(CC) $(BENCH_CFLAGS) -o $@ bench/raydump.c bench/bench.c bench/bench_scene.c $(LIB_OBJS) $(LDLIBS_ALL)
 
 # bench/packetbench: a render with camera packets against one with single camera rays
-bench/packetbench: bench/packetbench.c bench/bench.c bench/bench.h $(LIB_OBJS) $(FLAGS_STAMP)
-	$(CC) $(BENCH_CFLAGS) -o $@ bench/packetbench.c bench/bench.c $(LIB_OBJS) $(LDLIBS_ALL)
+bench/packetbench: bench/packetbench.c bench/bench.c bench/bench.h bench/bench_scene.c bench/bench_scene.h $(LIB_OBJS) $(FLAGS_STAMP)
+	$(CC) $(BENCH_CFLAGS) -o $@ bench/packetbench.c bench/bench.c bench/bench_scene.c $(LIB_OBJS) $(LDLIBS_ALL)
 
 bench/embree_bench: bench/embree_bench.c bench/bench.c bench/bench.h $(BENCH_OBJS) $(FLAGS_STAMP)
 	$(CC) $(BENCH_CFLAGS) $(EMBREE_CFLAGS) -o $@ bench/embree_bench.c bench/bench.c $(BENCH_OBJS) \

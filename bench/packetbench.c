@@ -10,6 +10,7 @@
 #include <time.h>
 
 #include "bench.h"
+#include "bench_scene.h"
 #include "film.h"
 #include "scene.h"
 #include "trace.h"
@@ -22,18 +23,6 @@ static const char usage[] =
     "  --spp N                 samples per pixel (default 16)\n"
     "  --runs R                rounds, each timing both (default 5)\n"
     "  --seed S                random seed (default 0)\n";
-
-static bool parse_u32(const char *s, const char *name, uint32_t min, uint32_t *v)
-{
-    char *end;
-    unsigned long long x = strtoull(s, &end, 10);
-    if (*s == '\0' || *end != '\0' || x < min || x > UINT32_MAX) {
-        fprintf(stderr, "packetbench: expected %s >= %u, got '%s'\n", name, min, s);
-        return false;
-    }
-    *v = (uint32_t)x;
-    return true;
-}
 
 static double cpu_ms(void)
 {
@@ -69,19 +58,19 @@ int main(int argc, char **argv)
         bool ok = true;
         switch (c) {
         case 'W':
-            ok = parse_u32(optarg, "--width", 1, &width);
+            ok = bench_parse_u32("packetbench", optarg, "--width", 1, &width);
             break;
         case 'H':
-            ok = parse_u32(optarg, "--height", 1, &height);
+            ok = bench_parse_u32("packetbench", optarg, "--height", 1, &height);
             break;
         case 'n':
-            ok = parse_u32(optarg, "--spp", 1, &spp);
+            ok = bench_parse_u32("packetbench", optarg, "--spp", 1, &spp);
             break;
         case 'r':
-            ok = parse_u32(optarg, "--runs", 1, &runs);
+            ok = bench_parse_u32("packetbench", optarg, "--runs", 1, &runs);
             break;
         case 's':
-            ok = parse_u32(optarg, "--seed", 0, &seed);
+            ok = bench_parse_u32("packetbench", optarg, "--seed", 0, &seed);
             break;
         case 'h':
             fputs(usage, stdout);
@@ -100,29 +89,11 @@ int main(int argc, char **argv)
         return 2;
     }
     struct scene scene;
+    struct trace_options opt;
+    if (!bench_scene_load(argv[optind], width, height, spp, seed, &scene, &opt))
+        return 2;
     struct mcpt_error err;
     char line[600];
-    if (!scene_load(argv[optind], &scene, &err)) {
-        mcpt_error_format(&err, line, sizeof line);
-        fprintf(stderr, "%s\n", line);
-        return 2;
-    }
-    if (width)
-        scene.width = (int)width;
-    if (height)
-        scene.height = (int)height;
-    struct trace_options opt = {
-        .spp = spp,
-        .max_depth = scene.render.max_depth,
-        .seed = seed,
-        .sampler = scene.render.sampler,
-        .n_threads = 1,
-        .direct = scene.render.direct,
-        .light_samples = scene.render.light_samples,
-        .split = scene.render.split,
-        .rr_prob = scene.render.rr_prob,
-        .rr_depth = scene.render.rr_depth,
-    };
     int status = 1;
     struct film packets = {0}, single = {0};
     double *ms[2] = {calloc(runs, sizeof(double)), calloc(runs, sizeof(double))};

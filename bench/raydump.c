@@ -12,6 +12,7 @@
 #include <string.h>
 
 #include "bench.h"
+#include "bench_scene.h"
 #include "film.h"
 #include "scene.h"
 #include "trace.h"
@@ -115,25 +116,15 @@ static bool write_rays(const char *prefix, const char *suffix, uint32_t kind,
     return true;
 }
 
-static bool parse_u32(const char *s, const char *name, uint32_t min, uint32_t *v)
-{
-    char *end;
-    unsigned long long x = strtoull(s, &end, 10);
-    if (*s == '\0' || *end != '\0' || x < min || x > UINT32_MAX) {
-        fprintf(stderr, "raydump: expected %s >= %u, got '%s'\n", name, min, s);
-        return false;
-    }
-    *v = (uint32_t)x;
-    return true;
-}
-
 int main(int argc, char **argv)
 {
-    static const struct option long_opts[] = {
-        {"width", required_argument, NULL, 'W'},   {"height", required_argument, NULL, 'H'},
-        {"spp", required_argument, NULL, 'n'},     {"seed", required_argument, NULL, 's'},
-        {"sampler", required_argument, NULL, 'k'}, {"help", no_argument, NULL, 'h'},
-        {NULL, 0, NULL, 0}};
+    static const struct option long_opts[] = {{"width", required_argument, NULL, 'W'},
+                                              {"height", required_argument, NULL, 'H'},
+                                              {"spp", required_argument, NULL, 'n'},
+                                              {"seed", required_argument, NULL, 's'},
+                                              {"sampler", required_argument, NULL, 'k'},
+                                              {"help", no_argument, NULL, 'h'},
+                                              {NULL, 0, NULL, 0}};
     const char *prefix = NULL;
     uint32_t width = 0, height = 0, spp = 4, seed = 0;
     const char *sampler = NULL;
@@ -141,14 +132,30 @@ int main(int argc, char **argv)
     while ((c = getopt_long(argc, argv, "o:h", long_opts, NULL)) != -1) {
         bool ok = true;
         switch (c) {
-        case 'o': prefix = optarg; break;
-        case 'W': ok = parse_u32(optarg, "--width", 1, &width); break;
-        case 'H': ok = parse_u32(optarg, "--height", 1, &height); break;
-        case 'n': ok = parse_u32(optarg, "--spp", 1, &spp); break;
-        case 's': ok = parse_u32(optarg, "--seed", 0, &seed); break;
-        case 'k': sampler = optarg; break;
-        case 'h': fputs(usage, stdout); return 0;
-        default: ok = false; break;
+        case 'o':
+            prefix = optarg;
+            break;
+        case 'W':
+            ok = bench_parse_u32("raydump", optarg, "--width", 1, &width);
+            break;
+        case 'H':
+            ok = bench_parse_u32("raydump", optarg, "--height", 1, &height);
+            break;
+        case 'n':
+            ok = bench_parse_u32("raydump", optarg, "--spp", 1, &spp);
+            break;
+        case 's':
+            ok = bench_parse_u32("raydump", optarg, "--seed", 0, &seed);
+            break;
+        case 'k':
+            sampler = optarg;
+            break;
+        case 'h':
+            fputs(usage, stdout);
+            return 0;
+        default:
+            ok = false;
+            break;
         }
         if (!ok) {
             fputs(usage, stderr);
@@ -160,30 +167,12 @@ int main(int argc, char **argv)
         return 2;
     }
     struct scene scene;
+    struct trace_options opt;
+    if (!bench_scene_load(argv[optind], width, height, spp, seed, &scene, &opt))
+        return 2;
+    opt.ray_hook = record_ray;
     struct mcpt_error err;
     char line[600];
-    if (!scene_load(argv[optind], &scene, &err)) {
-        mcpt_error_format(&err, line, sizeof line);
-        fprintf(stderr, "%s\n", line);
-        return 2;
-    }
-    if (width)
-        scene.width = (int)width;
-    if (height)
-        scene.height = (int)height;
-    struct trace_options opt = {
-        .spp = spp,
-        .max_depth = scene.render.max_depth,
-        .seed = seed,
-        .sampler = scene.render.sampler,
-        .n_threads = 1,
-        .direct = scene.render.direct,
-        .light_samples = scene.render.light_samples,
-        .split = scene.render.split,
-        .rr_prob = scene.render.rr_prob,
-        .rr_depth = scene.render.rr_depth,
-        .ray_hook = record_ray,
-    };
     if (sampler && !sample_sampler_parse(sampler, &opt.sampler)) {
         fprintf(stderr, "raydump: expected --sampler independent, stratified or sobol, got '%s'\n",
                 sampler);
@@ -214,7 +203,8 @@ int main(int argc, char **argv)
            scene.n_spheres + scene.n_quads + scene.n_planes);
     char path[4096];
     snprintf(path, sizeof path, "%s.obj", prefix);
-    if (write_obj(path, &scene) && write_rays(prefix, "closest", BENCH_KIND_CLOSEST, &dump.closest) &&
+    if (write_obj(path, &scene) &&
+        write_rays(prefix, "closest", BENCH_KIND_CLOSEST, &dump.closest) &&
         write_rays(prefix, "shadow", BENCH_KIND_OCCLUSION, &dump.shadow))
         status = 0;
 done:
