@@ -16,14 +16,7 @@
 #include "fuzz_util.h"
 #include "sample.h"
 
-static char dir[64];
-static char ckpt_path[96]; /* dir/a.ckpt */
-
-static void remove_dir(void)
-{
-    unlink(ckpt_path);
-    rmdir(dir);
-}
+static char ckpt_path[96]; /* the scratch folder's a.ckpt */
 
 int LLVMFuzzerInitialize(int *argc, char ***argv);
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
@@ -32,9 +25,8 @@ int LLVMFuzzerInitialize(int *argc, char ***argv)
 {
     (void)argc;
     (void)argv;
-    fuzz_make_dir(dir, sizeof dir, "checkpoint");
-    snprintf(ckpt_path, sizeof ckpt_path, "%s/a.ckpt", dir);
-    atexit(remove_dir);
+    fuzz_make_dir("checkpoint");
+    fuzz_path(ckpt_path, sizeof ckpt_path, "a.ckpt");
     return 0;
 }
 

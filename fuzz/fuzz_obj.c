@@ -16,16 +16,8 @@
 
 #define MTL_SEPARATOR "\n#MTL\n"
 
-static char dir[64];
-static char obj_path[96]; /* dir/a.obj */
-static char mtl_path[96]; /* dir/a.mtl */
-
-static void remove_dir(void)
-{
-    unlink(obj_path);
-    unlink(mtl_path);
-    rmdir(dir);
-}
+static char obj_path[96]; /* the scratch folder's a.obj */
+static char mtl_path[96]; /* the scratch folder's a.mtl */
 
 int LLVMFuzzerInitialize(int *argc, char ***argv);
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
@@ -34,10 +26,9 @@ int LLVMFuzzerInitialize(int *argc, char ***argv)
 {
     (void)argc;
     (void)argv;
-    fuzz_make_dir(dir, sizeof dir, "obj");
-    snprintf(obj_path, sizeof obj_path, "%s/a.obj", dir);
-    snprintf(mtl_path, sizeof mtl_path, "%s/a.mtl", dir);
-    atexit(remove_dir);
+    fuzz_make_dir("obj");
+    fuzz_path(obj_path, sizeof obj_path, "a.obj");
+    fuzz_path(mtl_path, sizeof mtl_path, "a.mtl");
     return 0;
 }
 

@@ -16,14 +16,7 @@
 #include "image.h"
 #include "stats.h"
 
-static char dir[64];
-static char exr_path[96]; /* dir/a.exr */
-
-static void remove_dir(void)
-{
-    unlink(exr_path);
-    rmdir(dir);
-}
+static char exr_path[96]; /* the scratch folder's a.exr */
 
 int LLVMFuzzerInitialize(int *argc, char ***argv);
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
@@ -32,9 +25,8 @@ int LLVMFuzzerInitialize(int *argc, char ***argv)
 {
     (void)argc;
     (void)argv;
-    fuzz_make_dir(dir, sizeof dir, "partial");
-    snprintf(exr_path, sizeof exr_path, "%s/a.exr", dir);
-    atexit(remove_dir);
+    fuzz_make_dir("partial");
+    fuzz_path(exr_path, sizeof exr_path, "a.exr");
     return 0;
 }
 

@@ -17,23 +17,11 @@
 
 #include "fuzz_util.h"
 
-static char dir[64];        /* the private folder */
-static char scene_path[96]; /* dir/scene.txt: each input */
+static char scene_path[96]; /* the scratch folder's scene.txt: each input */
 
 static void write_text(const char *path, const char *text)
 {
     fuzz_write_file(path, text, strlen(text));
-}
-
-static void remove_dir(void)
-{
-    const char *names[] = {"scene.txt", "a.obj", "a.mtl", "models"};
-    char path[160];
-    for (int i = 0; i < 4; i++) {
-        snprintf(path, sizeof path, "%s/%s", dir, names[i]);
-        unlink(path);
-    }
-    rmdir(dir);
 }
 
 int LLVMFuzzerInitialize(int *argc, char ***argv);
@@ -43,18 +31,17 @@ int LLVMFuzzerInitialize(int *argc, char ***argv)
 {
     (void)argc;
     (void)argv;
-    fuzz_make_dir(dir, sizeof dir, "scene");
-    snprintf(scene_path, sizeof scene_path, "%s/scene.txt", dir);
+    fuzz_make_dir("scene");
+    fuzz_path(scene_path, sizeof scene_path, "scene.txt");
     char path[160], models[PATH_MAX];
-    snprintf(path, sizeof path, "%s/a.obj", dir);
+    fuzz_path(path, sizeof path, "a.obj");
     write_text(path, "mtllib a.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvn 0 0 1\nvt 0 0\n"
                      "usemtl lamp\nf 1/1/1 2/1/1 3/1/1\nusemtl glass\nf 2 4 3\n");
-    snprintf(path, sizeof path, "%s/a.mtl", dir);
+    fuzz_path(path, sizeof path, "a.mtl");
     write_text(path, "newmtl lamp\nKd 0 0 0\nKe 5 5 5\nnewmtl glass\nillum 7\nNi 1.33\n");
-    snprintf(path, sizeof path, "%s/models", dir);
+    fuzz_path(path, sizeof path, "models");
     if (realpath("scenes/models", models))
         (void)symlink(models, path);
-    atexit(remove_dir);
     return 0;
 }
 
