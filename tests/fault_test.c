@@ -132,26 +132,56 @@ Test(hang, fifo_checkpoint_images_and_parts_refused_at_once, .init = setup, .fin
 }
 
 /* A scene read from a pipe (a FIFO with its writer, as `mcpt <(generate)` gives) renders: the
- * scene is read once, and its hash, which a checkpoint records, is of the bytes read. */
-Test(hang, scene_from_a_pipe_renders, .init = setup, .fini = teardown)
+ * scene is read once, and its hash, which a checkpoint records, is of the bytes read.  Two
+ * writers: one that wrote it all and left (the bytes wait in the pipe), one still writing
+ * (mcpt's reads wait for the rest).  mcpt starts only once the writer is connected: a FIFO with
+ * no writer reads as empty at once (bad_test's fifo case), so a writer scheduled late would
+ * race it; CI once hung for 90 minutes on that race, the writer blocked in open() forever. */
+Test(hang, scene_from_a_pipe_renders, .init = setup, .fini = teardown,
+     .timeout = TEST_TIMEOUT_S(120))
 {
     char fifo[300], out[300], err[4096];
     snprintf(fifo, sizeof fifo, "%s/scene.fifo", tmpdir);
     snprintf(out, sizeof out, "%s/out.exr", tmpdir);
     cr_assert_eq(mkfifo(fifo, 0644), 0);
-    pid_t writer = fork();
-    cr_assert_geq(writer, 0);
-    if (writer == 0) { /* the generator: writes the scene into the pipe, then ends */
-        char text[4096];
-        long n = test_read_file(SMALL, text, sizeof text);
-        int fd = open(fifo, O_WRONLY);
-        _exit(fd >= 0 && n > 0 && write(fd, text, (size_t)n) == n ? 0 : 1);
+    for (int still_writing = 0; still_writing <= 1; still_writing++) {
+        /* a reader held here keeps the pipe, and so the bytes written, alive until mcpt reads */
+        int hold = open(fifo, O_RDONLY | O_NONBLOCK);
+        int ready[2];
+        cr_assert(hold >= 0 && pipe(ready) == 0);
+        pid_t writer = fork();
+        cr_assert_geq(writer, 0);
+        if (writer == 0) { /* the generator */
+            alarm(60);     /* never outlives the test, whatever happens to mcpt */
+            char text[4096];
+            long n = test_read_file(SMALL, text, sizeof text);
+            int fd = open(fifo, O_WRONLY); /* at once: there is a reader */
+            long first = still_writing ? n / 2 : n;
+            bool ok = fd >= 0 && n > 0 && write(fd, text, (size_t)first) == first;
+            if (still_writing) { /* connected: mcpt may start; the rest comes later */
+                ok = ok && write(ready[1], "r", 1) == 1;
+                nanosleep(&(struct timespec){0, 300 * 1000 * 1000}, NULL);
+                ok = ok && write(fd, text + first, (size_t)(n - first)) == n - first;
+            }
+            _exit(ok ? 0 : 1);
+        }
+        close(ready[1]);
+        if (still_writing) {
+            char c;
+            cr_assert_eq(read(ready[0], &c, 1), 1, "the writer never connected");
+        } else {
+            cr_assert_eq(test_wait(writer), 0, "the writer failed");
+        }
+        const char *args[] = {fifo, "--spp", "2", "-o", out, "--quiet", NULL};
+        int rc = run(args, err, sizeof err);
+        if (still_writing)
+            cr_assert_eq(test_wait(writer), 0, "the writer failed");
+        close(hold);
+        close(ready[0]);
+        cr_assert_eq(rc, 0, "still writing %d: exit %d: %s", still_writing, rc, err);
+        cr_assert(test_exists(out));
+        cr_assert_eq(unlink(out), 0);
     }
-    const char *args[] = {fifo, "--spp", "2", "-o", out, "--quiet", NULL};
-    int rc = run(args, err, sizeof err);
-    cr_assert_eq(test_wait(writer), 0);
-    cr_assert_eq(rc, 0, "exit %d: %s", rc, err);
-    cr_assert(test_exists(out));
 }
 
 /* ---- outputs that would destroy a file ---- */

@@ -196,6 +196,7 @@ Test(file, stale_temporaries_removed_live_ones_kept, .init = setup, .fini = tear
     pid_t child = fork();
     cr_assert_geq(child, 0);
     if (child == 0) { /* a live writer: open, write, age the file, then wait to be killed */
+        alarm(60);    /* or to time out, should the test fail before it kills */
         struct file_atomic af;
         struct mcpt_error err;
         if (!file_atomic_open(&af, path, &err) || write(af.fd, "live", 4) != 4)

@@ -1,10 +1,32 @@
-/* tests/report.c - not a test: a Criterion report hook that lists, at the end of every run, the
- * tests that were skipped and why (cr_skip_test's message), one line each, then their number.
- * Criterion's default output only leaves them out of its count, so a test that needs the
- * shared models (../shared/models) or an optional tool could vanish unnoticed. */
+/* tests/report.c - not a test: Criterion hooks for the whole run.  Before it, every test gets
+ * a hang cap (one without its own .timeout would otherwise run forever: CI once waited 90
+ * minutes on a test blocked on a FIFO).  After it, the tests that were skipped are listed with
+ * why (cr_skip_test's message), one line each, then their number.  Criterion's default output
+ * only leaves them out of its count, so a test that needs the shared models (../shared/models)
+ * or an optional tool could vanish unnoticed. */
 #include <criterion/criterion.h>
 #include <criterion/hooks.h>
+#include <criterion/internal/ordered-set.h>
 #include <stdio.h>
+
+#include "test_util.h"
+
+/* seconds: the slowest test takes about 30 s alone on 2 loaded cores */
+#define DEFAULT_TIMEOUT_S 300
+
+/* Every test without a .timeout (nor its suite one) gets DEFAULT_TIMEOUT_S.  Criterion 2.4's
+ * --timeout only lowers the timeouts tests have, so the tests' own data is set here, in the
+ * runner, before it spawns them. */
+ReportHook(PRE_ALL)(struct criterion_test_set *set)
+{
+    FOREACH_SET (struct criterion_suite_set *s, set->suites) {
+        if (s->suite.data && s->suite.data->timeout > 0)
+            continue;
+        FOREACH_SET (struct criterion_test *t, s->tests)
+            if (t->data->timeout <= 0)
+                t->data->timeout = TEST_TIMEOUT_S(DEFAULT_TIMEOUT_S);
+    }
+}
 
 ReportHook(POST_ALL)(struct criterion_global_stats *stats)
 {
