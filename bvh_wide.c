@@ -819,8 +819,10 @@ static inline uint32_t i8_lane(struct i8 a, int i)
  * one specialised copy per slab-test form instead of a branch per node. */
 #if defined(__GNUC__)
 #define ALWAYS_INLINE inline __attribute__((always_inline))
+#define COLD __attribute__((noinline, cold))
 #else
 #define ALWAYS_INLINE inline
+#define COLD
 #endif
 
 static inline int lowest_bit(uint32_t bits)
@@ -858,7 +860,7 @@ struct woop8_out {
     struct f8 edge[3];  /* U, V, W, filled only when undecided != 0 */
 };
 
-static void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, struct f8 Bx, struct f8 By,
+static COLD void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, struct f8 Bx, struct f8 By,
                            struct f8 Cx, struct f8 Cy, struct f8 *U, struct f8 *V, struct f8 *W)
 {
     float ax[8], ay[8], bx[8], by[8], cx[8], cy[8], u[8], v[8], w[8];
@@ -1152,7 +1154,7 @@ static void leaf_tri(const struct bvh *bvh, uint32_t first, uint32_t n, uint32_t
 /* The lanes woop8 left undecided, decided by bvh_tri_hit_double (rare: hits at t ~ 0, grazing
  * hits, extreme coordinates): one ray rp against the leaf's triangles in `lanes`.  Their t, u, v
  * replace the lanes' in *out; returns the lanes hit. */
-static uint32_t leaf_undecided(const struct bvh *bvh, uint32_t first, uint32_t n,
+static COLD uint32_t leaf_undecided(const struct bvh *bvh, uint32_t first, uint32_t n,
                                const struct ray_pre *rp, float t_min, float t_max, uint32_t lanes,
                                struct woop8_out *out)
 {
@@ -1181,7 +1183,7 @@ static uint32_t leaf_undecided(const struct bvh *bvh, uint32_t first, uint32_t n
 }
 
 /* woop8 of one ray against the n (1..8) triangles of the leaf at wide triangle `first`. */
-static inline uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint32_t n,
+static ALWAYS_INLINE uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint32_t n,
                                      const struct wide_ray8 *v, float t_max, struct woop8_out *out)
 {
     const float *base = bvh->leaf_tris + 9 * (size_t)first;
