@@ -5,6 +5,8 @@
 # FUZZ_RUNS=N runs each for N executions instead (-runs=N; SECONDS then bounds the time).
 # FUZZ_TIMEOUT=S: an input running longer than S seconds of wall time is a hang (default 10;
 # raise it on a loaded machine, where the seed scenes with the big models take longer).
+# FUZZ_FLAGS: more libFuzzer flags for every harness run (the 10-million runs of
+# docs/reliability.md: FUZZ_FLAGS=-fork=2 for scene, FUZZ_FLAGS=-max_len=65536 for obj).
 # New inputs accumulate in BUILD/corpus-*/ between runs.  Prints each harness's final line
 # (executions "#N", coverage "cov:", features "ft:", corpus size) and fails when a harness
 # found a crash, leak or hang: the input is BUILD/crash-*; turn it into a tests/bad/ case.
@@ -15,6 +17,7 @@ B=${2:-build-fuzz}
 harnesses=${*:-scene obj checkpoint partial}
 runs=${FUZZ_RUNS:--1}
 timeout=${FUZZ_TIMEOUT:-10}
+flags=${FUZZ_FLAGS:-}
 status=0
 
 # seed_copy DEST FILE...: copies each file under a name made from its path (names repeat)
@@ -59,10 +62,10 @@ for h in $harnesses; do
     rc=0
     dict=""
     [ -f "fuzz/$h.dict" ] && dict="-dict=fuzz/$h.dict"
-    "$B/fuzz_$h" -max_total_time="$secs" -runs="$runs" -timeout="$timeout" -rss_limit_mb=2048 $dict \
+    "$B/fuzz_$h" -max_total_time="$secs" -runs="$runs" -timeout="$timeout" -rss_limit_mb=2048 $dict $flags \
         -artifact_prefix="$B/crash-$h-" -print_final_stats=1 \
         "$B/corpus-$h" "$B/seeds-$h" >"$log" 2>&1 || rc=$?
-    grep -E '^#[0-9]+[[:space:]]+(INITED|DONE)' "$log" | tail -n 2
+    grep -E '^#[0-9]+([[:space:]]+(INITED|DONE)|: cov:)|^INFO: fuzzed for' "$log" | tail -n 2
     grep -E '^stat::number_of_executed_units' "$log" || true
     if [ "$rc" -ne 0 ]; then
         echo "fuzz_$h: FAILED (exit $rc); see $log:"
