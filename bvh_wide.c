@@ -860,8 +860,9 @@ struct woop8_out {
     struct f8 edge[3];  /* U, V, W, filled only when undecided != 0 */
 };
 
-static COLD void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, struct f8 Bx, struct f8 By,
-                           struct f8 Cx, struct f8 Cy, struct f8 *U, struct f8 *V, struct f8 *W)
+static COLD void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, struct f8 Bx,
+                                struct f8 By, struct f8 Cx, struct f8 Cy, struct f8 *U,
+                                struct f8 *V, struct f8 *W)
 {
     float ax[8], ay[8], bx[8], by[8], cx[8], cy[8], u[8], v[8], w[8];
     f8_store(ax, Ax);
@@ -1155,8 +1156,8 @@ static void leaf_tri(const struct bvh *bvh, uint32_t first, uint32_t n, uint32_t
  * hits, extreme coordinates): one ray rp against the leaf's triangles in `lanes`.  Their t, u, v
  * replace the lanes' in *out; returns the lanes hit. */
 static COLD uint32_t leaf_undecided(const struct bvh *bvh, uint32_t first, uint32_t n,
-                               const struct ray_pre *rp, float t_min, float t_max, uint32_t lanes,
-                               struct woop8_out *out)
+                                    const struct ray_pre *rp, float t_min, float t_max,
+                                    uint32_t lanes, struct woop8_out *out)
 {
     float t[8];
     float u[8];
@@ -1184,7 +1185,8 @@ static COLD uint32_t leaf_undecided(const struct bvh *bvh, uint32_t first, uint3
 
 /* woop8 of one ray against the n (1..8) triangles of the leaf at wide triangle `first`. */
 static ALWAYS_INLINE uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint32_t n,
-                                     const struct wide_ray8 *v, float t_max, struct woop8_out *out)
+                                            const struct wide_ray8 *v, float t_max,
+                                            struct woop8_out *out)
 {
     const float *base = bvh->leaf_tris + 9 * (size_t)first;
     struct woop8_in in;

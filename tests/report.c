@@ -16,15 +16,19 @@
 
 /* Every test without a .timeout (nor its suite one) gets DEFAULT_TIMEOUT_S.  Criterion 2.4's
  * --timeout only lowers the timeouts tests have, so the tests' own data is set here, in the
- * runner, before it spawns them. */
+ * runner, before it spawns them.  An ordered set's element follows its node in memory (what
+ * Criterion's FOREACH_SET relies on). */
 ReportHook(PRE_ALL)(struct criterion_test_set *set)
 {
-    FOREACH_SET (struct criterion_suite_set *s, set->suites) {
-        if (s->suite.data && s->suite.data->timeout > 0)
+    for (struct criterion_ordered_set_node *ns = set->suites->first; ns; ns = ns->next) {
+        struct criterion_suite_set *s = (void *)(ns + 1);
+        if ((s->suite.data && s->suite.data->timeout > 0) || !s->tests)
             continue;
-        FOREACH_SET (struct criterion_test *t, s->tests)
+        for (struct criterion_ordered_set_node *nt = s->tests->first; nt; nt = nt->next) {
+            struct criterion_test *t = (void *)(nt + 1);
             if (t->data->timeout <= 0)
                 t->data->timeout = TEST_TIMEOUT_S(DEFAULT_TIMEOUT_S);
+        }
     }
 }
 
