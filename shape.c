@@ -20,6 +20,12 @@
  * underflows, so these computations are 2^29 times more precise than the float ones and need no
  * absolute error term.  gamma_d(n) = n u / (1 - n u), u = 2^-53 (PBRT 4e, ch. 6, "Managing
  * Rounding Error"). */
+#if defined(__GNUC__)
+#define ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define ALWAYS_INLINE inline
+#endif
+
 struct dvec3 {
     double x;
     double y;
@@ -56,6 +62,9 @@ static struct dvec3 d3_cross_abs(struct dvec3 a, struct dvec3 b)
                           fabs(a.x * b.y) + fabs(a.y * b.x)};
 }
 static double d3_length(struct dvec3 a) { return sqrt(d3_dot(a, a)); }
+/* the greater of two finite values (a comparison: fmax is a library call) */
+static double max_d(double a, double b) { return a > b ? a : b; }
+static double d3_max(struct dvec3 a) { return max_d(a.x, max_d(a.y, a.z)); }
 static vec3 d3_to_float(struct dvec3 a) { return (vec3){(float)a.x, (float)a.y, (float)a.z}; }
 
 static double gamma_d(int n)
@@ -77,7 +86,8 @@ static float float_up(double x)
  * caller returns beside the point: offset_ray_origin pushes along that normal by n . p_error,
  * and 4 eta (sum of the errors) added to every component keeps the push, projected on the exact
  * normal, beyond the exact distance (docs/theory.md, "Self-intersection"). */
-static vec3 round_point(struct dvec3 p_d, struct dvec3 err_d, double eta, vec3 *p_error)
+static ALWAYS_INLINE vec3 round_point(struct dvec3 p_d, struct dvec3 err_d, double eta,
+                                      vec3 *p_error)
 {
     vec3 p = d3_to_float(p_d);
     struct dvec3 e = d3_add(err_d, d3_add(d3_scale(d3_abs(p_d), 0x1p-24),
@@ -91,8 +101,8 @@ static vec3 round_point(struct dvec3 p_d, struct dvec3 err_d, double eta, vec3 *
  * in double: each term carries at most 2 roundings (e, and the product) and the two sums 2
  * more, so |p_d - exact| <= gamma_d(4) (|o| + |a e1| + |b e2|) = *err; the exact point lies on
  * the plane for any a, b. */
-static struct dvec3 plane_point_d(vec3 o, struct dvec3 e1, struct dvec3 e2, double a, double b,
-                                  struct dvec3 *err)
+static ALWAYS_INLINE struct dvec3 plane_point_d(vec3 o, struct dvec3 e1, struct dvec3 e2, double a,
+                                                double b, struct dvec3 *err)
 {
     struct dvec3 a_e1 = d3_scale(e1, a);
     struct dvec3 b_e2 = d3_scale(e2, b);
@@ -114,7 +124,7 @@ static double rounded_error_sum(struct dvec3 p_d, struct dvec3 err_d, double eta
  * and twice that after normalising, with 1 / sin(angle) = |e1| |e2| / |e1 x e2| <=
  * (|e1|^2 + |e2|^2) / (2 |e1 x e2|); the rounding to float adds 2^-24 per component.  A
  * degenerate pair (angle 0) gives ng = 0, *len = 0 and eta = 1. */
-static vec3 plane_normal(struct dvec3 e1, struct dvec3 e2, double *len, double *eta)
+static ALWAYS_INLINE vec3 plane_normal(struct dvec3 e1, struct dvec3 e2, double *len, double *eta)
 {
     struct dvec3 c = d3_cross(e1, e2);
     *len = d3_length(c);
@@ -703,12 +713,15 @@ struct surface shape_plane_surface(const struct plane *pl, const struct ray *ray
  * error, as offset_ray_origin puts it off the plane: at a concave edge a spawned ray then meets
  * the neighbour in front of its origin, not at t = 0.  A point more than eps outside (only from
  * the ray's point of a huge triangle, whose float inside test is off by u times its size) is
- * left where it is.  h_i = 2 area / |edge_i| >= 2 area / (sqrt(3) |edge_i|_max). */
-static vec3 triangle_point(const vec3 p[3], struct dvec3 e1, struct dvec3 e2, double b1, double b2,
-                           vec3 *ng, vec3 *p_error)
+ * left where it is.  h_i = 2 area / |edge_i| >= 2 area / (sqrt(3) |edge_i|_max).  *area2_out
+ * gets |e1 x e2|, twice the area (the bits triangle_area2 gives). */
+static ALWAYS_INLINE vec3 triangle_point(const vec3 p[3], struct dvec3 e1, struct dvec3 e2,
+                                         double b1, double b2, vec3 *ng, vec3 *p_error,
+                                         double *area2_out)
 {
     double area2, eta;
     *ng = plane_normal(e1, e2, &area2, &eta);
+    *area2_out = area2;
     struct dvec3 err;
     struct dvec3 pd = plane_point_d(p[0], e1, e2, b1, b2, &err);
     if (area2 > 0.0) {
@@ -716,8 +729,7 @@ static vec3 triangle_point(const vec3 p[3], struct dvec3 e1, struct dvec3 e2, do
         struct dvec3 e3 = d3_abs(d3_sub(e2, e1));
         struct dvec3 a1 = d3_abs(e1);
         struct dvec3 a2 = d3_abs(e2);
-        double eps[3] = {k * fmax(e3.x, fmax(e3.y, e3.z)), k * fmax(a2.x, fmax(a2.y, a2.z)),
-                         k * fmax(a1.x, fmax(a1.y, a1.z))};
+        double eps[3] = {k * d3_max(e3), k * d3_max(a2), k * d3_max(a1)};
         double b[3] = {1.0 - b1 - b2, b1, b2};
         bool inside = b[0] >= eps[0] && b[1] >= eps[1] && b[2] >= eps[2];
         bool near = b[0] >= -eps[0] && b[1] >= -eps[1] && b[2] >= -eps[2];
@@ -728,7 +740,7 @@ static vec3 triangle_point(const vec3 p[3], struct dvec3 e1, struct dvec3 e2, do
             } else {
                 double sum = 0.0;
                 for (int i = 0; i < 3; i++) {
-                    b[i] = fmax(0.0, b[i]);
+                    b[i] = max_d(0.0, b[i]);
                     sum += b[i];
                 }
                 b1 = eps[1] + (1.0 - eps_sum) * b[1] / sum;
@@ -754,9 +766,9 @@ struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec
      * own precision"): for a triangle 2^8 times larger than t |d| + |o| (a huge floor seen from
      * nearby) the barycentrics of o + t d, in double, are the more precise */
     struct dvec3 d = ray ? d3(ray->d) : (struct dvec3){0.0, 0.0, 0.0};
-    double o_max = ray ? fmax(fabs(ray->o.x), fmax(fabs(ray->o.y), fabs(ray->o.z))) : 0.0;
+    double o_max = ray ? d3_max(d3_abs(d3(ray->o))) : 0.0;
     double near = 0x1p8 * ((double)t_hit * sqrt(d3_dot(d, d)) + o_max);
-    if (ray && fmax(d3_dot(e1, e1), d3_dot(e2, e2)) > near * near) {
+    if (ray && max_d(d3_dot(e1, e1), d3_dot(e2, e2)) > near * near) {
         struct dvec3 q = d3_sub(d3_add(d3(ray->o), d3_scale(d, t_hit)), d3(p[0]));
         struct dvec3 n = d3_cross(e1, e2);
         double nn = d3_dot(n, n);
@@ -769,7 +781,8 @@ struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec
     }
     float b0 = 1.0f - b1 - b2;
     struct surface sf;
-    sf.p = triangle_point(p, e1, e2, b1_d, b2_d, &sf.ng, &sf.p_error);
+    double area2;
+    sf.p = triangle_point(p, e1, e2, b1_d, b2_d, &sf.ng, &sf.p_error, &area2);
     sf.ns = sf.ng;
     if (ns) {
         vec3 n = v3_add(v3_add(v3_scale(ns[0], b0), v3_scale(ns[1], b1)), v3_scale(ns[2], b2));
@@ -809,9 +822,10 @@ bool shape_triangle_sample(const vec3 p[3], const struct surface *ref, vec2 u,
      * warp (sample.c), pdf_area = 1 / A */
     vec2 b = sample_uniform_triangle(u);
     vec3 n, p_error;
+    double area2;
     vec3 pt = triangle_point(p, d3_sub(d3(p[1]), d3(p[0])), d3_sub(d3(p[2]), d3(p[0])), b.y,
-                             1.0 - (double)b.x - (double)b.y, &n, &p_error);
-    double area = 0.5 * triangle_area2(p);
+                             1.0 - (double)b.x - (double)b.y, &n, &p_error, &area2);
+    double area = 0.5 * area2; /* area2 = |e1 x e2|, as triangle_area2 computes it */
     if (!(area > 0.0))
         return false;
     return sample_by_area(pt, p_error, n, 1.0 / area, ref, ss);
@@ -870,8 +884,9 @@ bool shape_triangle_sample_solid_angle(const vec3 p[3], const struct surface *re
         b1 /= sum;
         b2 /= sum;
     }
+    double area2;
     ss->p = triangle_point(p, d3_sub(d3(p[1]), d3(p[0])), d3_sub(d3(p[2]), d3(p[0])), b1, b2,
-                           &ss->n, &ss->p_error);
+                           &ss->n, &ss->p_error, &area2);
     return direction_to(ss, ss->n, ref, pdf_u * pdf_spherical_triangle(&st));
 }
 
