@@ -8,6 +8,7 @@
 #include <criterion/criterion.h>
 
 #include <fcntl.h>
+#include <signal.h>
 #include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -63,9 +64,11 @@ static inline long test_read_file(const char *path, char *buf, size_t buf_bytes)
 }
 
 /* Starts mcpt with args (NULL-terminated, at most TEST_MAX_ARGS) and returns its pid.  Its stdout
- * goes to out_path and its stderr to err_path (created or truncated; NULL: /dev/null).  With
- * alarm_s > 0 an alarm that survives exec ends a hung run by SIGALRM after alarm_s seconds
- * instead of hanging the suite.  Collect it with test_wait. */
+ * goes to out_path and its stderr to err_path (created or emptied before it returns, so that a
+ * poll of them never reads an earlier run's; NULL: /dev/null).  With
+ * alarm_s > 0 an alarm that survives exec ends a hung run by SIGALRM after
+ * TEST_TIMEOUT_S(alarm_s) seconds instead of hanging the suite: a hang cap, scaled like the
+ * Criterion timeouts.  Collect it with test_wait. */
 static inline pid_t test_start_mcpt(const char *const *args, const char *out_path,
                                     const char *err_path, unsigned alarm_s)
 {
@@ -77,6 +80,14 @@ static inline pid_t test_start_mcpt(const char *const *args, const char *out_pat
         argv[argc] = args[argc - 1];
     }
     argv[argc] = NULL;
+    const char *paths[2] = {out_path, err_path}; /* emptied here: no earlier run's lines read */
+    for (int i = 0; i < 2; i++) {
+        if (!paths[i])
+            continue;
+        int fd = open(paths[i], O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        cr_assert(fd >= 0, "cannot create %s", paths[i]);
+        close(fd);
+    }
     pid_t pid = fork();
     cr_assert(pid >= 0);
     if (pid == 0) {
@@ -85,7 +96,7 @@ static inline pid_t test_start_mcpt(const char *const *args, const char *out_pat
         if (out_fd < 0 || err_fd < 0 || dup2(out_fd, 1) < 0 || dup2(err_fd, 2) < 0)
             _exit(127);
         if (alarm_s > 0)
-            alarm(alarm_s);
+            alarm(TEST_TIMEOUT_S(alarm_s));
         execv(bin, (char *const *)argv);
         _exit(127);
     }
@@ -98,6 +109,31 @@ static inline int test_wait(pid_t pid)
     int status;
     cr_assert_eq(waitpid(pid, &status, 0), pid);
     return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+/* Whether the child pid has ended, without collecting it (test_wait still gives its status).
+ * A poll for something mcpt does ends here too, rather than at a deadline a slow machine can
+ * pass: a run that never ends is ended by its alarm. */
+static inline bool test_has_ended(pid_t pid)
+{
+    siginfo_t info = {0};
+    cr_assert_eq(waitid(P_PID, (id_t)pid, &info, WEXITED | WNOHANG | WNOWAIT), 0);
+    return info.si_pid == pid;
+}
+
+/* Stops the child pid (SIGSTOP) and returns once it has stopped, all its threads: what it has
+ * written can then be read without racing it, and signals sent to it stay pending until
+ * kill(pid, SIGCONT) delivers them together.  Returns false when it ended before the stop, its
+ * status (as test_wait gives it) in *status. */
+static inline bool test_stop(pid_t pid, int *status)
+{
+    int st;
+    cr_assert_eq(kill(pid, SIGSTOP), 0);
+    cr_assert_eq(waitpid(pid, &st, WUNTRACED), pid);
+    if (WIFSTOPPED(st))
+        return true;
+    *status = WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+    return false;
 }
 
 /* test_start_mcpt, then test_wait: runs mcpt to the end and returns its status. */

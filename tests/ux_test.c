@@ -247,7 +247,7 @@ static void render_on_pty(int columns, struct screen *s)
         if (null_fd < 0 || dup2(null_fd, 1) < 0 || dup2(slave, 2) < 0)
             _exit(127);
         close(master);
-        alarm(60);
+        alarm(TEST_TIMEOUT_S(60)); /* a hang cap, like test_start_mcpt's */
         execl(mcpt_abs(), "mcpt", "tests/data/cli/tiny.txt", "--width", "64", "--spp", "256",
               "--threads", "1", "-o", out, (char *)NULL);
         _exit(127);
@@ -309,14 +309,15 @@ Test(ux, progress_line_fits_80_and_60_columns_in_tmux, .init = setup, .fini = te
                            sock, widths[i], mcpt_abs(), tmpdir),
                      0);
         bool done = false;
-        for (int k = 0; k < 600 && !done; k++) { /* 60 s at most */
+        for (int k = 0; k < TEST_TIMEOUT_S(600) && !done; k++) { /* 60 s (scaled) at most */
             usleep(100000);
             shell("tmux -L %s capture-pane -p > %s", sock, screen_path);
             test_read_file(screen_path, screen, sizeof screen);
             done = strstr(screen, "mcpt-exit=") != NULL;
         }
         shell("tmux -L %s kill-server", sock);
-        cr_assert(done, "%d columns: no exit within 60 s: %s", widths[i], screen);
+        cr_assert(done, "%d columns: no exit within %d s: %s", widths[i], TEST_TIMEOUT_S(60),
+                  screen);
         char *second = strchr(screen, '\n');
         cr_assert_not_null(second);
         *second++ = '\0';
