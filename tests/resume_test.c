@@ -32,19 +32,52 @@ static double now_s(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-/* Polls err_path until mcpt has printed a progress line (it has rendered a quarter of what it
- * set out to), so the signal lands mid-render; fails after 100 s (a sanitizer build on a
- * machine shared by many jobs has taken over 30 s to its first quarter). */
-static void wait_for_progress(const char *err_path)
+/* Polls err_path until the child pid (mcpt) has printed a progress line (it has rendered a
+ * quarter of what it set out to), so that a signal can land mid-render.  Returns false when
+ * mcpt ended first (not collected: test_wait gives its status).  No deadline of its own, which
+ * a slow machine could pass (a sanitizer build on a machine shared by many jobs has taken over
+ * 30 s to its first quarter): a run that never ends is ended by its alarm. */
+static bool wait_for_progress(pid_t pid, const char *err_path)
 {
     char buf[4096];
-    for (double t0 = now_s(); now_s() - t0 < 100.0;) {
+    for (;;) {
+        bool has_ended = test_has_ended(pid); /* before the read: its last line is read */
         test_read_file(err_path, buf, sizeof buf);
         if (strstr(buf, "progress:"))
-            return;
+            return true;
+        if (has_ended)
+            return false;
         nanosleep(&(struct timespec){0, 5 * 1000 * 1000}, NULL);
     }
-    cr_assert_fail("no progress line within 100 s");
+}
+
+/* Waits for the child pid's first progress line, then sends it sig; returns its exit status
+ * and in *stop_s the seconds from the signal to its end.  The signal races the render's end:
+ * a test descheduled between seeing the line and the kill (a loaded machine) can find the
+ * render finished, so 0 (a whole image, no checkpoint) is a legitimate outcome, for the caller
+ * to check and to try again. */
+static int signal_mid_render(pid_t pid, const char *err_path, int sig, double *stop_s)
+{
+    bool is_rendering = wait_for_progress(pid, err_path);
+    double t0 = now_s();
+    if (is_rendering)
+        kill(pid, sig);
+    int rc = test_wait(pid);
+    *stop_s = now_s() - t0;
+    return rc;
+}
+
+/* Waits for the child pid's first progress line, then stops it (test_stop), so that signals
+ * sent to it are delivered together, mid-render, by kill(pid, SIGCONT).  Returns false when
+ * the render ended before the stop (a descheduled test on a loaded machine), its exit status
+ * in *rc. */
+static bool stop_mid_render(pid_t pid, const char *err_path, int *rc)
+{
+    if (!wait_for_progress(pid, err_path)) {
+        *rc = test_wait(pid);
+        return false;
+    }
+    return test_stop(pid, rc);
 }
 
 /* Every channel of a holds the same float bytes as the channel of that name in b. */
@@ -66,8 +99,8 @@ static void assert_same_exr(const char *path_a, const char *path_b)
     image_free(&b);
 }
 
-/* A partial image: finite, with some pixels short of spp and some samples taken. */
-static void assert_partial(const char *exr_path, float spp)
+/* The least and the most samples of any pixel of a finite image (its samples channel). */
+static void samples_range(const char *exr_path, float *lo, float *hi)
 {
     struct image img;
     struct mcpt_error err;
@@ -75,15 +108,31 @@ static void assert_partial(const char *exr_path, float spp)
     int s = image_find_channel(&img, "samples");
     cr_assert(s >= 0);
     size_t n = (size_t)img.width * (size_t)img.height;
-    float lo = spp, hi = 0.0f;
+    *lo = INFINITY;
+    *hi = 0.0f;
     for (size_t i = 0; i < n; i++) {
-        lo = fminf(lo, img.data[s][i]);
-        hi = fmaxf(hi, img.data[s][i]);
+        *lo = fminf(*lo, img.data[s][i]);
+        *hi = fmaxf(*hi, img.data[s][i]);
         for (int c = 0; c < img.n_channels; c++)
             cr_assert(isfinite(img.data[c][i]));
     }
-    cr_assert(lo < spp && hi > 0.0f, "samples in [%g, %g] of %g", lo, hi, spp);
     image_free(&img);
+}
+
+/* A partial image: finite, with some pixels short of spp and some samples taken. */
+static void assert_partial(const char *exr_path, float spp)
+{
+    float lo, hi;
+    samples_range(exr_path, &lo, &hi);
+    cr_assert(lo < spp && hi > 0.0f, "samples in [%g, %g] of %g", lo, hi, spp);
+}
+
+/* A whole image: finite, every pixel at spp. */
+static void assert_whole(const char *exr_path, float spp)
+{
+    float lo, hi;
+    samples_range(exr_path, &lo, &hi);
+    cr_assert(lo == spp && hi == spp, "samples in [%g, %g] of %g", lo, hi, spp);
 }
 
 /* FNV-1a 64 of a file, as the scene loader records it (scene.file_hash, docs/reliability.md). */
@@ -198,14 +247,18 @@ Test(resume, mismatch_refused, .init = setup, .fini = teardown)
 /* SIGINT mid-render: exit 130 within a second or so, a valid partial EXR (its samples channel
  * short of spp somewhere) and a checkpoint.  The resumed run is interrupted again with SIGTERM
  * (exit 143), then resumed without naming the scene; the final EXR has the same bytes as an
- * uninterrupted run on another thread count. */
+ * uninterrupted run on another thread count.  A signal that comes after the render's end (the
+ * test descheduled after the progress line, on a loaded machine) finds exit 0 and the whole,
+ * bit-identical image, no checkpoint left: that run is tried again (the resumed one from a copy
+ * of its checkpoint), up to three times. */
 Test(interrupt, sigint_then_sigterm_then_bit_identical, .init = setup, .fini = teardown,
      .timeout = TEST_TIMEOUT_S(240))
 {
-    char full[300], part[300], ckpt[300], final[300], err_path[300], err[4096];
+    char full[300], part[300], ckpt[300], saved[300], final[300], err_path[300], err[4096];
     snprintf(full, sizeof full, "%s/full.exr", tmpdir);
     snprintf(part, sizeof part, "%s/part.exr", tmpdir);
     snprintf(ckpt, sizeof ckpt, "%s/part.exr.ckpt", tmpdir);
+    snprintf(saved, sizeof saved, "%s/saved.ckpt", tmpdir);
     snprintf(final, sizeof final, "%s/final.exr", tmpdir);
     snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
 
@@ -216,13 +269,18 @@ Test(interrupt, sigint_then_sigterm_then_bit_identical, .init = setup, .fini = t
     /* first interruption: SIGINT */
     snprintf(err_path, sizeof err_path, "%s/stderr1.txt", tmpdir);
     const char *a_int[] = {SCENE, "--spp", SIGNAL_SPP, "--threads", "2", "-o", part, NULL};
-    pid_t pid = test_start_mcpt(a_int, NULL, err_path, ALARM_S);
-    wait_for_progress(err_path);
-    double t0 = now_s();
-    kill(pid, SIGINT);
-    int rc = test_wait(pid);
-    double stop_s = now_s() - t0;
-    test_read_file(err_path, err, sizeof err);
+    int rc = 0;
+    double stop_s = 0.0;
+    for (int attempt = 1; attempt <= 3 && rc == 0; attempt++) {
+        pid_t pid = test_start_mcpt(a_int, NULL, err_path, ALARM_S);
+        rc = signal_mid_render(pid, err_path, SIGINT, &stop_s);
+        test_read_file(err_path, err, sizeof err);
+        if (rc == 0) { /* the render ended first */
+            cr_log_info("attempt %d: the render ended before SIGINT", attempt);
+            assert_same_exr(full, part);
+            cr_assert_not(test_exists(ckpt), "a finished render left a checkpoint");
+        }
+    }
     cr_assert_eq(rc, 130, "exit %d: %s", rc, err);
     cr_assert_lt(stop_s, 2.0, "took %.2f s to stop", stop_s);
     cr_log_info("SIGINT to exit: %.3f s", stop_s);
@@ -235,13 +293,24 @@ Test(interrupt, sigint_then_sigterm_then_bit_identical, .init = setup, .fini = t
     cr_assert(test_exists(ckpt));
 
     /* second interruption, of the resumed run: SIGTERM */
+    char cmd[700];
+    snprintf(cmd, sizeof cmd, "cp '%s' '%s'", ckpt, saved);
+    cr_assert_eq(system(cmd), 0);
+    snprintf(cmd, sizeof cmd, "cp '%s' '%s'", saved, ckpt);
     snprintf(err_path, sizeof err_path, "%s/stderr2.txt", tmpdir); /* no old progress lines */
     const char *a_res[] = {SCENE, "--resume", ckpt, "--threads", "2", NULL};
-    pid = test_start_mcpt(a_res, NULL, err_path, ALARM_S);
-    wait_for_progress(err_path);
-    kill(pid, SIGTERM);
-    rc = test_wait(pid);
-    test_read_file(err_path, err, sizeof err);
+    rc = 0;
+    for (int attempt = 1; attempt <= 3 && rc == 0; attempt++) {
+        cr_assert_eq(system(cmd), 0);
+        pid_t pid = test_start_mcpt(a_res, NULL, err_path, ALARM_S);
+        rc = signal_mid_render(pid, err_path, SIGTERM, &stop_s);
+        test_read_file(err_path, err, sizeof err);
+        if (rc == 0) { /* the resumed render ended first */
+            cr_log_info("attempt %d: the resumed render ended before SIGTERM", attempt);
+            assert_same_exr(full, part);
+            cr_assert_not(test_exists(ckpt), "a finished render left a checkpoint");
+        }
+    }
     cr_assert_eq(rc, 143, "exit %d: %s", rc, err);
     cr_assert(strstr(err, "mcpt: interrupted by SIGTERM"), "%s", err);
     assert_partial(part, 4096.0f); /* the stored -o: the same partial image, further on */
@@ -259,7 +328,11 @@ Test(interrupt, sigint_then_sigterm_then_bit_identical, .init = setup, .fini = t
 /* A second signal exits at once (status 128 + its number) without finishing the render or the
  * writes, and leaves no corrupt file: OUT.exr is the earlier file or a whole new image, and a
  * checkpoint, if one was written, loads.  The two signals differ (SIGTERM, then SIGINT) because
- * a second SIGINT sent while the first is still pending would merge with it. */
+ * a second SIGINT sent while the first is still pending would merge with it.  Both are sent
+ * while mcpt is stopped (SIGSTOP) and delivered together by SIGCONT: sent one after the other
+ * to a running mcpt, a test descheduled between the two kills (a loaded machine) let the first
+ * signal's path run to its end.  A render that ends before the stop is tried again, up to
+ * three times. */
 Test(interrupt, second_signal_exits_at_once, .init = setup, .fini = teardown,
      .timeout = TEST_TIMEOUT_S(180))
 {
@@ -267,24 +340,38 @@ Test(interrupt, second_signal_exits_at_once, .init = setup, .fini = teardown,
     snprintf(out, sizeof out, "%s/out.exr", tmpdir);
     snprintf(ckpt, sizeof ckpt, "%s/out.exr.ckpt", tmpdir);
     snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
-    FILE *f = fopen(out, "w");
-    fputs("earlier", f);
-    fclose(f);
     const char *args[] = {SCENE, "--spp", SIGNAL_SPP, "--threads", "2", "-o", out, NULL};
-    pid_t pid = test_start_mcpt(args, NULL, err_path, ALARM_S);
-    wait_for_progress(err_path);
-    double t0 = now_s();
-    kill(pid, SIGTERM);
-    kill(pid, SIGINT);
-    int rc = test_wait(pid);
-    double stop_s = now_s() - t0;
+    bool is_stopped = false;
+    int rc = 0;
+    double stop_s = 0.0;
+    for (int attempt = 1; attempt <= 3 && !is_stopped; attempt++) {
+        FILE *f = fopen(out, "w");
+        fputs("earlier", f);
+        fclose(f);
+        pid_t pid = test_start_mcpt(args, NULL, err_path, ALARM_S);
+        is_stopped = stop_mid_render(pid, err_path, &rc);
+        if (!is_stopped) {
+            test_read_file(err_path, err, sizeof err);
+            cr_log_info("attempt %d: the render ended before the stop", attempt);
+            cr_assert_eq(rc, 0, "exit %d: %s", rc, err);
+            continue;
+        }
+        kill(pid, SIGTERM);
+        kill(pid, SIGINT);
+        double t0 = now_s();
+        kill(pid, SIGCONT);
+        rc = test_wait(pid);
+        stop_s = now_s() - t0;
+    }
     test_read_file(err_path, err, sizeof err);
+    cr_assert(is_stopped, "the render ended before each of three stops: %s", err);
     cr_assert(rc == 130 || rc == 143, "exit %d: %s", rc, err);
     cr_assert_not(strstr(err, "interrupted by"), "the first signal's path ran to the end: %s", err);
     cr_assert_lt(stop_s, 1.0, "took %.2f s", stop_s);
+    cr_log_info("SIGCONT to exit: %.3f s", stop_s);
 
     char buf[16] = {0};
-    f = fopen(out, "rb");
+    FILE *f = fopen(out, "rb");
     cr_assert_not_null(f);
     cr_assert(fread(buf, 1, sizeof buf - 1, f) > 0);
     fclose(f);
@@ -303,43 +390,85 @@ Test(interrupt, second_signal_exits_at_once, .init = setup, .fini = teardown,
     }
 }
 
+/* Whether dir holds a file whose name starts with prefix. */
+static bool has_file_starting(const char *dir, const char *prefix)
+{
+    bool found = false;
+    DIR *d = opendir(dir);
+    for (struct dirent *e; d && (e = readdir(d));)
+        found |= strncmp(e->d_name, prefix, strlen(prefix)) == 0;
+    closedir(d);
+    return found;
+}
+
 /* Two signals during the checkpoint's write (the first starts it, the second arrives while its
- * temporary is being written): mcpt exits at once and leaves no temporary behind.  The film is
- * 1500x1500, so the checkpoint is 144 MB and takes long enough to be caught mid-write. */
+ * temporary is being written): mcpt exits at once (143, the second signal's status, before
+ * the first's "interrupted by" line) and leaves no temporary and no checkpoint behind.  The
+ * film is 1500x1500, so the checkpoint is 144 MB and takes long enough to be caught mid-write:
+ * once its temporary appears, mcpt is stopped (SIGSTOP) and the temporary looked for again,
+ * so the second signal, delivered by SIGCONT, lands before the rename.  A test descheduled
+ * past the write (a loaded machine) finds the checkpoint renamed into place instead, or the
+ * render ended before the first signal: no temporary is left then either, a checkpoint
+ * written loads, and the attempt is repeated, up to three times. */
 Test(interrupt, second_signal_mid_checkpoint_leaves_no_temporary, .init = setup, .fini = teardown,
      .timeout = TEST_TIMEOUT_S(180))
 {
-    char out[300], err_path[300], err[4096];
+    char out[300], ckpt[300], err_path[300], err[4096];
     snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(ckpt, sizeof ckpt, "%s/out.exr.ckpt", tmpdir);
     snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
     const char *args[] = {SCENE,   "--width", "1500",      "--height", "1500",
                           "--spp", "16",      "--threads", "2",        "--checkpoint-every",
                           "0",     "-o",      out,         NULL};
-    pid_t pid = test_start_mcpt(args, NULL, err_path, ALARM_S);
-    wait_for_progress(err_path);
-    kill(pid, SIGINT);
-    bool caught = false;
-    for (int k = 0; k < 20000 && !caught; k++) { /* the checkpoint's temporary appears */
+    bool is_mid_write = false; /* stopped with the checkpoint's temporary not yet renamed */
+    for (int attempt = 1; attempt <= 3 && !is_mid_write; attempt++) {
+        unlink(ckpt);
+        pid_t pid = test_start_mcpt(args, NULL, err_path, ALARM_S);
+        int rc = 0;
+        if (wait_for_progress(pid, err_path)) {
+            kill(pid, SIGINT);
+            bool has_ended = false;
+            while (!has_file_starting(tmpdir, "out.exr.ckpt.tmp.") && !has_ended) {
+                has_ended = test_has_ended(pid);
+                nanosleep(&(struct timespec){0, 500 * 1000}, NULL);
+            }
+            if (test_stop(pid, &rc)) {
+                is_mid_write = has_file_starting(tmpdir, "out.exr.ckpt.tmp.");
+                kill(pid, SIGTERM);
+                kill(pid, SIGCONT);
+                rc = test_wait(pid);
+            }
+        } else {
+            rc = test_wait(pid);
+        }
+        test_read_file(err_path, err, sizeof err);
+        cr_log_info("attempt %d: exit %d, %s", attempt, rc,
+                    is_mid_write ? "stopped mid-write" : "the write was not caught");
         DIR *d = opendir(tmpdir);
         for (struct dirent *e; d && (e = readdir(d));)
-            caught |= strncmp(e->d_name, "out.exr.ckpt.tmp.", 17) == 0;
+            cr_assert_null(strstr(e->d_name, ".tmp."), "left %s (exit %d)", e->d_name, rc);
         closedir(d);
-        if (!caught)
-            nanosleep(&(struct timespec){0, 500 * 1000}, NULL);
+        if (is_mid_write) {
+            cr_assert_eq(rc, 143, "exit %d: %s", rc, err);
+            cr_assert_not(strstr(err, "interrupted by"), "%s", err);
+            cr_assert_not(test_exists(ckpt), "the checkpoint was renamed into place");
+        } else {
+            cr_assert(rc == 0 || rc == 130 || rc == 143, "exit %d: %s", rc, err);
+            if (test_exists(ckpt)) {
+                struct film film;
+                struct checkpoint_info info;
+                struct mcpt_error e;
+                cr_assert(checkpoint_load(ckpt, &film, &info, &e), "%s", e.msg);
+                film_free(&film);
+            }
+        }
     }
-    kill(pid, SIGTERM);
-    int rc = test_wait(pid);
-    test_read_file(err_path, err, sizeof err);
-    cr_assert(caught, "the checkpoint's temporary never appeared: %s", err);
-    cr_assert(rc == 143 || rc == 130, "exit %d: %s", rc, err);
-    DIR *d = opendir(tmpdir);
-    for (struct dirent *e; d && (e = readdir(d));)
-        cr_assert_null(strstr(e->d_name, ".tmp."), "left %s (exit %d)", e->d_name, rc);
-    closedir(d);
+    cr_assert(is_mid_write, "the checkpoint's write was not caught in three attempts: %s", err);
 }
 
 /* SIGINT when the checkpoint cannot be written (its folder was removed during the render):
- * the partial image is still written, and the one error line says so; exit 1. */
+ * the partial image is still written, and the one error line says so; exit 1.  A render that
+ * ends before the signal (exit 0, a whole image) is tried again, up to three times. */
 Test(interrupt, checkpoint_unwritable_still_writes_the_image, .init = setup, .fini = teardown,
      .timeout = TEST_TIMEOUT_S(180))
 {
@@ -348,15 +477,24 @@ Test(interrupt, checkpoint_unwritable_still_writes_the_image, .init = setup, .fi
     snprintf(ckpt, sizeof ckpt, "%s/c.ckpt", dir);
     snprintf(out, sizeof out, "%s/out.exr", tmpdir);
     snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
-    cr_assert_eq(mkdir(dir, 0755), 0);
     const char *args[] = {SCENE, "--spp", SIGNAL_SPP, "--threads",          "2", "--checkpoint",
                           ckpt,  "-o",    out,        "--checkpoint-every", "0", NULL};
-    pid_t pid = test_start_mcpt(args, NULL, err_path, ALARM_S);
-    wait_for_progress(err_path);
-    cr_assert_eq(rmdir(dir), 0);
-    kill(pid, SIGINT);
-    int rc = test_wait(pid);
-    test_read_file(err_path, err, sizeof err);
+    int rc = 0;
+    for (int attempt = 1; attempt <= 3 && rc == 0; attempt++) {
+        cr_assert_eq(mkdir(dir, 0755), 0);
+        pid_t pid = test_start_mcpt(args, NULL, err_path, ALARM_S);
+        bool is_rendering = wait_for_progress(pid, err_path);
+        cr_assert_eq(rmdir(dir), 0);
+        if (is_rendering)
+            kill(pid, SIGINT);
+        rc = test_wait(pid);
+        test_read_file(err_path, err, sizeof err);
+        if (rc == 0) { /* the render ended first */
+            cr_log_info("attempt %d: the render ended before SIGINT", attempt);
+            cr_assert_not(strstr(err, "error"), "%s", err);
+            assert_whole(out, 4096.0f);
+        }
+    }
     cr_assert_eq(rc, 1, "exit %d: %s", rc, err);
     char want[800];
     snprintf(want, sizeof want,
@@ -369,24 +507,39 @@ Test(interrupt, checkpoint_unwritable_still_writes_the_image, .init = setup, .fi
 
 /* A render stopped (SIGSTOP) for 1.5 s and continued (SIGCONT) reports its wall time, which
  * counts the stop, and its CPU time, which does not: "render W s wall, C s CPU", W - C >= 1.5
- * on one thread. */
+ * on one thread.  The 1.5 s are timed from the stop's taking effect, and the stop counts only
+ * when it lands in the render, before its 100% progress line; one that lands later (a test
+ * descheduled after the first progress line, on a loaded machine) is tried again, up to three
+ * times. */
 Test(interrupt, stopped_time_is_wall_not_cpu, .init = setup, .fini = teardown,
      .timeout = TEST_TIMEOUT_S(180))
 {
-    char out[300], out_path[300], err_path[300], text[4096];
+    char out[300], out_path[300], err_path[300], text[4096], err[4096];
     snprintf(out, sizeof out, "%s/out.exr", tmpdir);
     snprintf(out_path, sizeof out_path, "%s/stdout.txt", tmpdir);
     snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
     const char *args[] = {SCENE, "--spp", "2048", "--threads", "1", "-o", out, NULL};
-    pid_t pid = test_start_mcpt(args, out_path, err_path, ALARM_S);
-    wait_for_progress(err_path);
-    kill(pid, SIGSTOP);
-    nanosleep(&(struct timespec){1, 500 * 1000 * 1000}, NULL);
-    kill(pid, SIGCONT);
-    cr_assert_eq(test_wait(pid), 0);
-    test_read_file(out_path, text, sizeof text);
-    const char *r = strstr(text, "render ");
-    double wall = 0.0, cpu = 0.0;
-    cr_assert(r && sscanf(r, "render %lf s wall, %lf s CPU", &wall, &cpu) == 2, "%s", text);
-    cr_assert_geq(wall - cpu, 1.5, "wall %.2f s, CPU %.2f s", wall, cpu);
+    bool is_stopped_mid_render = false;
+    for (int attempt = 1; attempt <= 3 && !is_stopped_mid_render; attempt++) {
+        pid_t pid = test_start_mcpt(args, out_path, err_path, ALARM_S);
+        int rc = 0;
+        if (stop_mid_render(pid, err_path, &rc)) {
+            test_read_file(err_path, err, sizeof err); /* what it printed before the stop */
+            is_stopped_mid_render = !strstr(err, "progress: 100%");
+            nanosleep(&(struct timespec){1, 500 * 1000 * 1000}, NULL);
+            kill(pid, SIGCONT);
+            rc = test_wait(pid);
+        }
+        cr_assert_eq(rc, 0);
+        test_read_file(out_path, text, sizeof text);
+        const char *r = strstr(text, "render ");
+        double wall = 0.0, cpu = 0.0;
+        cr_assert(r && sscanf(r, "render %lf s wall, %lf s CPU", &wall, &cpu) == 2, "%s", text);
+        cr_log_info("attempt %d: %s: wall %.2f s, CPU %.2f s", attempt,
+                    is_stopped_mid_render ? "stopped mid-render" : "the render ended first", wall,
+                    cpu);
+        if (is_stopped_mid_render)
+            cr_assert_geq(wall - cpu, 1.5, "wall %.2f s, CPU %.2f s", wall, cpu);
+    }
+    cr_assert(is_stopped_mid_render, "the render ended before each of three stops");
 }
