@@ -135,6 +135,18 @@ static void assert_whole(const char *exr_path, float spp)
     cr_assert(lo == spp && hi == spp, "samples in [%g, %g] of %g", lo, hi, spp);
 }
 
+/* A checkpoint at ckpt, if there is one, loads (a signal never leaves a corrupt one). */
+static void assert_checkpoint_loads_if_any(const char *ckpt)
+{
+    if (!test_exists(ckpt))
+        return;
+    struct film film;
+    struct checkpoint_info info;
+    struct mcpt_error e;
+    cr_assert(checkpoint_load(ckpt, &film, &info, &e), "%s", e.msg);
+    film_free(&film);
+}
+
 /* FNV-1a 64 of a file, as the scene loader records it (scene.file_hash, docs/reliability.md). */
 static uint64_t fnv1a_file(const char *path)
 {
@@ -381,13 +393,7 @@ Test(interrupt, second_signal_exits_at_once, .init = setup, .fini = teardown,
         cr_assert(image_read_exr(out, &img, &e), "%s", e.msg);
         image_free(&img);
     }
-    if (test_exists(ckpt)) {
-        struct film film;
-        struct checkpoint_info info;
-        struct mcpt_error e;
-        cr_assert(checkpoint_load(ckpt, &film, &info, &e), "%s", e.msg);
-        film_free(&film);
-    }
+    assert_checkpoint_loads_if_any(ckpt);
 }
 
 /* Whether dir holds a file whose name starts with prefix. */
@@ -454,13 +460,7 @@ Test(interrupt, second_signal_mid_checkpoint_leaves_no_temporary, .init = setup,
             cr_assert_not(test_exists(ckpt), "the checkpoint was renamed into place");
         } else {
             cr_assert(rc == 0 || rc == 130 || rc == 143, "exit %d: %s", rc, err);
-            if (test_exists(ckpt)) {
-                struct film film;
-                struct checkpoint_info info;
-                struct mcpt_error e;
-                cr_assert(checkpoint_load(ckpt, &film, &info, &e), "%s", e.msg);
-                film_free(&film);
-            }
+            assert_checkpoint_loads_if_any(ckpt);
         }
     }
     cr_assert(is_mid_write, "the checkpoint's write was not caught in three attempts: %s", err);
