@@ -815,15 +815,9 @@ static inline uint32_t i8_lane(struct i8 a, int i)
 #undef F8_MAP
 #undef M8_MAP
 
-/* The traversal loops take `fast` as a constant argument; inlining them at each call gives
- * one specialised copy per slab-test form instead of a branch per node. */
-#if defined(__GNUC__)
-#define ALWAYS_INLINE inline __attribute__((always_inline))
-#define COLD __attribute__((noinline, cold))
-#else
-#define ALWAYS_INLINE inline
-#define COLD
-#endif
+/* The traversal loops take `fast` as a constant argument; inlining them at each call
+ * (ALWAYS_INLINE, vec.h) gives one specialised copy per slab-test form instead of a branch per
+ * node. */
 
 static inline int lowest_bit(uint32_t bits)
 {

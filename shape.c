@@ -20,12 +20,6 @@
  * underflows, so these computations are 2^29 times more precise than the float ones and need no
  * absolute error term.  gamma_d(n) = n u / (1 - n u), u = 2^-53 (PBRT 4e, ch. 6, "Managing
  * Rounding Error"). */
-#if defined(__GNUC__)
-#define ALWAYS_INLINE inline __attribute__((always_inline))
-#else
-#define ALWAYS_INLINE inline
-#endif
-
 struct dvec3 {
     double x;
     double y;

@@ -11,6 +11,16 @@
 #include <stdio.h>
 #include <string.h>
 
+/* Inlining where gcc's heuristics decline it on a hot path (the 8-wide traversal, the
+ * triangle surface's double-precision helpers), and the rare paths kept out of the way. */
+#if defined(__GNUC__)
+#define ALWAYS_INLINE inline __attribute__((always_inline))
+#define COLD __attribute__((noinline, cold))
+#else
+#define ALWAYS_INLINE inline
+#define COLD
+#endif
+
 #define MCPT_PI 3.14159265358979323846f
 #define MCPT_INV_PI 0.31830988618379067154f
 #define MCPT_VERSION "0.1.0"
