@@ -153,7 +153,7 @@ static inline void ray_setup_woop(struct ray_pre *rp)
     rp->sx = d[kx] / d[kz];
     rp->sy = d[ky] / d[kz];
     rp->sz = 1.0f / d[kz];
-    rp->o_scale = fmaxf(fabsf(rp->o[0]), fmaxf(fabsf(rp->o[1]), fabsf(rp->o[2]))) * fabsf(rp->sz);
+    rp->o_scale = max_f(fabsf(rp->o[0]), max_f(fabsf(rp->o[1]), fabsf(rp->o[2]))) * fabsf(rp->sz);
 }
 
 /* Slab test (Kay, Kajiya 1986, "Ray Tracing Complex Scenes") in the (min - o) * inv_d form of

@@ -14,7 +14,7 @@
  * *k receives k; a zero or non-finite v comes back unscaled with k = 0. */
 static vec3 scale_to_unit_range(vec3 v, int *k)
 {
-    float m = fmaxf(fabsf(v.x), fmaxf(fabsf(v.y), fabsf(v.z)));
+    float m = max_f(fabsf(v.x), max_f(fabsf(v.y), fabsf(v.z)));
     *k = 0;
     if (!(m > 0.0f) || !isfinite(m))
         return v;

@@ -29,7 +29,7 @@ vec3 light_sky_radiance(const struct sky *sky, vec3 d)
     case SKY_CONSTANT:
         return sky->radiance;
     case SKY_GRADIENT: {
-        float s = fmaxf(0.0f, d.y); /* lerp(horizon, zenith, max(d.y, 0)) */
+        float s = max_f(0.0f, d.y); /* lerp(horizon, zenith, max(d.y, 0)) */
         return v3_add(v3_scale(sky->horizon, 1.0f - s), v3_scale(sky->zenith, s));
     }
     }
@@ -370,7 +370,7 @@ float light_pdf(const struct light_table *lt, uint32_t light_idx, const struct s
 {
     const struct scene *scene = lt->scene;
     if (light_idx == lt->sky_idx)
-        return pdf_cosine_hemisphere(fmaxf(0.0f, v3_dot(wi, n_sky)));
+        return pdf_cosine_hemisphere(max_f(0.0f, v3_dot(wi, n_sky)));
     if (light_idx >= scene->n_lights)
         return 0.0f;
     const struct light *l = &scene->lights[light_idx];

@@ -14,7 +14,7 @@
 #include "sample.h"
 
 static bool same_hemisphere(vec3 a, vec3 b) { return a.z * b.z > 0.0f; }
-static float clamp01(float x) { return fminf(1.0f, fmaxf(0.0f, x)); }
+static float clamp01(float x) { return min_f(1.0f, max_f(0.0f, x)); }
 static float ggx_alpha(const struct material *m) { return m->roughness * m->roughness; }
 static bool is_smooth(const struct material *m) { return ggx_alpha(m) < MAT_ALPHA_SMOOTH; }
 static vec3 reflect_z(vec3 w) { return v3(-w.x, -w.y, w.z); }
@@ -244,7 +244,7 @@ static vec3 fresnel_schlick(vec3 F0, float cos_theta)
  * the light arrives from inside. */
 static float fresnel_dielectric(float cos_theta_i, float eta)
 {
-    cos_theta_i = fminf(1.0f, fmaxf(-1.0f, cos_theta_i));
+    cos_theta_i = min_f(1.0f, max_f(-1.0f, cos_theta_i));
     if (cos_theta_i < 0.0f) {
         eta = 1.0f / eta;
         cos_theta_i = -cos_theta_i;
@@ -253,7 +253,7 @@ static float fresnel_dielectric(float cos_theta_i, float eta)
     float sin2_theta_t = sin2_theta_i / (eta * eta);
     if (sin2_theta_t >= 1.0f)
         return 1.0f; /* total internal reflection */
-    float cos_theta_t = sqrtf(fmaxf(0.0f, 1.0f - sin2_theta_t));
+    float cos_theta_t = sqrtf(max_f(0.0f, 1.0f - sin2_theta_t));
     float r_parl = (eta * cos_theta_i - cos_theta_t) / (eta * cos_theta_i + cos_theta_t);
     float r_perp = (cos_theta_i - eta * cos_theta_t) / (cos_theta_i + eta * cos_theta_t);
     return 0.5f * (r_parl * r_parl + r_perp * r_perp);
@@ -270,7 +270,7 @@ static bool refract(vec3 wo, float eta, vec3 *wt, float *etap)
         cos_theta_i = -cos_theta_i;
         n = v3(0.0f, 0.0f, -1.0f);
     }
-    float sin2_theta_i = fmaxf(0.0f, 1.0f - cos_theta_i * cos_theta_i);
+    float sin2_theta_i = max_f(0.0f, 1.0f - cos_theta_i * cos_theta_i);
     float sin2_theta_t = sin2_theta_i / (eta * eta);
     if (sin2_theta_t >= 1.0f)
         return false;
@@ -299,7 +299,7 @@ float mat_ggx_D(vec3 m, float alpha)
 static float ggx_lambda(vec3 w, float alpha)
 {
     float cos2 = w.z * w.z;
-    float sin2 = fmaxf(0.0f, w.x * w.x + w.y * w.y);
+    float sin2 = max_f(0.0f, w.x * w.x + w.y * w.y);
     if (cos2 == 0.0f)
         return INFINITY;
     return 0.5f * (sqrtf(1.0f + alpha * alpha * sin2 / cos2) - 1.0f);
@@ -325,11 +325,11 @@ vec3 mat_ggx_sample_vndf(vec3 wo, float alpha, vec2 u)
     float r = sqrtf(u.x), phi = 2.0f * MCPT_PI * u.y;
     float p1 = r * cosf(phi), p2 = r * sinf(phi);
     float s = 0.5f * (1.0f + vh.z);
-    p2 = (1.0f - s) * sqrtf(fmaxf(0.0f, 1.0f - p1 * p1)) + s * p2;
+    p2 = (1.0f - s) * sqrtf(max_f(0.0f, 1.0f - p1 * p1)) + s * p2;
     /* reproject onto the hemisphere, then unstretch */
     vec3 nh = v3_add(v3_add(v3_scale(t1, p1), v3_scale(t2, p2)),
-                     v3_scale(vh, sqrtf(fmaxf(0.0f, 1.0f - p1 * p1 - p2 * p2))));
-    return v3_normalize(v3(alpha * nh.x, alpha * nh.y, fmaxf(1e-6f, nh.z)));
+                     v3_scale(vh, sqrtf(max_f(0.0f, 1.0f - p1 * p1 - p2 * p2))));
+    return v3_normalize(v3(alpha * nh.x, alpha * nh.y, max_f(1e-6f, nh.z)));
 }
 
 float mat_ggx_pdf_vndf(vec3 wo, vec3 m, float alpha)

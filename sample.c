@@ -564,7 +564,7 @@ vec3 sample_cosine_hemisphere(vec2 u)
 {
     /* Malley: a uniform disk point lifted to the hemisphere is cosine distributed */
     vec2 d = sample_concentric_disk(u);
-    float z = sqrtf(fmaxf(0.0f, 1.0f - d.x * d.x - d.y * d.y));
+    float z = sqrtf(max_f(0.0f, 1.0f - d.x * d.x - d.y * d.y));
     return (vec3){d.x, d.y, z};
 }
 
@@ -587,7 +587,7 @@ vec3 sample_uniform_hemisphere(vec2 u)
 {
     /* z uniform in [0,1] gives uniform area on the hemisphere (Archimedes) */
     float z = u.x;
-    float r = sqrtf(fmaxf(0.0f, 1.0f - z * z));
+    float r = sqrtf(max_f(0.0f, 1.0f - z * z));
     float phi = 2.0f * MCPT_PI * u.y;
     return (vec3){r * cosf(phi), r * sinf(phi), z};
 }
@@ -604,7 +604,7 @@ vec3 sample_uniform_sphere(vec2 u)
      * Box-Muller) and a sqrt, and has no simple inverse: a stratified 2D point does not carry
      * over to the sphere. */
     float z = 1.0f - 2.0f * u.x;
-    float r = sqrtf(fmaxf(0.0f, 1.0f - z * z));
+    float r = sqrtf(max_f(0.0f, 1.0f - z * z));
     float phi = 2.0f * MCPT_PI * u.y;
     return (vec3){r * cosf(phi), r * sinf(phi), z};
 }
@@ -623,7 +623,7 @@ struct sample_cone sample_cone_from_cos(float cos_theta_max)
 {
     struct sample_cone c;
     c.cos_theta_max = cos_theta_max;
-    c.sin2_theta_max = fmaxf(0.0f, 1.0f - cos_theta_max * cos_theta_max);
+    c.sin2_theta_max = max_f(0.0f, 1.0f - cos_theta_max * cos_theta_max);
     c.one_minus_cos_max = 1.0f - cos_theta_max;
     c.is_narrow = false; /* the digits 1 - cos theta_max lost are gone already */
     return c;
@@ -633,7 +633,7 @@ struct sample_cone sample_cone_from_sin2(float sin2_theta_max)
 {
     struct sample_cone c;
     c.sin2_theta_max = sin2_theta_max;
-    c.cos_theta_max = sqrtf(fmaxf(0.0f, 1.0f - sin2_theta_max));
+    c.cos_theta_max = sqrtf(max_f(0.0f, 1.0f - sin2_theta_max));
     c.is_narrow = sin2_theta_max < CONE_NARROW_SIN2;
     /* Taylor: 1 - cos theta_max = 1 - sqrt(1 - s) ~ s / 2 */
     c.one_minus_cos_max = c.is_narrow ? sin2_theta_max / 2.0f : 1.0f - c.cos_theta_max;
@@ -658,7 +658,7 @@ vec3 sample_uniform_cone(vec2 u, const struct sample_cone *cone)
 {
     float cos_theta, sin2_theta;
     sample_uniform_cone_theta(u.x, cone, &cos_theta, &sin2_theta);
-    float sin_theta = sqrtf(fmaxf(0.0f, sin2_theta));
+    float sin_theta = sqrtf(max_f(0.0f, sin2_theta));
     float phi = 2.0f * MCPT_PI * u.y;
     return (vec3){sin_theta * cosf(phi), sin_theta * sinf(phi), cos_theta};
 }
@@ -702,7 +702,7 @@ static float sample_linear(float u, float a, float b)
     if (u == 0.0f && a == 0.0f)
         return 0.0f;
     float x = u * (a + b) / (a + sqrtf(lerpf(u, a * a, b * b)));
-    return fminf(x, 0x1.fffffep-1f);
+    return min_f(x, 0x1.fffffep-1f);
 }
 
 /* The CDF of sample_linear at x: u = x (a (2 - x) + b x) / (a + b). */
@@ -745,8 +745,8 @@ vec2 sample_invert_bilinear(vec2 p, const float w[4])
 static float angle_between(vec3 a, vec3 b)
 {
     if (v3_dot(a, b) < 0.0f)
-        return MCPT_PI - 2.0f * asinf(fminf(1.0f, 0.5f * v3_length(v3_add(a, b))));
-    return 2.0f * asinf(fminf(1.0f, 0.5f * v3_length(v3_sub(b, a))));
+        return MCPT_PI - 2.0f * asinf(min_f(1.0f, 0.5f * v3_length(v3_add(a, b))));
+    return 2.0f * asinf(min_f(1.0f, 0.5f * v3_length(v3_sub(b, a))));
 }
 
 /* normalize(v), or false when v is 0 (or not finite). */
@@ -799,8 +799,8 @@ vec3 sample_spherical_triangle(const struct sample_sph_triangle *st, vec2 u)
     float w = t - st->cos_alpha;
     float v = s + st->sin_alpha * st->cos_ab;
     float q = ((v * t - w * s) * st->cos_alpha - v) / ((v * s + w * t) * st->sin_alpha);
-    q = fminf(1.0f, fmaxf(-1.0f, q));
-    vec3 c_sub = v3_add(v3_scale(st->a, q), v3_scale(st->c_perp, sqrtf(fmaxf(0.0f, 1.0f - q * q))));
+    q = min_f(1.0f, max_f(-1.0f, q));
+    vec3 c_sub = v3_add(v3_scale(st->a, q), v3_scale(st->c_perp, sqrtf(max_f(0.0f, 1.0f - q * q))));
     /* on the arc b -> c', 1 - cos theta uniform in [0, 1 - cos |b c'|]; 1 - cos = |x - b|^2 / 2
      * keeps its digits for a small arc */
     vec3 d = v3_sub(c_sub, st->b);
@@ -809,7 +809,7 @@ vec3 sample_spherical_triangle(const struct sample_sph_triangle *st, vec2 u)
     vec3 perp;
     if (!normalize_to(v3_sub(c_sub, v3_scale(st->b, v3_dot(c_sub, st->b))), &perp))
         return st->b; /* c' = b: the arc has no length */
-    float sin_theta = sqrtf(fmaxf(0.0f, one_minus_z * (2.0f - one_minus_z)));
+    float sin_theta = sqrtf(max_f(0.0f, one_minus_z * (2.0f - one_minus_z)));
     return v3_normalize(v3_add(v3_scale(st->b, z), v3_scale(perp, sin_theta)));
 }
 
@@ -829,7 +829,7 @@ vec2 sample_invert_spherical_triangle(const struct sample_sph_triangle *st, vec3
     vec3 dw = v3_sub(w, st->b), dc = v3_sub(c_sub, st->b);
     float dc2 = v3_dot(dc, dc);
     float u1 = dc2 > 0.0f ? v3_dot(dw, dw) / dc2 : 0.0f;
-    return (vec2){fminf(1.0f, fmaxf(0.0f, u0)), fminf(1.0f, fmaxf(0.0f, u1))};
+    return (vec2){min_f(1.0f, max_f(0.0f, u0)), min_f(1.0f, max_f(0.0f, u1))};
 }
 
 /* ---- spherical rectangles (Urena, Fajardo & King 2013) ---- */
@@ -890,9 +890,9 @@ vec3 sample_spherical_rectangle(const struct sample_sph_rect *sr, vec2 u)
     float au = u.x * sr->area - sr->k;
     float fu = (cosf(au) * sr->b0 - sr->b1) / sinf(au);
     float cu = copysignf(1.0f / sqrtf(fu * fu + sr->b0 * sr->b0), fu);
-    cu = fminf(0x1.fffffep-1f, fmaxf(-0x1.fffffep-1f, cu));
-    float xu = -(cu * sr->z0) / sqrtf(fmaxf(0.0f, 1.0f - cu * cu));
-    xu = fminf(sr->x1, fmaxf(sr->x0, xu));
+    cu = min_f(0x1.fffffep-1f, max_f(-0x1.fffffep-1f, cu));
+    float xu = -(cu * sr->z0) / sqrtf(max_f(0.0f, 1.0f - cu * cu));
+    xu = min_f(sr->x1, max_f(sr->x0, xu));
     /* sec. 4.2: along x = xu, h = y / sqrt(d^2 + y^2) (the sine of the elevation) is uniform
      * in solid angle, d = sqrt(xu^2 + z0^2) */
     float dd = sqrtf(xu * xu + sr->z0 * sr->z0);
@@ -900,7 +900,7 @@ vec3 sample_spherical_rectangle(const struct sample_sph_rect *sr, vec2 u)
     float h1 = sr->y1 / sqrtf(dd * dd + sr->y1 * sr->y1);
     float hv = lerpf(u.y, h0, h1), hv2 = hv * hv;
     float yv = hv2 < 1.0f - 1e-6f ? hv * dd / sqrtf(1.0f - hv2) : sr->y1;
-    yv = fminf(sr->y1, fmaxf(sr->y0, yv));
+    yv = min_f(sr->y1, max_f(sr->y0, yv));
     return v3_add(sr->o, v3_add(v3_add(v3_scale(sr->x, xu), v3_scale(sr->y, yv)),
                                 v3_scale(sr->z, sr->z0)));
 }
@@ -911,15 +911,15 @@ vec2 sample_invert_spherical_rectangle(const struct sample_sph_rect *sr, vec3 p)
 {
     /* u0 = S(x0 .. xu) / S, the sub-rectangle's share; u1 = (h - h0) / (h1 - h0) */
     vec3 d = v3_sub(p, sr->o);
-    float xu = fminf(sr->x1, fmaxf(sr->x0, v3_dot(d, sr->x)));
-    float yv = fminf(sr->y1, fmaxf(sr->y0, v3_dot(d, sr->y)));
+    float xu = min_f(sr->x1, max_f(sr->x0, v3_dot(d, sr->x)));
+    float yv = min_f(sr->y1, max_f(sr->y0, v3_dot(d, sr->y)));
     float u0 = xu > sr->x0 ? rect_solid_angle(sr->x0, xu, sr->y0, sr->y1, sr->z0) / sr->area : 0.0f;
     float dd2 = xu * xu + sr->z0 * sr->z0;
     float h0 = sr->y0 / sqrtf(dd2 + sr->y0 * sr->y0);
     float h1 = sr->y1 / sqrtf(dd2 + sr->y1 * sr->y1);
     float h = yv / sqrtf(dd2 + yv * yv);
     float u1 = h1 != h0 ? (h - h0) / (h1 - h0) : 0.0f;
-    return (vec2){fminf(1.0f, fmaxf(0.0f, u0)), fminf(1.0f, fmaxf(0.0f, u1))};
+    return (vec2){min_f(1.0f, max_f(0.0f, u0)), min_f(1.0f, max_f(0.0f, u1))};
 }
 
 /* ---- discrete distributions: the alias method ---- */

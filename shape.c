@@ -203,7 +203,7 @@ static void receiver_weights(const struct surface *ref, vec3 d00, vec3 d10, vec3
 {
     const vec3 d[4] = {d00, d10, d01, d11};
     for (int k = 0; k < 4; k++)
-        w[k] = fmaxf(0.01f, fabsf(v3_dot(ref->ns, d[k])));
+        w[k] = max_f(0.01f, fabsf(v3_dot(ref->ns, d[k])));
 }
 
 /* Warps *u by the bilinear density of the receiver weights w (receiver_weights) and returns
@@ -424,7 +424,7 @@ struct surface shape_sphere_surface(const struct sphere *s, const struct ray *ra
     sf.ns = sf.ng;
     float phi = atan2f(sf.ng.z, sf.ng.x);
     sf.uv = (vec2){(phi < 0.0f ? phi + 2.0f * MCPT_PI : phi) * (0.5f * MCPT_INV_PI),
-                   acosf(fminf(1.0f, fmaxf(-1.0f, sf.ng.y))) * MCPT_INV_PI};
+                   acosf(min_f(1.0f, max_f(-1.0f, sf.ng.y))) * MCPT_INV_PI};
     sf.mat_idx = s->mat_idx;
     return sf;
 }
@@ -470,8 +470,8 @@ bool shape_sphere_sample(const struct sphere *s, const struct surface *ref, vec2
     float sin2_theta_max = cone.sin2_theta_max;
     float sin_theta_max = sqrtf(sin2_theta_max);
     float cos_alpha = sin2_theta / sin_theta_max +
-                      cos_theta * sqrtf(fmaxf(0.0f, 1.0f - sin2_theta / sin2_theta_max));
-    float sin_alpha = sqrtf(fmaxf(0.0f, 1.0f - cos_alpha * cos_alpha));
+                      cos_theta * sqrtf(max_f(0.0f, 1.0f - sin2_theta / sin2_theta_max));
+    float sin_alpha = sqrtf(max_f(0.0f, 1.0f - cos_alpha * cos_alpha));
     float phi = 2.0f * MCPT_PI * u.y;
     struct dvec3 w = d3(wc);
     vec3 wz = d3_to_float(d3_scale(w, -1.0 / d3_length(w))); /* centre -> reference point */
@@ -644,8 +644,8 @@ bool shape_quad_sample_solid_angle(const struct quad *q, const struct surface *r
      * pdf_sa = pdf_bilinear(u) / S */
     float pdf_u = warp_by_cosine(&u, w);
     vec3 pr = v3_sub(sample_spherical_rectangle(&sr, u), q->corner);
-    float alpha = fminf(1.0f, fmaxf(0.0f, v3_dot(pr, q->e1) / v3_dot(q->e1, q->e1)));
-    float beta = fminf(1.0f, fmaxf(0.0f, v3_dot(pr, q->e2) / v3_dot(q->e2, q->e2)));
+    float alpha = min_f(1.0f, max_f(0.0f, v3_dot(pr, q->e1) / v3_dot(q->e1, q->e1)));
+    float beta = min_f(1.0f, max_f(0.0f, v3_dot(pr, q->e2) / v3_dot(q->e2, q->e2)));
     ss->p = quad_point(q, alpha, beta, &ss->n, &ss->p_error);
     return direction_to(ss, ss->n, ref, pdf_u * pdf_spherical_rectangle(&sr));
 }
@@ -871,8 +871,8 @@ bool shape_triangle_sample_solid_angle(const vec3 p[3], const struct surface *re
     float divisor = v3_dot(s1, e1);
     if (divisor == 0.0f)
         return false;
-    float b1 = fminf(1.0f, fmaxf(0.0f, v3_dot(s, s1) / divisor));
-    float b2 = fminf(1.0f, fmaxf(0.0f, v3_dot(wi, v3_cross(s, e1)) / divisor));
+    float b1 = min_f(1.0f, max_f(0.0f, v3_dot(s, s1) / divisor));
+    float b2 = min_f(1.0f, max_f(0.0f, v3_dot(wi, v3_cross(s, e1)) / divisor));
     if (b1 + b2 > 1.0f) {
         float sum = b1 + b2;
         b1 /= sum;

@@ -216,7 +216,7 @@ static vec3 radiance(const struct trace_scene *ts, const struct trace_options *o
         if (n_bounces >= rr_depth) {
             float p = opt->rr_prob > 0.0f
                           ? opt->rr_prob
-                          : fminf(1.0f, v3_max_comp(beta) * eta_scale / rr_threshold);
+                          : min_f(1.0f, v3_max_comp(beta) * eta_scale / rr_threshold);
             if (p < 1.0f) {
                 sample_set_dim(sampler, dim0 + SAMPLE_BOUNCE_ROULETTE);
                 if (!(sample_1d(sampler) < p))

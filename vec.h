@@ -107,6 +107,10 @@ static inline void mcpt_error_format(const struct mcpt_error *err, char *out, si
 }
 
 static inline vec3 v3(float x, float y, float z) { return (vec3){x, y, z}; }
+/* fmaxf and fminf written out: gcc calls libm for them (their NaN rule, a NaN operand gives the
+ * other, has no one-instruction form on x86), and they sit in the path loop.  Same results. */
+static inline float max_f(float a, float b) { return a > b || b != b ? a : b; }
+static inline float min_f(float a, float b) { return a < b || b != b ? a : b; }
 static inline vec3 v3_splat(float s) { return (vec3){s, s, s}; }
 static inline vec3 v3_add(vec3 a, vec3 b) { return (vec3){a.x + b.x, a.y + b.y, a.z + b.z}; }
 static inline vec3 v3_sub(vec3 a, vec3 b) { return (vec3){a.x - b.x, a.y - b.y, a.z - b.z}; }
@@ -122,14 +126,14 @@ static inline float v3_length(vec3 a) { return sqrtf(v3_dot(a, a)); }
 static inline vec3 v3_normalize(vec3 a) { return v3_scale(a, 1.0f / v3_length(a)); }
 static inline vec3 v3_min(vec3 a, vec3 b)
 {
-    return (vec3){fminf(a.x, b.x), fminf(a.y, b.y), fminf(a.z, b.z)};
+    return (vec3){min_f(a.x, b.x), min_f(a.y, b.y), min_f(a.z, b.z)};
 }
 static inline vec3 v3_max(vec3 a, vec3 b)
 {
-    return (vec3){fmaxf(a.x, b.x), fmaxf(a.y, b.y), fmaxf(a.z, b.z)};
+    return (vec3){max_f(a.x, b.x), max_f(a.y, b.y), max_f(a.z, b.z)};
 }
 static inline float v3_get(vec3 a, int axis) { return axis == 0 ? a.x : axis == 1 ? a.y : a.z; }
-static inline float v3_max_comp(vec3 a) { return fmaxf(a.x, fmaxf(a.y, a.z)); }
+static inline float v3_max_comp(vec3 a) { return max_f(a.x, max_f(a.y, a.z)); }
 static inline bool v3_is_zero(vec3 a) { return a.x == 0.0f && a.y == 0.0f && a.z == 0.0f; }
 static inline bool v3_is_finite(vec3 a) { return isfinite(a.x) && isfinite(a.y) && isfinite(a.z); }
 /* Rec. 709 luminance of linear RGB. */
