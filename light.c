@@ -18,6 +18,7 @@ struct light_table {
     uint32_t *tri_light;           /* light index of each triangle, or LIGHT_NONE */
     uint32_t *quad_light;          /* light index of each quad, or LIGHT_NONE */
     uint32_t *sphere_light;        /* light index of each sphere, or LIGHT_NONE */
+    struct triangle_plane *planes; /* by light index: each emitting triangle's plane (shape.h) */
     bool by_solid_angle;           /* triangles and quads by solid angle (render light-sampling) */
 };
 
@@ -171,7 +172,9 @@ struct light_table *light_table_build(const struct scene *scene, struct mcpt_err
     lt->sphere_light = malloc(sizeof(uint32_t) * ((size_t)scene->n_spheres + 1));
     lt->bins = malloc(sizeof(struct sample_alias_bin) * ((size_t)lt->n_lights + 1));
     power = malloc(sizeof(double) * ((size_t)lt->n_lights + 1));
-    if (!lt->tri_light || !lt->quad_light || !lt->sphere_light || !lt->bins || !power)
+    lt->planes = malloc(sizeof(struct triangle_plane) * ((size_t)scene->n_lights + 1));
+    if (!lt->tri_light || !lt->quad_light || !lt->sphere_light || !lt->bins || !power ||
+        !lt->planes)
         goto oom;
     for (uint32_t i = 0; i < scene->n_tris; i++)
         lt->tri_light[i] = LIGHT_NONE;
@@ -183,9 +186,12 @@ struct light_table *light_table_build(const struct scene *scene, struct mcpt_err
     /* light selection proportional to emitted power: pmf_i = Phi_i / sum Phi (alias table) */
     for (uint32_t i = 0; i < scene->n_lights; i++) {
         const struct light *l = &scene->lights[i];
-        if (l->kind == LIGHT_TRIANGLE)
+        if (l->kind == LIGHT_TRIANGLE) {
             lt->tri_light[l->prim_idx] = i;
-        else if (l->kind == LIGHT_QUAD)
+            vec3 p[3];
+            triangle_corners(scene, l->prim_idx, p);
+            shape_triangle_plane(p, &lt->planes[i]);
+        } else if (l->kind == LIGHT_QUAD)
             lt->quad_light[l->prim_idx] = i;
         else if (l->kind == LIGHT_SPHERE)
             lt->sphere_light[l->prim_idx] = i;
@@ -218,6 +224,7 @@ void light_table_free(struct light_table *lt)
     free(lt->tri_light);
     free(lt->quad_light);
     free(lt->sphere_light);
+    free(lt->planes);
     free(lt);
 }
 
@@ -295,15 +302,12 @@ static bool sample_point(const struct light *l, const struct surface *ref, struc
  * triple product of float differences scales as the cube of the scene's unit, which leaves
  * float's range (0 below a scale of about 1e-13, inf above 1e13; tests/extremes, Cornell box
  * from 1e-15 to 1e15). */
-static bool is_behind(const struct material *m, vec3 p0, const double e1[3], const double e2[3],
-                      vec3 p_ref)
+static bool is_behind(const struct material *m, vec3 p0, struct dvec3 n, vec3 p_ref)
 {
     if (m->two_sided_emission)
         return false;
     double r[3] = {(double)p_ref.x - p0.x, (double)p_ref.y - p0.y, (double)p_ref.z - p0.z};
-    double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
-                   e1[0] * e2[1] - e1[1] * e2[0]};
-    return n[0] * r[0] + n[1] * r[1] + n[2] * r[2] <= 0.0;
+    return n.x * r[0] + n.y * r[1] + n.z * r[2] <= 0.0;
 }
 
 bool light_sample(const struct light_table *lt, uint32_t light_idx, const struct surface *ref,
@@ -323,15 +327,17 @@ bool light_sample(const struct light_table *lt, uint32_t light_idx, const struct
     case LIGHT_POINT:
         return sample_point(l, ref, ls);
     case LIGHT_TRIANGLE: {
-        vec3 p[3];
-        triangle_corners(scene, l->prim_idx, p);
+        const struct triangle_plane *tp = &lt->planes[light_idx];
         mat_idx = scene->tris[l->prim_idx].mat_idx;
-        double e1[3] = {(double)p[1].x - p[0].x, (double)p[1].y - p[0].y, (double)p[1].z - p[0].z};
-        double e2[3] = {(double)p[2].x - p[0].x, (double)p[2].y - p[0].y, (double)p[2].z - p[0].z};
-        if (is_behind(&scene->materials[mat_idx], p[0], e1, e2, ref->p))
+        if (is_behind(&scene->materials[mat_idx], tp->p0, tp->c, ref->p))
             return false;
-        ok = lt->by_solid_angle ? shape_triangle_sample_solid_angle(p, ref, u, &ss)
-                                : shape_triangle_sample(p, ref, u, &ss);
+        if (lt->by_solid_angle) {
+            vec3 p[3];
+            triangle_corners(scene, l->prim_idx, p);
+            ok = shape_triangle_sample_solid_angle(p, ref, u, &ss);
+        } else {
+            ok = shape_triangle_plane_sample(tp, ref, u, &ss);
+        }
         break;
     }
     case LIGHT_QUAD: {
@@ -339,7 +345,9 @@ bool light_sample(const struct light_table *lt, uint32_t light_idx, const struct
         mat_idx = q->mat_idx;
         const double e1[3] = {q->e1.x, q->e1.y, q->e1.z};
         const double e2[3] = {q->e2.x, q->e2.y, q->e2.z};
-        if (is_behind(&scene->materials[mat_idx], q->corner, e1, e2, ref->p))
+        struct dvec3 n = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                          e1[0] * e2[1] - e1[1] * e2[0]};
+        if (is_behind(&scene->materials[mat_idx], q->corner, n, ref->p))
             return false;
         ok = lt->by_solid_angle ? shape_quad_sample_solid_angle(q, ref, u, &ss)
                                 : shape_quad_sample(q, ref, u, &ss);
@@ -376,10 +384,11 @@ float light_pdf(const struct light_table *lt, uint32_t light_idx, const struct s
     const struct light *l = &scene->lights[light_idx];
     switch (l->kind) {
     case LIGHT_TRIANGLE: {
+        if (!lt->by_solid_angle)
+            return shape_triangle_plane_pdf(&lt->planes[light_idx], ref, on, wi);
         vec3 p[3];
         triangle_corners(scene, l->prim_idx, p);
-        return lt->by_solid_angle ? shape_triangle_pdf_solid_angle(p, ref, on, wi)
-                                  : shape_triangle_pdf(p, ref, on, wi);
+        return shape_triangle_pdf_solid_angle(p, ref, on, wi);
     }
     case LIGHT_QUAD: {
         const struct quad *q = &scene->quads[l->prim_idx];

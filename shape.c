@@ -20,12 +20,6 @@
  * underflows, so these computations are 2^29 times more precise than the float ones and need no
  * absolute error term.  gamma_d(n) = n u / (1 - n u), u = 2^-53 (PBRT 4e, ch. 6, "Managing
  * Rounding Error"). */
-struct dvec3 {
-    double x;
-    double y;
-    double z;
-}; /* 24 bytes */
-
 static struct dvec3 d3(vec3 a) { return (struct dvec3){a.x, a.y, a.z}; }
 static struct dvec3 d3_add(struct dvec3 a, struct dvec3 b)
 {
@@ -117,10 +111,11 @@ static double rounded_error_sum(struct dvec3 p_d, struct dvec3 err_d, double eta
  * gamma_d(3) |e1| |e2| at most, which moves the direction by gamma_d(3) sqrt(3) / sin(angle)
  * and twice that after normalising, with 1 / sin(angle) = |e1| |e2| / |e1 x e2| <=
  * (|e1|^2 + |e2|^2) / (2 |e1 x e2|); the rounding to float adds 2^-24 per component.  A
- * degenerate pair (angle 0) gives ng = 0, *len = 0 and eta = 1. */
-static ALWAYS_INLINE vec3 plane_normal(struct dvec3 e1, struct dvec3 e2, double *len, double *eta)
+ * degenerate pair (angle 0) gives ng = 0, *len = 0 and eta = 1.  c is e1 x e2 (d3_cross), which
+ * plane_normal computes. */
+static ALWAYS_INLINE vec3 plane_normal_c(struct dvec3 e1, struct dvec3 e2, struct dvec3 c,
+                                         double *len, double *eta)
 {
-    struct dvec3 c = d3_cross(e1, e2);
     *len = d3_length(c);
     if (!(*len > 0.0)) {
         *eta = 1.0;
@@ -129,6 +124,10 @@ static ALWAYS_INLINE vec3 plane_normal(struct dvec3 e1, struct dvec3 e2, double 
     double inv_len = 1.0 / *len;
     *eta = 0x1p-23 + 2.0 * gamma_d(3) * (d3_dot(e1, e1) + d3_dot(e2, e2)) * inv_len;
     return d3_to_float(d3_scale(c, inv_len));
+}
+static ALWAYS_INLINE vec3 plane_normal(struct dvec3 e1, struct dvec3 e2, double *len, double *eta)
+{
+    return plane_normal_c(e1, e2, d3_cross(e1, e2), len, eta);
 }
 
 /* The ray parameter t (a double, whose sign is certain) as a float, when it is > 0 and in
@@ -699,25 +698,35 @@ struct surface shape_plane_surface(const struct plane *pl, const struct ray *ray
 
 /* ---- triangle (the BVH finds the hit) ---- */
 
-/* The triangle's point p0 + b1 e1 + b2 e2 (e1 = p1 - p0, e2 = p2 - p0 in double) with its
- * error bound and unit normal (plane_point_d, plane_normal), pulled inside the triangle: where
+/* What every point of triangle p[3] shares (shape.h), by the operations triangle_point used to
+ * repeat for each point, so the points are the same to the bit. */
+static ALWAYS_INLINE void triangle_plane(const vec3 p[3], struct triangle_plane *tp)
+{
+    tp->p0 = p[0];
+    tp->e1 = d3_sub(d3(p[1]), d3(p[0]));
+    tp->e2 = d3_sub(d3(p[2]), d3(p[0]));
+    tp->c = d3_cross(tp->e1, tp->e2);
+    tp->ng = plane_normal_c(tp->e1, tp->e2, tp->c, &tp->area2, &tp->eta);
+}
+
+void shape_triangle_plane(const vec3 p[3], struct triangle_plane *tp) { triangle_plane(p, tp); }
+
+/* The point p0 + b1 e1 + b2 e2 of triangle tp (triangle_plane) with its error bound
+ * (plane_point_d, round_point), pulled inside the triangle: where
  * some b_i is below eps_i = 2 E / h_i, with E the sum of the point's error bounds and h_i the
  * height over edge i, the barycentrics are clamped to the triangle and shrunk towards its centre,
  * b_i' = eps_i + (1 - sum eps) b_i.  So the rounded point lies inside every edge by at least its
  * error, as offset_ray_origin puts it off the plane: at a concave edge a spawned ray then meets
  * the neighbour in front of its origin, not at t = 0.  A point more than eps outside (only from
  * the ray's point of a huge triangle, whose float inside test is off by u times its size) is
- * left where it is.  h_i = 2 area / |edge_i| >= 2 area / (sqrt(3) |edge_i|_max).  *area2_out
- * gets |e1 x e2|, twice the area (the bits triangle_area2 gives). */
-static ALWAYS_INLINE vec3 triangle_point(const vec3 p[3], struct dvec3 e1, struct dvec3 e2,
-                                         double b1, double b2, vec3 *ng, vec3 *p_error,
-                                         double *area2_out)
+ * left where it is.  h_i = 2 area / |edge_i| >= 2 area / (sqrt(3) |edge_i|_max). */
+static ALWAYS_INLINE vec3 triangle_point(const struct triangle_plane *tp, double b1, double b2,
+                                         vec3 *p_error)
 {
-    double area2, eta;
-    *ng = plane_normal(e1, e2, &area2, &eta);
-    *area2_out = area2;
+    struct dvec3 e1 = tp->e1, e2 = tp->e2;
+    double area2 = tp->area2, eta = tp->eta;
     struct dvec3 err;
-    struct dvec3 pd = plane_point_d(p[0], e1, e2, b1, b2, &err);
+    struct dvec3 pd = plane_point_d(tp->p0, e1, e2, b1, b2, &err);
     if (area2 > 0.0) {
         double k = 2.0 * 1.7320508075688774 * rounded_error_sum(pd, err, eta) / area2;
         struct dvec3 e3 = d3_abs(d3_sub(e2, e1));
@@ -740,7 +749,7 @@ static ALWAYS_INLINE vec3 triangle_point(const vec3 p[3], struct dvec3 e1, struc
                 b1 = eps[1] + (1.0 - eps_sum) * b[1] / sum;
                 b2 = eps[2] + (1.0 - eps_sum) * b[2] / sum;
             }
-            pd = plane_point_d(p[0], e1, e2, b1, b2, &err);
+            pd = plane_point_d(tp->p0, e1, e2, b1, b2, &err);
         }
     }
     return round_point(pd, err, eta, p_error);
@@ -750,8 +759,9 @@ struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec
                                       const struct ray *ray, float t_hit, float b1, float b2,
                                       uint32_t mat_idx)
 {
-    struct dvec3 e1 = d3_sub(d3(p[1]), d3(p[0]));
-    struct dvec3 e2 = d3_sub(d3(p[2]), d3(p[0]));
+    struct triangle_plane tp;
+    triangle_plane(p, &tp);
+    struct dvec3 e1 = tp.e1, e2 = tp.e2;
     double b1_d = b1;
     double b2_d = b2;
     /* float barycentrics place the point to about 2^-24 of the triangle's size, the ray's t to
@@ -764,7 +774,7 @@ struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec
     double near = 0x1p8 * ((double)t_hit * sqrt(d3_dot(d, d)) + o_max);
     if (ray && max_d(d3_dot(e1, e1), d3_dot(e2, e2)) > near * near) {
         struct dvec3 q = d3_sub(d3_add(d3(ray->o), d3_scale(d, t_hit)), d3(p[0]));
-        struct dvec3 n = d3_cross(e1, e2);
+        struct dvec3 n = tp.c;
         double nn = d3_dot(n, n);
         if (nn > 0.0) {
             b1_d = d3_dot(d3_cross(q, e2), n) / nn;
@@ -775,8 +785,8 @@ struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec
     }
     float b0 = 1.0f - b1 - b2;
     struct surface sf;
-    double area2;
-    sf.p = triangle_point(p, e1, e2, b1_d, b2_d, &sf.ng, &sf.p_error, &area2);
+    sf.p = triangle_point(&tp, b1_d, b2_d, &sf.p_error);
+    sf.ng = tp.ng;
     sf.ns = sf.ng;
     if (ns) {
         vec3 n = v3_add(v3_add(v3_scale(ns[0], b0), v3_scale(ns[1], b1)), v3_scale(ns[2], b2));
@@ -809,20 +819,33 @@ float shape_triangle_area(const vec3 p[3], vec3 *ng)
     return (float)(0.5 * triangle_area2(p));
 }
 
-bool shape_triangle_sample(const vec3 p[3], const struct surface *ref, vec2 u,
-                           struct shape_sample *ss)
+bool shape_triangle_plane_sample(const struct triangle_plane *tp, const struct surface *ref, vec2 u,
+                                 struct shape_sample *ss)
 {
     /* uniform by area: barycentrics (b0, b1, b2) = (b.x, b.y, 1 - b.x - b.y) by the square-root
      * warp (sample.c), pdf_area = 1 / A */
-    vec2 b = sample_uniform_triangle(u);
-    vec3 n, p_error;
-    double area2;
-    vec3 pt = triangle_point(p, d3_sub(d3(p[1]), d3(p[0])), d3_sub(d3(p[2]), d3(p[0])), b.y,
-                             1.0 - (double)b.x - (double)b.y, &n, &p_error, &area2);
-    double area = 0.5 * area2; /* area2 = |e1 x e2|, as triangle_area2 computes it */
+    double area = 0.5 * tp->area2; /* area2 = |e1 x e2|, as triangle_area2 computes it */
     if (!(area > 0.0))
         return false;
-    return sample_by_area(pt, p_error, n, 1.0 / area, ref, ss);
+    vec2 b = sample_uniform_triangle(u);
+    vec3 p_error;
+    vec3 pt = triangle_point(tp, b.y, 1.0 - (double)b.x - (double)b.y, &p_error);
+    return sample_by_area(pt, p_error, tp->ng, 1.0 / area, ref, ss);
+}
+
+float shape_triangle_plane_pdf(const struct triangle_plane *tp, const struct surface *ref,
+                               const struct surface *on, vec3 wi)
+{
+    double area = 0.5 * tp->area2;
+    return area > 0.0 ? pdf_by_area(1.0 / area, ref, on, wi) : 0.0f;
+}
+
+bool shape_triangle_sample(const vec3 p[3], const struct surface *ref, vec2 u,
+                           struct shape_sample *ss)
+{
+    struct triangle_plane tp;
+    triangle_plane(p, &tp);
+    return shape_triangle_plane_sample(&tp, ref, u, ss);
 }
 
 float shape_triangle_pdf(const vec3 p[3], const struct surface *ref, const struct surface *on,
@@ -878,9 +901,10 @@ bool shape_triangle_sample_solid_angle(const vec3 p[3], const struct surface *re
         b1 /= sum;
         b2 /= sum;
     }
-    double area2;
-    ss->p = triangle_point(p, d3_sub(d3(p[1]), d3(p[0])), d3_sub(d3(p[2]), d3(p[0])), b1, b2,
-                           &ss->n, &ss->p_error, &area2);
+    struct triangle_plane tp;
+    triangle_plane(p, &tp);
+    ss->p = triangle_point(&tp, b1, b2, &ss->p_error);
+    ss->n = tp.ng;
     return direction_to(ss, ss->n, ref, pdf_u * pdf_spherical_triangle(&st));
 }
 

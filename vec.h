@@ -107,6 +107,14 @@ static inline void mcpt_error_format(const struct mcpt_error *err, char *out, si
 }
 
 static inline vec3 v3(float x, float y, float z) { return (vec3){x, y, z}; }
+/* A 3-vector of doubles: shape.c computes points and normals in double (docs/theory.md,
+ * "Self-intersection"), and struct triangle_plane (shape.h) keeps some. */
+struct dvec3 {
+    double x;
+    double y;
+    double z;
+}; /* 24 bytes */
+
 /* fmaxf and fminf written out: gcc calls libm for them (their NaN rule, a NaN operand gives the
  * other, has no one-instruction form on x86), and they sit in the path loop.  Same results. */
 static inline float max_f(float a, float b) { return a > b || b != b ? a : b; }
