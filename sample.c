@@ -14,6 +14,10 @@
 
 #include "sobol_matrices.h"
 
+#if defined(__GFNI__) && defined(__AVX2__)
+#include <immintrin.h>
+#endif
+
 _Static_assert(SOBOL_N_DIMS == SAMPLE_SOBOL_MAX_DIMS, "sobol_matrices.h and sample.h disagree");
 _Static_assert(SAMPLE_SOBOL_JOINT_DIMS <= SOBOL_N_DIMS, "joint dimensions beyond the table");
 
@@ -317,6 +321,56 @@ static uint32_t pascal_digits(uint32_t index)
     return x;
 }
 
+/* The padded block's requests run a lane each (pad_block): eight 32-bit lanes as a GNU C vector,
+ * on which every operation above is written once more, lane by lane, to the same bits.  Always
+ * inlined: no function takes or returns a 32-byte vector, whose ABI differs without AVX. */
+#pragma GCC diagnostic ignored "-Wpsabi" /* which gcc raises at the definitions all the same */
+typedef uint32_t u32x8 __attribute__((vector_size(32)));
+typedef int32_t i32x8 __attribute__((vector_size(32)));
+typedef float f32x8 __attribute__((vector_size(32)));
+_Static_assert(SAMPLE_PAD_LANES == 8, "pad_block runs the block as one u32x8");
+
+#if defined(__GFNI__) && defined(__AVX2__)
+/* With GFNI the affine map whose matrix is 0x8040201008040201 reverses the bits of every byte
+ * (Intel's GF2P8AFFINEQB), and a byte shuffle reverses each lane's bytes: two instructions for
+ * reverse_bits32's fifteen. */
+static ALWAYS_INLINE u32x8 reverse_bits_x8(u32x8 x)
+{
+    __m256i v = _mm256_gf2p8affine_epi64_epi8((__m256i)x,
+                                              _mm256_set1_epi64x((long long)0x8040201008040201ull),
+                                              0);
+    const __m256i bytes = _mm256_setr_epi8(3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12, 3,
+                                           2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12);
+    return (u32x8)_mm256_shuffle_epi8(v, bytes);
+}
+#else
+static ALWAYS_INLINE u32x8 reverse_bits_x8(u32x8 x)
+{
+    x = (x << 16) | (x >> 16);
+    x = ((x & 0x00ff00ffu) << 8) | ((x & 0xff00ff00u) >> 8);
+    x = ((x & 0x0f0f0f0fu) << 4) | ((x & 0xf0f0f0f0u) >> 4);
+    x = ((x & 0x33333333u) << 2) | ((x & 0xccccccccu) >> 2);
+    x = ((x & 0x55555555u) << 1) | ((x & 0xaaaaaaaau) >> 1);
+    return x;
+}
+#endif
+
+static ALWAYS_INLINE u32x8 pascal_digits_x8(u32x8 x)
+{
+    x ^= (x >> 1) & 0x55555555u;
+    x ^= (x >> 2) & 0x33333333u;
+    x ^= (x >> 4) & 0x0f0f0f0fu;
+    x ^= (x >> 8) & 0x00ff00ffu;
+    x ^= (x >> 16) & 0x0000ffffu;
+    return x;
+}
+
+/* fraction_to_float: x >> 8 < 2^24 converts exactly through int32 */
+static ALWAYS_INLINE f32x8 fraction_to_float_x8(u32x8 x)
+{
+    return __builtin_convertvector((i32x8)(x >> 8), f32x8) * 0x1p-24f;
+}
+
 uint32_t sample_sobol_u32(uint32_t index, uint32_t dim)
 {
     /* x = C_dim * bits(index) over GF(2), the columns C_dim from Joe & Kuo 2008 */
@@ -334,6 +388,16 @@ uint32_t sample_sobol_u32(uint32_t index, uint32_t dim)
  * Karras 2011, "Stratified sampling for stochastic transparency"), with the stronger
  * constants of Vegdahl 2021, "Building a Better LK Hash" in place of Burley 2020's. */
 static uint32_t laine_karras_permutation(uint32_t x, uint32_t seed)
+{
+    x ^= x * 0x3d20adeau;
+    x += seed;
+    x *= (seed >> 16) | 1u;
+    x ^= x * 0x05526c56u;
+    x ^= x * 0x53a22864u;
+    return x;
+}
+
+static ALWAYS_INLINE u32x8 laine_karras_permutation_x8(u32x8 x, u32x8 seed)
 {
     x ^= x * 0x3d20adeau;
     x += seed;
@@ -457,11 +521,18 @@ static void pad_block(struct sampler *s, uint32_t dim)
         seeds = &s->pad_kept[block - PAD_FIRST_KEPT];
     else
         pad_block_seeds(s, dim0, &computed);
-    for (int l = 0; l < SAMPLE_PAD_LANES; l++) {
-        vec2 u = pad_request(s->sample_idx_rev, seeds->index[l], seeds->x[l], seeds->y[l]);
-        s->pad_x[l] = u.x;
-        s->pad_y[l] = u.y;
-    }
+    /* pad_request on every lane at once */
+    u32x8 seed_index, seed_x, seed_y;
+    memcpy(&seed_index, seeds->index, sizeof seed_index);
+    memcpy(&seed_x, seeds->x, sizeof seed_x);
+    memcpy(&seed_y, seeds->y, sizeof seed_y);
+    u32x8 rev = (u32x8){0} + s->sample_idx_rev;
+    u32x8 index = reverse_bits_x8(laine_karras_permutation_x8(rev, seed_index));
+    u32x8 x = reverse_bits_x8(laine_karras_permutation_x8(index, seed_x));
+    u32x8 y = reverse_bits_x8(laine_karras_permutation_x8(pascal_digits_x8(index), seed_y));
+    f32x8 fx = fraction_to_float_x8(x), fy = fraction_to_float_x8(y);
+    memcpy(s->pad_x, &fx, sizeof fx);
+    memcpy(s->pad_y, &fy, sizeof fy);
     s->pad_dim0 = dim0;
 }
 
