@@ -701,9 +701,9 @@ static int age_temporaries(const char *dir, int ago_s)
     return n;
 }
 
-/* kill -9 while the preview is being written (its temporary has just appeared): the image and
- * its preview are still a pair, both old or both new, never the new image beside the old
- * preview.  Killed with the old pair, both of the new pair's temporaries are left; the next run
+/* kill -9 while the preview is being written (its temporary has just appeared beside the
+ * image's): the image and its preview are still a pair, both old or both new, never the new
+ * image beside the old preview.  Killed with the old pair, both of the new pair's temporaries are left; the next run
  * removes them (here aged past FILE_STALE_S, as a later run would find them) and writes the
  * pair.  The kill races the write: on a loaded machine the test can be descheduled between
  * seeing the temporary and the kill while mcpt renames both, so a new pair is a legitimate
@@ -741,10 +741,17 @@ Test(kill9, during_the_preview_leaves_a_pair, .init = setup, .fini = teardown,
         pid_t pid = test_start_mcpt(again, NULL, NULL, ALARM_S);
         bool caught = false;
         for (int k = 0; k < 20000 && !caught; k++) { /* up to about 20 s */
+            /* both temporaries at once: the pair is being written.  The preview's alone is
+             * also made at the start, where mcpt checks that it can create each output (an
+             * empty temporary, removed at once), and a kill there leaves that one alone. */
+            bool has_exr_tmp = false, has_png_tmp = false;
             DIR *d = opendir(tmpdir);
-            for (struct dirent *e; d && (e = readdir(d));)
-                caught |= strncmp(e->d_name, "out.png.tmp.", 12) == 0;
+            for (struct dirent *e; d && (e = readdir(d));) {
+                has_exr_tmp |= strncmp(e->d_name, "out.exr.tmp.", 12) == 0;
+                has_png_tmp |= strncmp(e->d_name, "out.png.tmp.", 12) == 0;
+            }
             closedir(d);
+            caught = has_exr_tmp && has_png_tmp;
             if (!caught)
                 nanosleep(&(struct timespec){0, 1000 * 1000}, NULL);
         }
