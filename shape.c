@@ -698,8 +698,9 @@ struct surface shape_plane_surface(const struct plane *pl, const struct ray *ray
 
 /* ---- triangle (the BVH finds the hit) ---- */
 
-/* What every point of triangle p[3] shares (shape.h), by the operations triangle_point used to
- * repeat for each point, so the points are the same to the bit. */
+/* What every point of triangle p[3] shares (shape.h): a hit computes it for its triangle, the
+ * light table once per emitting triangle, by these same operations, so a light's sampled points
+ * are the bits a fresh computation would give. */
 static ALWAYS_INLINE void triangle_plane(const vec3 p[3], struct triangle_plane *tp)
 {
     tp->p0 = p[0];
