@@ -322,9 +322,9 @@ static uint32_t pascal_digits(uint32_t index)
 }
 
 /* The padded block's requests run a lane each (pad_block): eight 32-bit lanes as a GNU C vector,
- * on which every operation above is written once more, lane by lane, to the same bits.  Always
- * inlined: no function takes or returns a 32-byte vector, whose ABI differs without AVX. */
-#pragma GCC diagnostic ignored "-Wpsabi" /* which gcc raises at the definitions all the same */
+ * on which every operation above is written once more, lane by lane, to the same bits.  The
+ * helpers work in place through pointers: a 32-byte vector passed by value has another ABI
+ * without AVX, which gcc notes at every such definition. */
 typedef uint32_t u32x8 __attribute__((vector_size(32)));
 typedef int32_t i32x8 __attribute__((vector_size(32)));
 typedef float f32x8 __attribute__((vector_size(32)));
@@ -334,41 +334,44 @@ _Static_assert(SAMPLE_PAD_LANES == 8, "pad_block runs the block as one u32x8");
 /* With GFNI the affine map whose matrix is 0x8040201008040201 reverses the bits of every byte
  * (Intel's GF2P8AFFINEQB), and a byte shuffle reverses each lane's bytes: two instructions for
  * reverse_bits32's fifteen. */
-static ALWAYS_INLINE u32x8 reverse_bits_x8(u32x8 x)
+static ALWAYS_INLINE void reverse_bits_x8(u32x8 *x)
 {
-    __m256i v = _mm256_gf2p8affine_epi64_epi8((__m256i)x,
+    __m256i v = _mm256_gf2p8affine_epi64_epi8((__m256i)*x,
                                               _mm256_set1_epi64x((long long)0x8040201008040201ull),
                                               0);
     const __m256i bytes = _mm256_setr_epi8(3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12, 3,
                                            2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12);
-    return (u32x8)_mm256_shuffle_epi8(v, bytes);
+    *x = (u32x8)_mm256_shuffle_epi8(v, bytes);
 }
 #else
-static ALWAYS_INLINE u32x8 reverse_bits_x8(u32x8 x)
+static ALWAYS_INLINE void reverse_bits_x8(u32x8 *x)
 {
-    x = (x << 16) | (x >> 16);
-    x = ((x & 0x00ff00ffu) << 8) | ((x & 0xff00ff00u) >> 8);
-    x = ((x & 0x0f0f0f0fu) << 4) | ((x & 0xf0f0f0f0u) >> 4);
-    x = ((x & 0x33333333u) << 2) | ((x & 0xccccccccu) >> 2);
-    x = ((x & 0x55555555u) << 1) | ((x & 0xaaaaaaaau) >> 1);
-    return x;
+    u32x8 v = *x;
+    v = (v << 16) | (v >> 16);
+    v = ((v & 0x00ff00ffu) << 8) | ((v & 0xff00ff00u) >> 8);
+    v = ((v & 0x0f0f0f0fu) << 4) | ((v & 0xf0f0f0f0u) >> 4);
+    v = ((v & 0x33333333u) << 2) | ((v & 0xccccccccu) >> 2);
+    v = ((v & 0x55555555u) << 1) | ((v & 0xaaaaaaaau) >> 1);
+    *x = v;
 }
 #endif
 
-static ALWAYS_INLINE u32x8 pascal_digits_x8(u32x8 x)
+static ALWAYS_INLINE void pascal_digits_x8(u32x8 *x)
 {
-    x ^= (x >> 1) & 0x55555555u;
-    x ^= (x >> 2) & 0x33333333u;
-    x ^= (x >> 4) & 0x0f0f0f0fu;
-    x ^= (x >> 8) & 0x00ff00ffu;
-    x ^= (x >> 16) & 0x0000ffffu;
-    return x;
+    u32x8 v = *x;
+    v ^= (v >> 1) & 0x55555555u;
+    v ^= (v >> 2) & 0x33333333u;
+    v ^= (v >> 4) & 0x0f0f0f0fu;
+    v ^= (v >> 8) & 0x00ff00ffu;
+    v ^= (v >> 16) & 0x0000ffffu;
+    *x = v;
 }
 
-/* fraction_to_float: x >> 8 < 2^24 converts exactly through int32 */
-static ALWAYS_INLINE f32x8 fraction_to_float_x8(u32x8 x)
+/* fraction_to_float into out[8]: x >> 8 < 2^24 converts exactly through int32 */
+static ALWAYS_INLINE void fraction_to_float_x8(const u32x8 *x, float *out)
 {
-    return __builtin_convertvector((i32x8)(x >> 8), f32x8) * 0x1p-24f;
+    f32x8 f = __builtin_convertvector((i32x8)(*x >> 8), f32x8) * 0x1p-24f;
+    memcpy(out, &f, sizeof f);
 }
 
 uint32_t sample_sobol_u32(uint32_t index, uint32_t dim)
@@ -397,14 +400,15 @@ static uint32_t laine_karras_permutation(uint32_t x, uint32_t seed)
     return x;
 }
 
-static ALWAYS_INLINE u32x8 laine_karras_permutation_x8(u32x8 x, u32x8 seed)
+static ALWAYS_INLINE void laine_karras_permutation_x8(u32x8 *x, const u32x8 *seed)
 {
-    x ^= x * 0x3d20adeau;
-    x += seed;
-    x *= (seed >> 16) | 1u;
-    x ^= x * 0x05526c56u;
-    x ^= x * 0x53a22864u;
-    return x;
+    u32x8 v = *x;
+    v ^= v * 0x3d20adeau;
+    v += *seed;
+    v *= (*seed >> 16) | 1u;
+    v ^= v * 0x05526c56u;
+    v ^= v * 0x53a22864u;
+    *x = v;
 }
 
 /* Nested uniform (Owen 1995) scrambling of a 32-bit fraction, as in Burley 2020: after the bit
@@ -526,13 +530,17 @@ static void pad_block(struct sampler *s, uint32_t dim)
     memcpy(&seed_index, seeds->index, sizeof seed_index);
     memcpy(&seed_x, seeds->x, sizeof seed_x);
     memcpy(&seed_y, seeds->y, sizeof seed_y);
-    u32x8 rev = (u32x8){0} + s->sample_idx_rev;
-    u32x8 index = reverse_bits_x8(laine_karras_permutation_x8(rev, seed_index));
-    u32x8 x = reverse_bits_x8(laine_karras_permutation_x8(index, seed_x));
-    u32x8 y = reverse_bits_x8(laine_karras_permutation_x8(pascal_digits_x8(index), seed_y));
-    f32x8 fx = fraction_to_float_x8(x), fy = fraction_to_float_x8(y);
-    memcpy(s->pad_x, &fx, sizeof fx);
-    memcpy(s->pad_y, &fy, sizeof fy);
+    u32x8 index = (u32x8){0} + s->sample_idx_rev;
+    laine_karras_permutation_x8(&index, &seed_index);
+    reverse_bits_x8(&index);
+    u32x8 x = index, y = index;
+    laine_karras_permutation_x8(&x, &seed_x);
+    reverse_bits_x8(&x);
+    pascal_digits_x8(&y);
+    laine_karras_permutation_x8(&y, &seed_y);
+    reverse_bits_x8(&y);
+    fraction_to_float_x8(&x, s->pad_x);
+    fraction_to_float_x8(&y, s->pad_y);
     s->pad_dim0 = dim0;
 }
 
