@@ -1431,7 +1431,9 @@ unsigned bvh_layouts(const struct bvh *bvh) { return bvh->layouts; }
  * measurably in front of the plane (tri_hit decides the side exactly, in double where float
  * cannot); an origin on the plane within double rounding finds nothing there.  Spawned rays
  * start at offset_ray_origin (vec.h), which puts the origin on the correct side by the hit
- * point's error bound.
+ * point's error bound.  The renderer also names the triangle a ray leaves (`from`,
+ * bvh_intersect_from), and every traversal skips it: for such a ray it cannot be a hit, and it
+ * is the one triangle whose test float leaves to double (t ~ 0).
  * The per-ray constants (struct ray_pre) and the conservative slab test box_hit, which the wide
  * layout uses too, are in bvh_internal.h. */
 
@@ -1445,7 +1447,8 @@ static void ray_setup(const struct ray *ray, struct ray_pre *rp)
 static bool tri_hit(const struct bvh_tri *tri, const struct ray_pre *rp, float t_min, float t_max,
                     float *t_out, float *u_out, float *v_out);
 
-static bool binary_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *hit)
+static bool binary_intersect(const struct bvh *bvh, const struct ray *ray, uint32_t from,
+                             struct bvh_hit *hit)
 {
     if (bvh->n_nodes == 0 || !ray_is_valid(ray))
         return false;
@@ -1471,7 +1474,8 @@ static bool binary_intersect(const struct bvh *bvh, const struct ray *ray, struc
                 float t;
                 float u;
                 float v;
-                if (tri_hit(&bvh->tris[i], &rp, t_min, t_hit, &t, &u, &v)) {
+                if (bvh->prim_idx[i] != from &&
+                    tri_hit(&bvh->tris[i], &rp, t_min, t_hit, &t, &u, &v)) {
                     t_hit = t;
                     u_hit = u;
                     v_hit = v;
@@ -1521,7 +1525,7 @@ done:
 
 /* Any hit: the same boxes against the fixed [t_min, t_max], children in stored order, and the
  * first triangle hit ends the search.  It reports a hit exactly when binary_intersect does. */
-static bool binary_occluded(const struct bvh *bvh, const struct ray *ray)
+static bool binary_occluded(const struct bvh *bvh, const struct ray *ray, uint32_t from)
 {
     if (bvh->n_nodes == 0 || !ray_is_valid(ray))
         return false;
@@ -1544,7 +1548,8 @@ static bool binary_occluded(const struct bvh *bvh, const struct ray *ray)
                 float t;
                 float u;
                 float v;
-                if (tri_hit(&bvh->tris[i], &rp, t_min, t_max, &t, &u, &v))
+                if (bvh->prim_idx[i] != from &&
+                    tri_hit(&bvh->tris[i], &rp, t_min, t_max, &t, &u, &v))
                     return true;
             }
         } else {
@@ -1570,32 +1575,44 @@ static bool binary_occluded(const struct bvh *bvh, const struct ray *ray)
 
 /* The public entry points: the wide layout when the BVH carries it (bvh_wide.c), else the
  * binary reference. */
-bool bvh_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *hit)
+bool bvh_intersect_from(const struct bvh *bvh, const struct ray *ray, uint32_t from,
+                        struct bvh_hit *hit)
 {
     if (bvh->layouts & BVH_LAYOUT_WIDE)
-        return bvh_wide_intersect(bvh, ray, hit);
-    return binary_intersect(bvh, ray, hit);
+        return bvh_wide_intersect(bvh, ray, from, hit);
+    return binary_intersect(bvh, ray, from, hit);
+}
+
+bool bvh_occluded_from(const struct bvh *bvh, const struct ray *ray, uint32_t from)
+{
+    if (bvh->layouts & BVH_LAYOUT_WIDE)
+        return bvh_wide_occluded(bvh, ray, from);
+    return binary_occluded(bvh, ray, from);
+}
+
+bool bvh_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *hit)
+{
+    return bvh_intersect_from(bvh, ray, BVH_NO_PRIM, hit);
 }
 
 bool bvh_occluded(const struct bvh *bvh, const struct ray *ray)
 {
-    if (bvh->layouts & BVH_LAYOUT_WIDE)
-        return bvh_wide_occluded(bvh, ray);
-    return binary_occluded(bvh, ray);
+    return bvh_occluded_from(bvh, ray, BVH_NO_PRIM);
 }
 
 bool bvh_intersect_layout(const struct bvh *bvh, enum bvh_layout layout, const struct ray *ray,
                           struct bvh_hit *hit)
 {
     assert(bvh->n_tris == 0 || (bvh->layouts & (unsigned)layout));
-    return layout == BVH_LAYOUT_WIDE ? bvh_wide_intersect(bvh, ray, hit)
-                                     : binary_intersect(bvh, ray, hit);
+    return layout == BVH_LAYOUT_WIDE ? bvh_wide_intersect(bvh, ray, BVH_NO_PRIM, hit)
+                                     : binary_intersect(bvh, ray, BVH_NO_PRIM, hit);
 }
 
 bool bvh_occluded_layout(const struct bvh *bvh, enum bvh_layout layout, const struct ray *ray)
 {
     assert(bvh->n_tris == 0 || (bvh->layouts & (unsigned)layout));
-    return layout == BVH_LAYOUT_WIDE ? bvh_wide_occluded(bvh, ray) : binary_occluded(bvh, ray);
+    return layout == BVH_LAYOUT_WIDE ? bvh_wide_occluded(bvh, ray, BVH_NO_PRIM)
+                                     : binary_occluded(bvh, ray, BVH_NO_PRIM);
 }
 
 /* ---- Watertight ray-triangle test: Woop, Benthin, Wald 2013 -----------------------------------
@@ -1878,6 +1895,12 @@ void bvh_brute_step(const struct bvh_tri *tri, uint32_t prim, const struct ray_p
 
 bool bvh_intersect_brute(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *hit)
 {
+    return bvh_intersect_brute_from(bvh, ray, BVH_NO_PRIM, hit);
+}
+
+bool bvh_intersect_brute_from(const struct bvh *bvh, const struct ray *ray, uint32_t from,
+                              struct bvh_hit *hit)
+{
     if (!ray_is_valid(ray))
         return false;
     struct ray_pre rp;
@@ -1885,9 +1908,10 @@ bool bvh_intersect_brute(const struct bvh *bvh, const struct ray *ray, struct bv
     struct bvh_hit best = {ray->t_max, 0.0f, 0.0f, UINT32_MAX};
     if (bvh->layouts & BVH_LAYOUT_BINARY) {
         for (uint32_t i = 0; i < bvh->n_refs; i++)
-            bvh_brute_step(&bvh->tris[i], bvh->prim_idx[i], &rp, ray->t_min, &best);
+            if (bvh->prim_idx[i] != from)
+                bvh_brute_step(&bvh->tris[i], bvh->prim_idx[i], &rp, ray->t_min, &best);
     } else if (bvh->n_wide > 0) {
-        bvh_wide_brute(bvh, &rp, ray->t_min, &best);
+        bvh_wide_brute(bvh, &rp, ray->t_min, from, &best);
     }
     if (best.prim_idx == UINT32_MAX)
         return false;

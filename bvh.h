@@ -91,6 +91,19 @@ bool bvh_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit 
 /* Any hit with t in (ray->t_min, ray->t_max): shadow rays.  Returns true when occluded. */
 bool bvh_occluded(const struct bvh *bvh, const struct ray *ray);
 
+/* The prim_idx of no triangle: what rays that leave no triangle pass as `from`. */
+#define BVH_NO_PRIM UINT32_MAX
+
+/* bvh_intersect and bvh_occluded for a ray spawned from the surface of triangle `from` (its
+ * prim_idx, or BVH_NO_PRIM), which is never reported.  A ray leaving a flat triangle, its origin
+ * offset to the side of its direction (offset_ray_origin), cannot meet that triangle at t > 0,
+ * so the result is what bvh_intersect / bvh_occluded give; but the origin's own triangle is the
+ * one whose test float cannot decide (t ~ 0), and the traversals skip its double-precision
+ * test (docs/theory.md, "Self-intersection"). */
+bool bvh_intersect_from(const struct bvh *bvh, const struct ray *ray, uint32_t from,
+                        struct bvh_hit *hit);
+bool bvh_occluded_from(const struct bvh *bvh, const struct ray *ray, uint32_t from);
+
 /* The same through one given layout, which the BVH must carry (see bvh_layouts): the tests and
  * the benchmark compare the layouts on the same rays. */
 bool bvh_intersect_layout(const struct bvh *bvh, enum bvh_layout layout, const struct ray *ray,
@@ -99,6 +112,8 @@ bool bvh_occluded_layout(const struct bvh *bvh, enum bvh_layout layout, const st
 
 /* Brute-force reference: tests every triangle (the teaching O(n) baseline and test oracle). */
 bool bvh_intersect_brute(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *hit);
+bool bvh_intersect_brute_from(const struct bvh *bvh, const struct ray *ray, uint32_t from,
+                              struct bvh_hit *hit);
 
 /* Ray packets: BVH_PACKET_SIZE rays in SoA form, traversed together through the wide layout
  * (each node's boxes are tested against all active rays at once).  They pay for coherent rays

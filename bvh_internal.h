@@ -238,12 +238,13 @@ bool bvh_wide_convert(struct bvh *bvh, const vec3 *positions, const uint32_t *in
                       const uint8_t *degenerate);
 
 /* bvh_intersect / bvh_occluded through the wide layout, which bvh must carry. */
-bool bvh_wide_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *hit);
-bool bvh_wide_occluded(const struct bvh *bvh, const struct ray *ray);
+bool bvh_wide_intersect(const struct bvh *bvh, const struct ray *ray, uint32_t from,
+                        struct bvh_hit *hit);
+bool bvh_wide_occluded(const struct bvh *bvh, const struct ray *ray, uint32_t from);
 
 /* Brute force over the wide leaves (bvh_brute_step on each triangle, in stored order), for a
  * BVH that did not keep the binary layout. */
-void bvh_wide_brute(const struct bvh *bvh, const struct ray_pre *rp, float t_min,
+void bvh_wide_brute(const struct bvh *bvh, const struct ray_pre *rp, float t_min, uint32_t from,
                     struct bvh_hit *best);
 
 #endif

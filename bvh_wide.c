@@ -1016,6 +1016,7 @@ struct wide_ray8 {
     int order_shift;              /* 3 octant: the ray's child order (struct wide_node) */
     const struct wide_node *wide; /* the node array */
     struct ray_pre *rp;           /* the caller's; Woop's constants go there at the first leaf */
+    uint32_t from;                /* the triangle the ray leaves (never reported), or BVH_NO_PRIM */
 };                                /* 640 bytes with AVX2 */
 
 /* The slab test takes max(max(t_0, t_1), max(t_2, t_min)) as a tree, which shortens the chain
@@ -1091,6 +1092,7 @@ static inline void wide_ray8_box(const struct bvh *bvh, const struct wide_ray *w
     const int *is_neg = wr->rp->is_neg;
     v->order_shift = 3 * (is_neg[0] | is_neg[1] << 1 | is_neg[2] << 2);
     v->rp = wr->rp;
+    v->from = BVH_NO_PRIM;
 }
 
 /* Woop's constants: computed into *rp (which the caller owns) on the first leaf. */
@@ -1177,7 +1179,23 @@ static COLD uint32_t leaf_undecided(const struct bvh *bvh, uint32_t first, uint3
     return hits;
 }
 
-/* woop8 of one ray against the n (1..8) triangles of the leaf at wide triangle `first`. */
+/* Of the lanes of the leaf at wide triangle `first`, those holding triangle `from` (the one a
+ * spawned ray leaves: bvh_intersect_from).  Only lanes woop8 found hit or left undecided are
+ * looked at, so the lookup costs nothing on the leaves a ray merely passes. */
+static inline uint32_t leaf_own(const struct bvh *bvh, uint32_t first, uint32_t lanes,
+                                uint32_t from)
+{
+    uint32_t own = 0;
+    for (; lanes; lanes &= lanes - 1) {
+        int i = lowest_bit(lanes);
+        if (bvh->wide_prim_idx[first + (uint32_t)i] == from)
+            own |= 1u << i;
+    }
+    return own;
+}
+
+/* woop8 of one ray against the n (1..8) triangles of the leaf at wide triangle `first`, without
+ * the ray's own triangle (v->from). */
 static ALWAYS_INLINE uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t first, uint32_t n,
                                             const struct wide_ray8 *v, float t_max,
                                             struct woop8_out *out)
@@ -1197,6 +1215,11 @@ static ALWAYS_INLINE uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t firs
     in.t_min = v->t_min;
     in.t_max = f8_set1(t_max);
     uint32_t hits = woop8(&in, (1u << n) - 1u, out);
+    if ((hits | out->undecided) && v->from != BVH_NO_PRIM) {
+        uint32_t own = leaf_own(bvh, first, hits | out->undecided, v->from);
+        hits &= ~own;
+        out->undecided &= ~own;
+    }
     if (out->undecided)
         hits |= leaf_undecided(bvh, first, n, v->rp, v->rp_t_min, t_max, out->undecided, out);
     return hits;
@@ -1387,10 +1410,11 @@ static bool wide_any_safe(const struct bvh *bvh, uint32_t root, struct wide_ray8
 }
 
 static inline void wide_closest_ray(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
-                                    struct wide_hit *hit)
+                                    uint32_t from, struct wide_hit *hit)
 {
     struct wide_ray8 v;
     wide_ray8_box(bvh, wr, &v);
+    v.from = from;
     if (wr->fast)
         wide_closest_fast(bvh, root, &v, hit);
     else
@@ -1398,10 +1422,11 @@ static inline void wide_closest_ray(const struct bvh *bvh, uint32_t root, const 
 }
 
 static inline bool wide_any_ray(const struct bvh *bvh, uint32_t root, const struct wide_ray *wr,
-                                float t_max)
+                                uint32_t from, float t_max)
 {
     struct wide_ray8 v;
     wide_ray8_box(bvh, wr, &v);
+    v.from = from;
     return wr->fast ? wide_any_fast(bvh, root, &v, t_max) : wide_any_safe(bvh, root, &v, t_max);
 }
 
@@ -1504,11 +1529,13 @@ static inline bool wide_ray8_fast(const struct bvh *bvh, const struct ray *ray, 
     rp->d[1] = ray->d.y;
     rp->d[2] = ray->d.z;
     v->rp = rp;
+    v->from = BVH_NO_PRIM;
     return true;
 }
 #endif
 
-bool bvh_wide_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *out)
+bool bvh_wide_intersect(const struct bvh *bvh, const struct ray *ray, uint32_t from,
+                        struct bvh_hit *out)
 {
     if (bvh->n_wide == 0)
         return false;
@@ -1520,6 +1547,7 @@ bool bvh_wide_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh
     if (wide_ray8_fast(bvh, ray, &rp, &v, &is_miss)) {
         if (is_miss)
             return false;
+        v.from = from;
         wide_closest_fast(bvh, 0, &v, &hit);
     } else
 #endif
@@ -1527,7 +1555,7 @@ bool bvh_wide_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh
         struct wide_ray wr;
         if (!wide_ray_begin(bvh, ray, &rp, &wr))
             return false;
-        wide_closest_ray(bvh, 0, &wr, &hit);
+        wide_closest_ray(bvh, 0, &wr, from, &hit);
     }
     if (hit.tri == UINT32_MAX)
         return false;
@@ -1535,7 +1563,7 @@ bool bvh_wide_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh
     return true;
 }
 
-bool bvh_wide_occluded(const struct bvh *bvh, const struct ray *ray)
+bool bvh_wide_occluded(const struct bvh *bvh, const struct ray *ray, uint32_t from)
 {
     if (bvh->n_wide == 0)
         return false;
@@ -1543,13 +1571,15 @@ bool bvh_wide_occluded(const struct bvh *bvh, const struct ray *ray)
 #if BVH_FUSED_SLABS
     struct wide_ray8 v;
     bool is_miss;
-    if (wide_ray8_fast(bvh, ray, &rp, &v, &is_miss))
+    if (wide_ray8_fast(bvh, ray, &rp, &v, &is_miss)) {
+        v.from = from;
         return !is_miss && wide_any_fast(bvh, 0, &v, ray->t_max);
+    }
 #endif
     struct wide_ray wr;
     if (!wide_ray_begin(bvh, ray, &rp, &wr))
         return false;
-    return wide_any_ray(bvh, 0, &wr, ray->t_max);
+    return wide_any_ray(bvh, 0, &wr, from, ray->t_max);
 }
 
 /* ---- Packets: eight rays through the wide layout ------------------------------------------------
@@ -1759,6 +1789,7 @@ static inline bool packet_lane_fast(const struct bvh *bvh, const struct bvh_pack
     v->order_shift = 3 * neg;
     v->wide = bvh->wide;
     v->rp = rp;
+    v->from = BVH_NO_PRIM;
     return true;
 }
 
@@ -1907,7 +1938,7 @@ static ALWAYS_INLINE uint32_t packet_closest(const struct bvh *bvh, const struct
                 } else {
                     struct wide_ray wr;
                     packet_lane_ray(packet, lane, &rp, &wr);
-                    wide_closest_ray(bvh, cur.ref, &wr, &h);
+                    wide_closest_ray(bvh, cur.ref, &wr, BVH_NO_PRIM, &h);
                 }
                 t_hit[lane] = h.t;
                 u_hit[lane] = h.u;
@@ -2059,7 +2090,7 @@ static ALWAYS_INLINE uint32_t packet_any(const struct bvh *bvh, const struct bvh
                 } else {
                     struct wide_ray wr;
                     packet_lane_ray(packet, lane, &rp, &wr);
-                    is_occluded = wide_any_ray(bvh, cur.ref, &wr, packet->t_max[lane]);
+                    is_occluded = wide_any_ray(bvh, cur.ref, &wr, BVH_NO_PRIM, packet->t_max[lane]);
                 }
                 if (is_occluded)
                     occluded |= 1u << lane;
@@ -2134,7 +2165,7 @@ void bvh_packet_set(struct bvh_packet *packet, int lane, const struct ray *ray)
  * stored order (the order of the wide triangles, which is the binary order without the
  * degenerate triangles), each triangle unpacked from SoA and tested by bvh_brute_step, the
  * scalar reference test. */
-void bvh_wide_brute(const struct bvh *bvh, const struct ray_pre *rp, float t_min,
+void bvh_wide_brute(const struct bvh *bvh, const struct ray_pre *rp, float t_min, uint32_t from,
                     struct bvh_hit *best)
 {
     uint32_t stack[WIDE_STACK_SIZE];
@@ -2152,6 +2183,8 @@ void bvh_wide_brute(const struct bvh *bvh, const struct ray_pre *rp, float t_min
         uint32_t n = (ref & 7u) + 1;
         for (uint32_t i = 0; i < n; i++) {
             struct bvh_tri tri;
+            if (bvh->wide_prim_idx[first + i] == from)
+                continue;
             leaf_tri(bvh, first, n, i, &tri);
             bvh_brute_step(&tri, bvh->wide_prim_idx[first + i], rp, t_min, best);
         }

@@ -49,6 +49,7 @@ struct trace_scene {
 struct hit_record {
     struct surface sf;
     uint32_t light_idx; /* or LIGHT_NONE */
+    uint32_t tri;       /* the triangle hit (the BVH's prim_idx), or BVH_NO_PRIM */
 };
 
 /* The first intersection of a camera ray, found before its path starts (the packets of the
@@ -67,6 +68,7 @@ struct vertex {
     vec3 wo_world; /* unit direction towards the previous vertex */
     vec3 wo;       /* wo_world in the shading frame */
     vec3 n_sky;    /* ns turned to the side of wo: the sky is sampled about it */
+    uint32_t tri;  /* the triangle it lies on, or BVH_NO_PRIM: its rays never report it */
 };
 
 /* The vertex a ray left from and how its direction was drawn: what MIS needs to weigh the
@@ -82,10 +84,11 @@ static void count_ray(const struct trace_options *opt, const struct ray *ray, bo
                       uint64_t *n_rays);
 static vec3 radiance(const struct trace_scene *ts, const struct trace_options *opt, struct ray ray,
                      const struct first_hit *first, struct sampler *sampler, uint64_t *n_rays);
-static bool intersect(const struct trace_scene *ts, const struct ray *ray, struct hit_record *hr);
+static bool intersect(const struct trace_scene *ts, const struct ray *ray, uint32_t from,
+                      struct hit_record *hr);
 static bool intersect_camera_rays(const struct trace_scene *ts, const struct trace_options *opt,
                                   const struct ray *rays, uint32_t n, struct first_hit *first);
-static bool occluded(const struct trace_scene *ts, const struct ray *ray);
+static bool occluded(const struct trace_scene *ts, const struct ray *ray, uint32_t from);
 static struct ray spawn_ray(const struct surface *sf, vec3 d);
 static struct ray spawn_ray_to(const struct surface *from, vec3 p_to, vec3 p_to_error, vec3 n_to);
 static struct vertex make_vertex(const struct surface *sf, const struct material *m, vec3 wo_world,
@@ -138,11 +141,12 @@ static vec3 radiance(const struct trace_scene *ts, const struct trace_options *o
     struct sampler extra; /* light samples 1 .. N-1 (sample.h, SAMPLE_DIM_LIGHT_EXTRA) */
     bool extra_started = false;
 
+    uint32_t from = BVH_NO_PRIM; /* the triangle the ray leaves */
     for (uint32_t n_bounces = 0;;) {
         /* find the next vertex */
         struct hit_record hr;
         count_ray(opt, &ray, false, n_rays);
-        bool hit = first ? first->hit : intersect(ts, &ray, &hr);
+        bool hit = first ? first->hit : intersect(ts, &ray, from, &hr);
         if (first && hit)
             hr = first->hr;
         first = NULL;
@@ -171,6 +175,7 @@ static vec3 radiance(const struct trace_scene *ts, const struct trace_options *o
         struct material m_textured;
         struct vertex v = make_vertex(&hr.sf, &scene->materials[hr.sf.mat_idx], wo_world,
                                       &m_textured);
+        v.tri = hr.tri;
         uint32_t bounce = n_bounces - 1;
         uint32_t dim0 = SAMPLE_DIM_BOUNCE0 + bounce * SAMPLE_DIMS_PER_BOUNCE;
 
@@ -209,6 +214,7 @@ static vec3 radiance(const struct trace_scene *ts, const struct trace_options *o
         }
         last = (struct last_bounce){hr.sf, v.n_sky, bs.pdf_sa, bs.is_specular};
         ray = spawn_ray(&hr.sf, wi_world);
+        from = hr.tri;
 
         /* Russian roulette after bounce rr_depth: continue with probability p, beta /= p;
          * p = min(1, max(beta) eta^2 / threshold) by throughput (a survivor below the threshold
@@ -674,7 +680,7 @@ static vec3 sample_one_light(const struct trace_scene *ts, const struct trace_op
     struct ray shadow = ls.is_infinite ? spawn_ray(sf, ls.wi)
                                        : spawn_ray_to(sf, ls.p, ls.p_error, ls.n);
     count_ray(opt, &shadow, true, n_rays);
-    if (occluded(ts, &shadow))
+    if (occluded(ts, &shadow, v->tri))
         return zero;
     vec3 Ld = v3_scale(v3_mul(f, ls.Le), fabsf(wi.z) / ((float)n_ls * pmf));
     if (ls.is_delta)
@@ -769,12 +775,14 @@ static bool closest_hit(const struct trace_scene *ts, const struct ray *ray_in,
             idx = i;
             ray.t_max = t;
         }
+    hr->tri = BVH_NO_PRIM;
     switch (kind) {
     case HIT_NONE:
         return false;
     case HIT_TRI:
         hr->sf = triangle_surface(scene, idx, &ray, bh->t, bh->u, bh->v);
         hr->light_idx = light_idx_of(ts->lights, LIGHT_TRIANGLE, idx);
+        hr->tri = idx;
         return true;
     case HIT_SPHERE:
         hr->sf = shape_sphere_surface(&scene->spheres[idx], &ray, ray.t_max);
@@ -792,10 +800,11 @@ static bool closest_hit(const struct trace_scene *ts, const struct ray *ray_in,
     return false;
 }
 
-static bool intersect(const struct trace_scene *ts, const struct ray *ray, struct hit_record *hr)
+static bool intersect(const struct trace_scene *ts, const struct ray *ray, uint32_t from,
+                      struct hit_record *hr)
 {
     struct bvh_hit bh;
-    bool tri_hit = bvh_intersect(ts->bvh, ray, &bh);
+    bool tri_hit = bvh_intersect_from(ts->bvh, ray, from, &bh);
     return closest_hit(ts, ray, tri_hit ? &bh : NULL, hr);
 }
 
@@ -820,7 +829,7 @@ static bool intersect_camera_rays(const struct trace_scene *ts, const struct tra
     return true;
 }
 
-static bool occluded(const struct trace_scene *ts, const struct ray *ray)
+static bool occluded(const struct trace_scene *ts, const struct ray *ray, uint32_t from)
 {
     const struct scene *scene = ts->scene;
     float t;
@@ -833,7 +842,7 @@ static bool occluded(const struct trace_scene *ts, const struct ray *ray)
     for (uint32_t i = 0; i < scene->n_planes; i++)
         if (shape_plane_intersect(&scene->planes[i], ray, &t))
             return true;
-    return bvh_occluded(ts->bvh, ray);
+    return bvh_occluded_from(ts->bvh, ray, from);
 }
 
 /* PBRT 4e, ch. 6, "Robust Spawned Ray Origins": SpawnRay */

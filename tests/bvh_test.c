@@ -840,6 +840,97 @@ Test(bvh, reintersect_pbrt)
     cr_assert_gt(n_spawned, 1900000);
 }
 
+/* ---- rays that leave a triangle (bvh_intersect_from) --------------------------------------------
+ * A ray spawned from triangle `from` never reports it: every traversal (wide, binary, brute
+ * force) skips it, and for rays spawned as the renderer spawns them (offset_ray_origin) that
+ * changes nothing, since such a ray cannot meet its own flat triangle at t > 0.  Triangle soup
+ * (crossing and touching triangles) plus an icosphere: points at random barycentrics, rays into
+ * both hemispheres, unbounded and shadow-like (t_max = 0.5).  Rays aimed at a triangle from
+ * outside with that triangle as `from` show that the skip is real: they find another triangle
+ * or none, in every traversal alike. */
+static bool same_hit(bool a, const struct bvh_hit *ha, bool b, const struct bvh_hit *hb)
+{
+    return a == b && (!a || (ha->prim_idx == hb->prim_idx && same_bits(ha->t, hb->t) &&
+                             same_bits(ha->u, hb->u) && same_bits(ha->v, hb->v)));
+}
+
+Test(bvh, spawned_rays_skip_their_triangle)
+{
+    struct mesh m = {0};
+    make_icosphere(&m, 3, v3(0.2f, -0.1f, 0.3f), 0.6f); /* first: it subdivides all of m */
+    make_soup(&m, 3000, 77);
+    struct bvh *both = build(&m);
+    /* one layout each: bvh_intersect_from takes the wide one where there is one */
+    struct bvh_build_options opt = {1, BVH_LAYOUT_WIDE, BVH_QUALITY_DEFAULT};
+    struct bvh *wide = bvh_build_with(m.positions, m.indices, m.n_tris, &opt);
+    opt.layouts = BVH_LAYOUT_BINARY;
+    struct bvh *binary = bvh_build_with(m.positions, m.indices, m.n_tris, &opt);
+    cr_assert(wide && binary);
+    struct rng r = {91};
+    int n_rays = 0, n_hits = 0, n_own_first = 0;
+    for (uint32_t prim = 0; prim < m.n_tris; prim += 3) {
+        vec3 q[3];
+        for (int k = 0; k < 3; k++)
+            q[k] = m.positions[m.indices[3 * prim + (uint32_t)k]];
+        float b1, b2;
+        rng_bary(&r, &b1, &b2);
+        struct surface sf = shape_triangle_surface(q, NULL, NULL, NULL, 0.0f, b1, b2, 0);
+        for (int k = 0; k < 4; k++) {
+            vec3 w = rng_dir(&r);
+            if ((v3_dot(w, sf.ng) < 0.0f) != (k % 2 == 1))
+                w = v3_neg(w);
+            struct ray out = make_ray(offset_ray_origin(sf.p, sf.p_error, sf.ng, w), w, 0.0f,
+                                      k < 2 ? INFINITY : 0.5f);
+            struct bvh_hit h_plain, h_from, h_bin, h_brute, h_wide_brute;
+            bool plain = bvh_intersect(both, &out, &h_plain);
+            bool from = bvh_intersect_from(both, &out, prim, &h_from);
+            bool bin = bvh_intersect_from(binary, &out, prim, &h_bin);
+            cr_assert(same_hit(from, &h_from, bin, &h_bin), "triangle %u: wide vs binary", prim);
+            bool brute = bvh_intersect_brute_from(both, &out, prim, &h_brute);
+            bool wide_brute = bvh_intersect_brute_from(wide, &out, prim, &h_wide_brute);
+            cr_assert(same_hit(plain, &h_plain, from, &h_from),
+                      "triangle %u: spawned ray differs with from (%d %d)", prim, plain, from);
+            cr_assert(same_hit(from, &h_from, brute, &h_brute), "triangle %u: wide vs brute", prim);
+            cr_assert(same_hit(from, &h_from, wide_brute, &h_wide_brute),
+                      "triangle %u: wide vs brute over the wide leaves", prim);
+            cr_assert(!from || h_from.prim_idx != prim);
+            bool occ = bvh_occluded_from(both, &out, prim);
+            cr_assert_eq(occ, bvh_occluded(both, &out), "triangle %u: occlusion", prim);
+            cr_assert_eq(occ, from, "triangle %u: occluded %d, hit %d", prim, occ, from);
+            cr_assert_eq(bvh_occluded_from(binary, &out, prim), occ);
+            n_rays++;
+            n_hits += from;
+        }
+        /* aimed at the triangle from outside, the triangle being `from`: it is skipped */
+        vec3 o = v3_add(sf.p, v3_scale(sf.ng, 0.01f));
+        struct ray in = make_ray(o, v3_sub(sf.p, o), 0.0f, INFINITY);
+        struct bvh_hit h_plain, h_from, h_bin, h_brute;
+        bool plain = bvh_intersect(both, &in, &h_plain);
+        bool from = bvh_intersect_from(both, &in, prim, &h_from);
+        bool bin = bvh_intersect_from(binary, &in, prim, &h_bin);
+        bool brute = bvh_intersect_brute_from(both, &in, prim, &h_brute);
+        cr_assert(same_hit(from, &h_from, brute, &h_brute), "triangle %u: aimed, wide vs brute",
+                  prim);
+        cr_assert(same_hit(from, &h_from, bin, &h_bin), "triangle %u: aimed, wide vs binary",
+                  prim);
+        cr_assert_eq(bvh_occluded_from(both, &in, prim), from);
+        cr_assert_eq(bvh_occluded_from(binary, &in, prim), from);
+        cr_assert(!from || h_from.prim_idx != prim);
+        if (plain && h_plain.prim_idx == prim) {
+            n_own_first++;
+            cr_assert(!from || h_from.t >= h_plain.t);
+        }
+    }
+    cr_log_info("spawned rays: %d, %d of them hit another triangle; %d aimed rays found their "
+                "triangle first, and skipped it with from", n_rays, n_hits, n_own_first);
+    cr_assert_gt(n_hits, n_rays / 10);
+    cr_assert_gt(n_own_first, 500);
+    bvh_free(binary);
+    bvh_free(wide);
+    bvh_free(both);
+    mesh_free(&m);
+}
+
 /* ---- watertightness on a closed mesh ----------------------------------------------------------
  * Woop et al. 2013: rays aimed exactly at the mesh's vertices and edge midpoints, from the
  * centre, from off-centre points inside and from outside, never escape. */
