@@ -1215,13 +1215,14 @@ static ALWAYS_INLINE uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t firs
     in.t_min = v->t_min;
     in.t_max = f8_set1(t_max);
     uint32_t hits = woop8(&in, (1u << n) - 1u, out);
-    if ((hits | out->undecided) && v->from != BVH_NO_PRIM) {
-        uint32_t own = leaf_own(bvh, first, hits | out->undecided, v->from);
-        hits &= ~own;
-        out->undecided &= ~own;
+    if (out->undecided) {
+        if (v->from != BVH_NO_PRIM)
+            out->undecided &= ~leaf_own(bvh, first, out->undecided, v->from);
+        if (out->undecided)
+            hits |= leaf_undecided(bvh, first, n, v->rp, v->rp_t_min, t_max, out->undecided, out);
     }
-    if (out->undecided)
-        hits |= leaf_undecided(bvh, first, n, v->rp, v->rp_t_min, t_max, out->undecided, out);
+    if (hits && v->from != BVH_NO_PRIM)
+        hits &= ~leaf_own(bvh, first, hits, v->from);
     return hits;
 }
 
