@@ -94,7 +94,8 @@ struct reader {
     struct usemtl_site *usemtl_sites; /* per usemtl name: where it is first used */
     size_t cap_usemtl_sites;
     struct obj_names mtl_names; /* newmtl name -> index into mesh->materials */
-    struct obj_names mtl_paths; /* MTL files already read, so a repeated mtllib is read once */
+    struct obj_names mtl_paths; /* MTL paths already read, so a repeated mtllib is read once */
+    struct obj_names mtl_files; /* and their "device:inode", for the same file by another name */
     uint32_t mtl_first;         /* index of the first record of the MTL file being read */
     bool has_mtllib;            /* the OBJ names at least one MTL file */
     struct warn_site spectral;  /* the first 'spectral' colour, ignored */
@@ -283,6 +284,7 @@ bool obj_load_fd(int fd, const char *path, struct obj_mesh *mesh, struct mcpt_er
     obj_names_free(&r.usemtl_names);
     obj_names_free(&r.mtl_names);
     obj_names_free(&r.mtl_paths);
+    obj_names_free(&r.mtl_files);
     free(r.usemtl_sites);
     if (!ok)
         obj_free(mesh);
@@ -653,6 +655,21 @@ static bool read_mtl_file(struct reader *r, struct cursor *c, const char *name,
     if (fd < 0)
         return fail_at(c, name, "cannot open mtllib '%s' (%s): %s", tok, shown_path,
                        strerror(errno));
+    /* the same file under another name ("./a.mtl", a link) is read once too */
+    struct stat st;
+    if (fstat(fd, &st) == 0) {
+        char key[48];
+        int key_len = snprintf(key, sizeof key, "%llu:%llu", (unsigned long long)st.st_dev,
+                               (unsigned long long)st.st_ino);
+        if (obj_names_find(&r->mtl_files, key, (size_t)key_len) >= 0) {
+            close(fd);
+            return true;
+        }
+        if (!obj_names_add(&r->mtl_files, key, (size_t)key_len, 0)) {
+            close(fd);
+            return fail_oom(c, name);
+        }
+    }
     struct cursor mc = {.line = 1, .path = mtl_path, .err = c->err};
     r->mtl_first = r->mesh->n_materials;
     bool ok = read_file(r, &mc, fd, true);
@@ -660,7 +677,7 @@ static bool read_mtl_file(struct reader *r, struct cursor *c, const char *name,
     return ok;
 }
 
-/* mtllib a.mtl [b.mtl ...]: each name is read once.  When the whole rest of the line names a
+/* mtllib a.mtl [b.mtl ...]: each file is read once.  When the whole rest of the line names a
  * regular file it is one name (Blender reads mtllib so, and exporters write names with
  * spaces), and double quotes around a name are dropped (Blender does too). */
 static bool read_mtllib(struct reader *r, struct cursor *c)

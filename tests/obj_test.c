@@ -583,6 +583,31 @@ Test(obj, backslash_continues_an_mtl_statement, .init = tmp_setup, .fini = tmp_t
     obj_free(&m);
 }
 
+/* A repeated mtllib is read once when it names the same file another way too: "./a.mtl", a
+ * symbolic link (docs/scene-format.md: "each file is read once"); reading it twice would make
+ * its newmtl names duplicates, an error.  A different file that defines the same name still
+ * is one. */
+Test(obj, mtllib_same_file_by_another_name_is_read_once, .init = tmp_setup, .fini = tmp_teardown)
+{
+    write_tmp("a.mtl", "newmtl red\nKd 1 0 0\n");
+    char target[512], link[512];
+    snprintf(target, sizeof target, "%s/a.mtl", tmp_dir);
+    snprintf(link, sizeof link, "%s/b.mtl", tmp_dir);
+    cr_assert_eq(symlink(target, link), 0);
+    const char *path = write_tmp("same.obj", "mtllib a.mtl\nmtllib ./a.mtl\nmtllib b.mtl a.mtl\n"
+                                             "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl red\nf 1 2 3\n");
+    struct obj_mesh m;
+    load_ok(path, &m);
+    cr_assert_eq(m.n_materials, 1);
+    cr_assert_eq(m.tris[0].mat_idx, 0);
+    obj_free(&m);
+
+    write_tmp("c.mtl", "newmtl red\nKd 0 1 0\n");
+    path = write_tmp("other.obj", "mtllib a.mtl c.mtl\n");
+    expect_error(path, "c.mtl:1:8: error: expected a new material name, got 'red' (already "
+                       "defined by an earlier mtllib)");
+}
+
 /* A usemtl may come before the mtllib that defines its name: names resolve once every mtllib
  * is read (Blender reads the MTL files after the whole OBJ).  A name no mtllib defines gets
  * mat_idx -1 and one warning at its first use, counting the other undefined names; without
