@@ -314,14 +314,17 @@ static const uint64_t PILOT_SEED_TAG = 0x70696c6f74ull;
  * pixel's estimate is the mean of its N image samples, and since N depends on the pilot alone,
  * which is independent of them, E[estimate | N] = E[one sample] = the pixel's value.  The stop
  * rule's estimate is biased because one set of samples both decides and estimates.  The count
- * is a pure function of (seed, pixel), the same for every call; opt->pilot_target keeps it. */
-static uint32_t pilot_target(const struct render_job *job, struct worker *w, uint32_t x, uint32_t y,
-                             uint64_t *n_rays)
+ * is a pure function of (seed, pixel), the same for every call; opt->pilot_target keeps it.
+ * Returns false, keeping nothing, when the render is cancelled during the pilot. */
+static bool pilot_target(const struct render_job *job, struct worker *w, uint32_t x, uint32_t y,
+                         uint64_t *n_rays, uint32_t *target_out)
 {
     const struct trace_options *opt = job->opt;
     uint32_t pixel_idx = y * (uint32_t)job->film->width + x;
-    if (opt->pilot_target && opt->pilot_target[pixel_idx])
-        return opt->pilot_target[pixel_idx];
+    if (opt->pilot_target && opt->pilot_target[pixel_idx]) {
+        *target_out = opt->pilot_target[pixel_idx];
+        return true;
+    }
     struct sampler sampler;
     sample_start_pixel(&sampler, opt->sampler, sample_hash64(opt->seed ^ PILOT_SEED_TAG), pixel_idx,
                        job->set_spp);
@@ -329,6 +332,12 @@ static uint32_t pilot_target(const struct render_job *job, struct worker *w, uin
     uint64_t n = 0;
     uint32_t n_pilot = opt->pilot_spp ? opt->pilot_spp : TRACE_ADAPTIVE_PILOT_SPP;
     for (uint32_t i = 0; i < n_pilot; i++) {
+        /* a signal stops a long pilot too; its count is not kept, so the pilot is redone whole
+         * (the same samples) when the render resumes */
+        if (opt->cancel && atomic_load_explicit(opt->cancel, memory_order_relaxed)) {
+            w->result.cancelled = true;
+            return false;
+        }
         sample_start_index(&sampler, i);
         vec2 u_pixel = sample_2d(&sampler);
         vec2 u_lens = sample_2d(&sampler);
@@ -348,7 +357,8 @@ static uint32_t pilot_target(const struct render_job *job, struct worker *w, uin
                                       max_spp, opt->batch);
     if (opt->pilot_target)
         opt->pilot_target[pixel_idx] = target;
-    return target;
+    *target_out = target;
+    return true;
 }
 
 /* How many samples the pixel may take, from `taken`, before its next adaptive test point
@@ -379,7 +389,11 @@ static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, u
     uint32_t spp = opt->spp;
     if (opt->adaptive && opt->adaptive_rule == RENDER_ADAPTIVE_PILOT &&
         px->n + px->n_dropped < opt->spp) {
-        uint32_t target = pilot_target(job, w, x, y, &n_rays);
+        uint32_t target;
+        if (!pilot_target(job, w, x, y, &n_rays, &target)) {
+            w->result.n_rays += n_rays;
+            return; /* cancelled: the pixel keeps what it has */
+        }
         if (target < spp) {
             skipped = spp - (px->n + px->n_dropped > target ? px->n + px->n_dropped : target);
             spp = target;

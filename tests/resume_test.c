@@ -337,6 +337,32 @@ Test(interrupt, sigint_then_sigterm_then_bit_identical, .init = setup, .fini = t
     cr_assert_not(test_exists(ckpt));
 }
 
+/* A signal during the adaptive pilot (here one of 10^8 samples a pixel, which would take
+ * hours) stops it as it stops the render: exit 143 at once, nothing written.  Found by
+ * probing: the pilot's loop did not look at the signal, so only SIGKILL ended such a run.  The
+ * signal may also land before the pilot starts (a loaded machine); the outcome is the same. */
+Test(interrupt, during_the_adaptive_pilot, .init = setup, .fini = teardown,
+     .timeout = TEST_TIMEOUT_S(120))
+{
+    char out[300], err_path[300], err[4096];
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
+    const char *args[] = {SCENE,         "--spp",     "2",  "--adaptive", "--pilot-spp",
+                          "100000000",   "--min-spp", "2",  "--threads",  "2",
+                          "-o",          out,         NULL};
+    pid_t pid = test_start_mcpt(args, NULL, err_path, ALARM_S);
+    nanosleep(&(struct timespec){0, 500 * 1000 * 1000}, NULL);
+    double t0 = now_s();
+    kill(pid, SIGTERM);
+    int rc = test_wait(pid);
+    double stop_s = now_s() - t0;
+    test_read_file(err_path, err, sizeof err);
+    cr_assert_eq(rc, 143, "exit %d: %s", rc, err);
+    cr_assert_lt(stop_s, 2.0, "took %.2f s to stop", stop_s);
+    cr_assert(strstr(err, "mcpt: interrupted by SIGTERM"), "%s", err);
+    cr_assert_not(test_exists(out));
+}
+
 /* A second signal exits at once (status 128 + its number) without finishing the render or the
  * writes, and leaves no corrupt file: OUT.exr is the earlier file or a whole new image, and a
  * checkpoint, if one was written, loads.  The two signals differ (SIGTERM, then SIGINT) because
