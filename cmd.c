@@ -13,6 +13,7 @@
 #include <float.h>
 #include <getopt.h>
 #include <stdlib.h>
+#include <string.h>
 #include <strings.h>
 
 #include "image.h"
@@ -59,10 +60,14 @@ bool cmd_parse_float(const char *s, float lo, float hi, float *out)
 {
     if (!s || !*s)
         return false;
+    /* decimal numbers only, as in the scene format: no blanks, hexadecimal, inf or nan */
+    if (s[strspn(s, "0123456789+-.eE")] != '\0')
+        return false;
     errno = 0;
     char *end;
     float v = strtof(s, &end);
-    if (errno || *end || !isfinite(v) || v < lo || v > hi)
+    /* an underflow is a tiny number or 0 (the scene format's 1e-50 is 0 too) */
+    if ((errno && errno != ERANGE) || *end || !isfinite(v) || v < lo || v > hi)
         return false;
     *out = v;
     return true;

@@ -9,6 +9,7 @@
  * line and the signal handler, and is the only one that may exit. */
 #include <ctype.h>
 #include <errno.h>
+#include <float.h>
 #include <getopt.h>
 #include <stdarg.h>
 #include <signal.h>
@@ -44,7 +45,8 @@ static const char USAGE[] =
     "                         8-bit sRGB image only (default: the scene's name with .exr)\n"
     "      --spp N            samples per pixel (default: the scene's render spp, else 64)\n"
     "      --max-depth D      most bounces per path; 0 = emission only, 1 = direct light,\n"
-    "                         inf = until Russian roulette ends it (default: scene, else inf)\n"
+    "                         inf = until Russian roulette ends it; no path goes beyond 1024\n"
+    "                         (default: scene, else inf)\n"
     "      --direct E         direct-light estimator: mis (default), light, bsdf, cosine or\n"
     "                         hemisphere; every one converges to the same image\n"
     "      --light-samples N  shadow rays per path vertex, each to a light picked by power\n"
@@ -392,11 +394,11 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
         o->has_max_depth = true;
         if (strcmp(optarg, "inf") == 0)
             o->max_depth = TRACE_DEPTH_INFINITE;
-        else if (cmd_parse_u64(optarg, 0, TRACE_DEPTH_CAP, &v))
+        else if (cmd_parse_u64(optarg, 0, UINT32_MAX, &v)) /* as the scene's; 1024 at most run */
             o->max_depth = (uint32_t)v;
         else
             return cmd_usage_error(err,
-                                   "expected --max-depth to be an integer in 0..1024 or "
+                                   "expected --max-depth to be an integer in 0..4294967295 or "
                                    "'inf', got '%s'",
                                    optarg);
         return true;
@@ -413,7 +415,8 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
                cmd_usage_error(err, "expected --split to be full, direct or indirect, got '%s'",
                                optarg);
     case OPT_RR_THRESHOLD:
-        return (cmd_parse_float(optarg, 0.0f, 1e6f, &o->rr_threshold) && o->rr_threshold > 0.0f) ||
+        return (cmd_parse_float(optarg, 0.0f, FLT_MAX, &o->rr_threshold) &&
+                o->rr_threshold > 0.0f) ||
                cmd_usage_error(err, "expected --rr-threshold to be a number > 0, got '%s'", optarg);
     case OPT_LIGHT_SAMPLING:
         o->has_light_sampling = true;
@@ -616,6 +619,8 @@ static bool parse_args(int argc, char **argv, struct options *o, struct mcpt_err
         return cmd_usage_error(err, "expected a scene file, got nothing");
     if (optind + 1 < argc)
         return cmd_usage_error(err, "expected one scene file, got '%s' too", argv[optind + 1]);
+    if (optind < argc && argv[optind][0] == '\0')
+        return cmd_usage_error(err, "expected a scene file, got an empty name");
     o->scene_path = optind < argc ? argv[optind] : NULL;
     return true;
 }

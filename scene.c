@@ -84,6 +84,7 @@ enum value_range {
     RANGE_FOV,      /* (0, 180) degrees */
     RANGE_FILM,     /* 1..65535 pixels */
     RANGE_SPP,      /* 1..4294967295 */
+    RANGE_SPREAD,   /* 2..4294967295: sample counts that estimate a spread (min-spp, pilot-spp) */
     RANGE_1K,       /* 1..1024 */
 };
 
@@ -161,11 +162,11 @@ static const struct stmt_spec stmt_specs[STMT_COUNT] = {
                          {"sampler", VAL_SAMPLER, RANGE_ANY, ALL_TYPES, 0},
                          {"adaptive", VAL_BOOL, RANGE_ANY, ALL_TYPES, 0},
                          {"adaptive-rule", VAL_ADAPTIVE_RULE, RANGE_ANY, ALL_TYPES, 0},
-                         {"pilot-spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
+                         {"pilot-spp", VAL_INT, RANGE_SPREAD, ALL_TYPES, 0},
                          {"tolerance", VAL_NUMBER, RANGE_POSITIVE, ALL_TYPES, 0},
                          {"adaptive-floor", VAL_NUMBER, RANGE_NONNEG, ALL_TYPES, 0},
                          {"batch", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
-                         {"min-spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
+                         {"min-spp", VAL_INT, RANGE_SPREAD, ALL_TYPES, 0},
                          {"max-spp", VAL_INT, RANGE_SPP, ALL_TYPES, 0},
                          {"direct", VAL_DIRECT, RANGE_ANY, ALL_TYPES, 0},
                          {"light-samples", VAL_INT, RANGE_1K, ALL_TYPES, 0},
@@ -678,9 +679,10 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
         if (!parse_integer(p->text, &u, &is_negative))
             return fail(ps, p->val_col, "expected an integer for '%s', got '%s'", sp->key, v);
         uint64_t hi = sp->range == RANGE_FILM ? 65535 : sp->range == RANGE_1K ? 1024 : UINT32_MAX;
-        if (is_negative || u < 1 || u > hi)
-            return fail(ps, p->val_col, "expected '%s' in 1..%llu, got %s", sp->key,
-                        (unsigned long long)hi, v);
+        uint64_t lo = sp->range == RANGE_SPREAD ? 2 : 1; /* one sample has no spread */
+        if (is_negative || u < lo || u > hi)
+            return fail(ps, p->val_col, "expected '%s' in %llu..%llu, got %s", sp->key,
+                        (unsigned long long)lo, (unsigned long long)hi, v);
         p->u = (uint32_t)u;
         return true;
     }
@@ -826,6 +828,10 @@ static int next_byte(struct parser *ps)
         do
             got = read(ps->fd, ps->in, SCENE_READ_BYTES);
         while (got < 0 && errno == EINTR);
+        if (got < 0 && errno == EISDIR) { /* standard input redirected from a folder */
+            mcpt_error_set(ps->err, ps->path, 0, 0, "expected a scene, got a directory");
+            return -2;
+        }
         if (got < 0) {
             mcpt_error_runtime(ps->err, ps->path, "cannot read: %s", strerror(errno));
             return -2;
@@ -1722,12 +1728,8 @@ static bool do_render(struct parser *ps, const struct stmt *st)
         r->has_adaptive_rule = true;
         r->adaptive_rule = (enum render_adaptive_rule)p->u;
     }
-    if ((p = get(st, "pilot-spp"))->key) {
-        /* one sample has no spread, as for min-spp */
-        if (p->u < 2)
-            return fail(ps, p->val_col, "expected 'pilot-spp' >= 2, got %s", p->text);
-        r->pilot_spp = p->u;
-    }
+    if ((p = get(st, "pilot-spp"))->key)
+        r->pilot_spp = p->u; /* >= 2 (RANGE_SPREAD) */
     if ((p = get(st, "tolerance"))->key)
         r->tolerance = p->f[0];
     if ((p = get(st, "adaptive-floor"))->key)
@@ -1751,9 +1753,7 @@ static bool do_render(struct parser *ps, const struct stmt *st)
     if ((p = get(st, "rr-threshold"))->key)
         r->rr_threshold = p->f[0];
     if ((p = get(st, "min-spp"))->key) {
-        /* one sample has no spread: sigma = 0 would stop every lit pixel at once */
-        if (p->u < 2)
-            return fail(ps, p->val_col, "expected 'min-spp' >= 2, got %s", p->text);
+        /* >= 2 (RANGE_SPREAD): with one sample sigma = 0 would stop every lit pixel at once */
         if (r->max_spp && p->u > r->max_spp)
             return fail(ps, p->val_col, "expected 'min-spp' <= 'max-spp' (%u), got %s", r->max_spp,
                         p->text);

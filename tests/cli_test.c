@@ -52,6 +52,9 @@ Test(cli, bad_usage, .init = setup, .fini = teardown)
         {"tests/data/cli/tiny.txt", "--adaptive", "--adaptive-rule", "stop", "--pilot-spp", "8"},
         {"tests/data/cli/tiny.txt", "--light-sampling", "sphere", NULL},
         {"tests/data/cli/tiny.txt", "--rr-threshold", "0", NULL},
+        {"", NULL},                                                /* an empty scene name */
+        {"tests/data/cli/tiny.txt", "--exposure", " 2", NULL},     /* decimal numbers only, */
+        {"tests/data/cli/tiny.txt", "--scale", "0x1p-1", NULL},    /* as in the scene format */
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         char err[4096];
@@ -85,6 +88,21 @@ Test(cli, bad_scene_writes_nothing, .init = setup, .fini = teardown)
     const char *missing[] = {"tests/data/cli/no-such-scene.txt", "-o", out, NULL};
     cr_assert_eq(run_mcpt(missing, err, sizeof err), 2);
     cr_assert(strstr(err, "tests/data/cli/no-such-scene.txt") == err, "%s", err);
+}
+
+/* A scene read from standard input that is a folder is bad input like a folder named as the
+ * scene (exit 2, one line), not a read failure (exit 1). */
+Test(cli, scene_from_stdin_that_is_a_folder, .init = setup, .fini = teardown)
+{
+    char cmd[1024], err_path[300], err[4096];
+    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
+    snprintf(cmd, sizeof cmd, "'%s' - -o '%s/out.exr' < tests/data > /dev/null 2> '%s'",
+             getenv("MCPT") ? getenv("MCPT") : "./mcpt", tmpdir, err_path);
+    int status = system(cmd);
+    cr_assert(WIFEXITED(status));
+    test_read_file(err_path, err, sizeof err);
+    cr_assert_eq(WEXITSTATUS(status), 2, "%s", err);
+    cr_assert_str_eq(err, "<stdin>: error: expected a scene, got a directory\n");
 }
 
 /* --help and --version exit 0. */

@@ -1327,7 +1327,7 @@ Test(sampling, render_statement_errors)
     } cases[] = {
         {"render sampler=halton\n", 16,
          "expected independent, stratified or sobol for 'sampler', got 'halton'"},
-        {"render min-spp=1\n", 16, "expected 'min-spp' >= 2, got 1"},
+        {"render min-spp=1\n", 16, "expected 'min-spp' in 2..4294967295, got 1"},
         {"render min-spp=128 max-spp=64\n", 16, "expected 'min-spp' <= 'max-spp' (64), got 128"},
         {"render tolerance=0\n", 18, "expected 'tolerance' > 0, got 0"},
         {"render batch=0\n", 14, "expected 'batch' in 1..4294967295, got 0"},
@@ -1335,7 +1335,8 @@ Test(sampling, render_statement_errors)
         {"render adaptive-rule=early\n", 22,
          "expected pilot or stop for 'adaptive-rule', got "
          "'early'"},
-        {"render pilot-spp=1\n", 18, "expected 'pilot-spp' >= 2, got 1"},
+        {"render pilot-spp=1\n", 18, "expected 'pilot-spp' in 2..4294967295, got 1"},
+        {"render pilot-spp=0\n", 18, "expected 'pilot-spp' in 2..4294967295, got 0"},
         {"render light-sampling=sphere\n", 23,
          "expected area or solid-angle for "
          "'light-sampling', got 'sphere'"},
