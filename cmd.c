@@ -156,12 +156,13 @@ static int run_compare(int argc, char **argv)
     const char *paths[3] = {heatmap, a_path, ref_path};
     for (int k = 0; k < 3; k++)
         snprintf(files[k].path, sizeof files[k].path, "%s", paths[k] ? paths[k] : "");
-    bool ok = (!heatmap || output_check(files, 1, files + 1, 2, &err)) &&
-              read_image(a_path, &a_exr, &a, &err) && read_image(ref_path, &ref_exr, &ref, &err);
+    /* the inputs first: bad input touches no output, not even by the creatability probe */
+    bool ok = read_image(a_path, &a_exr, &a, &err) && read_image(ref_path, &ref_exr, &ref, &err);
     if (ok && !stats_compare_where(&a, &ref, max_lum, &m, &err)) {
         snprintf(err.file, sizeof err.file, "%s", ref_path);
         ok = false;
     }
+    ok = ok && (!heatmap || output_check(files, 1, files + 1, 2, &err));
     if (ok) {
         if (json)
             stats_write_metrics_json(stdout, &m, a_path, ref_path);
@@ -465,8 +466,10 @@ static int run_merge(int argc, char **argv)
                              keep_partial ? "--partial" : "--no-preview", out);
     struct film film = {0};
     struct partial_info info;
-    ok = ok && check_merge_outputs(&paths, argv + optind, argc - optind, &err) &&
-         partial_merge_files((const char *const *)argv + optind, argc - optind, &film, &info, &err);
+    /* the parts first: bad input touches no output, not even by the creatability probe */
+    ok = ok &&
+         partial_merge_files((const char *const *)argv + optind, argc - optind, &film, &info, &err) &&
+         check_merge_outputs(&paths, argv + optind, argc - optind, &err);
     /* the whole render is an ordinary image, unless asked to stay mergeable */
     bool is_plain = ok && partial_is_whole(&info) && !keep_partial;
     char ranges[PARTIAL_RENDER_BYTES];
@@ -547,7 +550,7 @@ static int run_convert(int argc, char **argv)
     snprintf(files[0].path, sizeof files[0].path, "%s", out);
     snprintf(files[1].path, sizeof files[1].path, "%s", in);
     struct image img;
-    if (!output_check(files, 1, files + 1, 1, &err) || !image_read_exr(in, &img, &err))
+    if (!image_read_exr(in, &img, &err))
         return cmd_fail(&err);
     int rgb_idx[3] = {image_find_channel(&img, "R"), image_find_channel(&img, "G"),
                       image_find_channel(&img, "B")};
@@ -566,7 +569,9 @@ static int run_convert(int argc, char **argv)
     for (size_t i = 0; ok && i < n_pixels; i++)
         for (int c = 0; c < 3; c++)
             rgb[3 * i + c] = img.data[rgb_idx[c]][i];
-    ok = ok && image_write_png_srgb(out, img.width, img.height, rgb, &look, &err);
+    /* checked once the input is known good: bad input touches no output */
+    ok = ok && output_check(files, 1, files + 1, 1, &err) &&
+         image_write_png_srgb(out, img.width, img.height, rgb, &look, &err);
     if (ok && !quiet)
         printf("mcpt convert: %dx%d, exposure %g, tonemap %s; wrote %s\n", img.width, img.height,
                (double)look.exposure, image_tonemap_name(look.tonemap), out);

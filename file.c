@@ -394,7 +394,7 @@ bool file_id_same(const struct file_id *a, const struct file_id *b)
 
 /* ---- outputs ---- */
 
-bool file_check_creatable(const char *path, struct mcpt_error *err)
+bool file_check_name(const char *path, struct mcpt_error *err)
 {
     struct stat st;
     if (stat(path, &st) == 0 && !S_ISREG(st.st_mode)) {
@@ -402,6 +402,26 @@ bool file_check_creatable(const char *path, struct mcpt_error *err)
                        kind_name(st.st_mode));
         return false;
     }
+    char dir[FILE_PATH_BYTES];
+    const char *slash = strrchr(path, '/');
+    snprintf(dir, sizeof dir, "%.*s", slash ? (int)(slash - path) : 1, slash ? path : ".");
+    if (slash == path)
+        snprintf(dir, sizeof dir, "/");
+    if (stat(dir, &st) != 0 && errno == ENOENT) {
+        mcpt_error_set(err, path, 0, 0, "cannot create: no folder '%s'", dir);
+        return false;
+    }
+    if (stat(dir, &st) == 0 && !S_ISDIR(st.st_mode)) {
+        mcpt_error_set(err, path, 0, 0, "cannot create: '%s' is not a folder", dir);
+        return false;
+    }
+    return true;
+}
+
+bool file_check_creatable(const char *path, struct mcpt_error *err)
+{
+    if (!file_check_name(path, err))
+        return false;
     struct file_atomic af;
     if (file_atomic_open(&af, path, err)) {
         file_atomic_abort(&af);

@@ -115,4 +115,9 @@ bool file_id_same(const struct file_id *a, const struct file_id *b);
  * full, I/O). */
 bool file_check_creatable(const char *path, struct mcpt_error *err);
 
+/* The part of file_check_creatable that touches nothing: the path is a regular file or does
+ * not exist, and its folder exists.  Run on every output before any is probed, so that a bad
+ * later path is refused before a temporary is made beside an earlier one. */
+bool file_check_name(const char *path, struct mcpt_error *err);
+
 #endif

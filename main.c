@@ -1120,24 +1120,28 @@ static bool check_outputs(struct run *run, struct mcpt_error *err)
         snprintf(in[n_in].path, sizeof in[n_in].path, "%s", run->scene.loaded_paths[i]);
         in[n_in++].role = "a file the scene loads";
     }
-    bool ok = n_out > 0 && output_check(files, n_out, in, n_in, err);
-    free(files);
-    if (!ok)
-        return false;
+    /* a checkpoint in the way is refused before any output is probed */
     struct stat st;
-    if (is_resumed_here || stat(run->out.checkpoint, &st) != 0)
-        return true;
-    if (o->restart) {
-        unlink(run->out.checkpoint); /* the user discards the interrupted render */
-        return true;
+    bool has_checkpoint = !is_resumed_here && stat(run->out.checkpoint, &st) == 0;
+    if (n_out > 0 && !output_check_names(files, n_out, in, n_in, err)) {
+        free(files);
+        return false;
     }
-    char cmd[3 * FILE_PATH_BYTES + 16];
-    resume_command(run, run->out.checkpoint, cmd, sizeof cmd);
-    mcpt_error_set(err, run->out.checkpoint, 0, 0,
-                   "expected no checkpoint of an interrupted render here, got one: continue it "
-                   "with '%.600s', or discard it with --restart",
-                   cmd);
-    return false;
+    if (n_out > 0 && has_checkpoint && !o->restart) {
+        free(files);
+        char cmd[3 * FILE_PATH_BYTES + 16];
+        resume_command(run, run->out.checkpoint, cmd, sizeof cmd);
+        mcpt_error_set(err, run->out.checkpoint, 0, 0,
+                       "expected no checkpoint of an interrupted render here, got one: continue "
+                       "it with '%.600s', or discard it with --restart",
+                       cmd);
+        return false;
+    }
+    bool ok = n_out > 0 && output_check_creatable(files, n_out, err);
+    free(files);
+    if (ok && has_checkpoint)
+        unlink(run->out.checkpoint); /* --restart: the user discards the interrupted render */
+    return ok;
 }
 
 /* ---- render: progress, signals, passes ---- */

@@ -330,6 +330,24 @@ int output_list(const struct output_paths *p, const char *curve_path, bool snaps
 bool output_check(const struct output_file *outputs, int n_outputs,
                   const struct output_file *inputs, int n_inputs, struct mcpt_error *err)
 {
+    return output_check_names(outputs, n_outputs, inputs, n_inputs, err) &&
+           output_check_creatable(outputs, n_outputs, err);
+}
+
+bool output_check_creatable(const struct output_file *outputs, int n_outputs,
+                            struct mcpt_error *err)
+{
+    bool ok = true;
+    for (int i = 0; ok && i < n_outputs; i++)
+        ok = file_check_creatable(outputs[i].path, err);
+    for (int i = 0; ok && i < n_outputs; i++)
+        file_remove_stale(outputs[i].path);
+    return ok;
+}
+
+bool output_check_names(const struct output_file *outputs, int n_outputs,
+                        const struct output_file *inputs, int n_inputs, struct mcpt_error *err)
+{
     struct file_id *ids = malloc(sizeof *ids * (size_t)(n_outputs + n_inputs));
     if (!ids) {
         mcpt_error_runtime(err, NULL, "out of memory checking the output files");
@@ -359,9 +377,7 @@ bool output_check(const struct output_file *outputs, int n_outputs,
         }
     }
     for (int i = 0; ok && i < n_outputs; i++)
-        ok = file_check_creatable(outputs[i].path, err);
-    for (int i = 0; ok && i < n_outputs; i++)
-        file_remove_stale(outputs[i].path);
+        ok = file_check_name(outputs[i].path, err);
 done:
     free(ids);
     return ok;

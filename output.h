@@ -117,4 +117,13 @@ int output_list(const struct output_paths *p, const char *curve_path, bool snaps
 bool output_check(const struct output_file *outputs, int n_outputs,
                   const struct output_file *inputs, int n_inputs, struct mcpt_error *err);
 
+/* output_check in its two steps: the checks that touch nothing (the same-file rule, each
+ * output a regular file or a new name in an existing folder: file_check_name), then the
+ * creatability probes and the stale temporaries.  A caller with a check of its own to make
+ * between them (a checkpoint in the way) calls both. */
+bool output_check_names(const struct output_file *outputs, int n_outputs,
+                        const struct output_file *inputs, int n_inputs, struct mcpt_error *err);
+bool output_check_creatable(const struct output_file *outputs, int n_outputs,
+                            struct mcpt_error *err);
+
 #endif

@@ -2,6 +2,8 @@
  * nothing written on error, and a small render producing a readable EXR (with variance and
  * sample-count channels) and a PNG.  Runs the binary named by $MCPT (default ./mcpt). */
 #include <criterion/criterion.h>
+#include <sys/stat.h>
+#include <time.h>
 
 #include "image.h"
 #include "test_util.h"
@@ -103,6 +105,49 @@ Test(cli, scene_from_stdin_that_is_a_folder, .init = setup, .fini = teardown)
     test_read_file(err_path, err, sizeof err);
     cr_assert_eq(WEXITSTATUS(status), 2, "%s", err);
     cr_assert_str_eq(err, "<stdin>: error: expected a scene, got a directory\n");
+}
+
+/* The folder's modification time, to nanoseconds: creating or removing any file in it (even a
+ * temporary made and removed at once) changes it. */
+static struct timespec folder_mtime(const char *dir)
+{
+    struct stat st;
+    cr_assert_eq(stat(dir, &st), 0);
+    return st.st_mtim;
+}
+
+/* Bad input or a bad later output touches no output folder, not even by the probe that makes
+ * and removes a temporary to learn that an output can be created: every name is checked
+ * first, and the subcommands read their inputs before they probe their outputs. */
+Test(cli, bad_input_touches_no_output_folder, .init = setup, .fini = teardown)
+{
+    char dir[300], sub[300], out[300], bad[300], err[4096];
+    snprintf(dir, sizeof dir, "%s/d", tmpdir);
+    snprintf(sub, sizeof sub, "%s/d/out.png", tmpdir); /* the preview's name is a folder */
+    snprintf(out, sizeof out, "%s/d/out.exr", tmpdir);
+    snprintf(bad, sizeof bad, "%s/bad.exr", tmpdir);
+    cr_assert_eq(mkdir(dir, 0755), 0);
+    cr_assert_eq(mkdir(sub, 0755), 0);
+    FILE *f = fopen(bad, "w");
+    fputs("not an image", f);
+    fclose(f);
+    nanosleep(&(struct timespec){0, 20 * 1000 * 1000}, NULL); /* past the clock's granularity */
+    struct timespec before = folder_mtime(dir);
+    char png[300], heat[300], merged[300];
+    snprintf(png, sizeof png, "%s/d/c.png", tmpdir);
+    snprintf(heat, sizeof heat, "%s/d/h.png", tmpdir);
+    snprintf(merged, sizeof merged, "%s/d/m.exr", tmpdir);
+    const char *render[] = {"tests/data/cli/tiny.txt", "-o", out, NULL};
+    const char *merge[] = {"merge", bad, "-o", merged, NULL};
+    const char *convert[] = {"convert", bad, png, NULL};
+    const char *compare[] = {"compare", bad, bad, "--heatmap", heat, NULL};
+    const char *const *cases[] = {render, merge, convert, compare};
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        cr_assert_eq(run_mcpt(cases[i], err, sizeof err), 2, "case %zu: %s", i, err);
+        struct timespec after = folder_mtime(dir);
+        cr_assert(after.tv_sec == before.tv_sec && after.tv_nsec == before.tv_nsec,
+                  "case %zu: the output folder was written to: %s", i, err);
+    }
 }
 
 /* --help and --version exit 0. */
