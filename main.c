@@ -204,6 +204,8 @@ struct run {
     struct options o;
     const char *argv0;            /* the program as invoked, for the commands we suggest */
     struct checkpoint_info saved; /* --resume: the interrupted run's settings and options */
+    struct options saved_o;       /* --resume: its stored options alone, parsed */
+    enum render_light_sampling scene_light_sampling; /* the scene's, before --light-sampling */
     struct scene scene;
     bool has_scene;          /* scene loaded (run_free frees it) */
     uint64_t scene_hash;     /* FNV-1a 64 of the scene file: a checkpoint records it */
@@ -678,6 +680,17 @@ static bool resume_options(int argc, char **argv, struct run *run, struct mcpt_e
     words[n] = NULL;
     int n_stored = n - argc;                    /* words 1 .. n_stored are the checkpoint's */
     const char *ckpt_path = run->o.resume_path; /* parse_args clears run->o first */
+    /* the stored options alone (and the scene, which parse_args wants), for resume_matches to
+     * compare the settings they give with this run's */
+    char *stored[CHECKPOINT_ARGS_BYTES / 2 + 3];
+    int n_saved = 0;
+    for (int i = 0; i <= n_stored && n_saved < (int)(sizeof stored / sizeof *stored) - 2; i++)
+        stored[n_saved++] = words[i];
+    stored[n_saved++] = ck->scene_path;
+    stored[n_saved] = NULL;
+    struct mcpt_error ignored;
+    if (!parse_args(n_saved, stored, &run->saved_o, &ignored))
+        memset(&run->saved_o, 0, sizeof run->saved_o); /* reported by the parse below */
     bool ok = parse_args(n, words, &run->o, err);
     if (!ok && optind - 1 <= n_stored) { /* a stored value (--spp=0): the checkpoint's fault */
         char *hint = strstr(err->msg, " (see mcpt --help)");
@@ -825,6 +838,7 @@ static double cpu_seconds(void)
  * light table samples as --light-sampling says, else as the scene's render statement. */
 static bool build(struct run *run, struct mcpt_error *err)
 {
+    run->scene_light_sampling = run->scene.render.light_sampling;
     if (run->o.has_light_sampling)
         run->scene.render.light_sampling = run->o.light_sampling;
     double t0 = now_seconds();
@@ -934,13 +948,123 @@ static void checkpoint_info_of(const struct run *run, struct checkpoint_info *in
     info->args_bytes = run->o.args_bytes;
 }
 
+static bool estimator_settings(const struct options *o, const struct render_settings *r,
+                               struct trace_options *t, struct mcpt_error *err);
+
+/* Two different floats as short as they can be told apart: %g, else all 9 digits. */
+static void float_pair_text(float a, float b, char *ta, char *tb, size_t bytes)
+{
+    snprintf(ta, bytes, "%g", (double)a);
+    snprintf(tb, bytes, "%g", (double)b);
+    if (strcmp(ta, tb) == 0) {
+        snprintf(ta, bytes, "%.9g", (double)a);
+        snprintf(tb, bytes, "%.9g", (double)b);
+    }
+}
+
+/* Text of a roulette setting (--rr): "throughput" or the fixed probability. */
+static void rr_text(float rr_prob, char *out, size_t out_bytes)
+{
+    if (rr_prob > 0.0f)
+        snprintf(out, out_bytes, "%.9g", (double)rr_prob);
+    else
+        snprintf(out, out_bytes, "throughput");
+}
+
+/* The estimator settings of the resumed run against those its checkpoint's options give with
+ * the same scene: a resumed render adds samples of the same estimator, or its image would be
+ * a mix of two (--split indirect on a full render's samples, say).  False with *err naming the
+ * first that differs. */
+static bool resume_estimator_matches(const struct run *run, struct mcpt_error *err)
+{
+    struct trace_options was;
+    struct mcpt_error ignored;
+    if (!estimator_settings(&run->saved_o, &run->scene.render, &was, &ignored))
+        return true; /* the stored options do not apply to this scene: checked elsewhere */
+    const struct trace_options *now = &run->topt;
+    const char *opt = NULL;
+    char want[64], got[64];
+#define DIFFER(name, a, b)                                                                         \
+    do {                                                                                           \
+        if (!opt && (a) != (b)) {                                                                  \
+            opt = name;                                                                            \
+            snprintf(want, sizeof want, "%u", (unsigned)(a));                                      \
+            snprintf(got, sizeof got, "%u", (unsigned)(b));                                        \
+        }                                                                                          \
+    } while (0)
+#define DIFFER_F(name, a, b)                                                                       \
+    do {                                                                                           \
+        if (!opt && (a) != (b)) {                                                                  \
+            opt = name;                                                                            \
+            float_pair_text(a, b, want, got, sizeof want);                                         \
+        }                                                                                          \
+    } while (0)
+    enum render_light_sampling ls_was = run->saved_o.has_light_sampling
+                                            ? run->saved_o.light_sampling
+                                            : run->scene_light_sampling;
+    enum render_light_sampling ls_now = run->scene.render.light_sampling;
+    if (ls_was != ls_now) {
+        opt = "--light-sampling";
+        snprintf(want, sizeof want, "%s", scene_light_sampling_name(ls_was));
+        snprintf(got, sizeof got, "%s", scene_light_sampling_name(ls_now));
+    }
+    if (!opt && was.direct != now->direct) {
+        opt = "--direct";
+        snprintf(want, sizeof want, "%s", scene_direct_name(was.direct));
+        snprintf(got, sizeof got, "%s", scene_direct_name(now->direct));
+    }
+    if (!opt && was.split != now->split) {
+        opt = "--split";
+        snprintf(want, sizeof want, "%s", scene_split_name(was.split));
+        snprintf(got, sizeof got, "%s", scene_split_name(now->split));
+    }
+    DIFFER("--light-samples", was.light_samples ? was.light_samples : 1u,
+           now->light_samples ? now->light_samples : 1u);
+    if (!opt && was.rr_prob != now->rr_prob) {
+        opt = "--rr";
+        rr_text(was.rr_prob, want, sizeof want);
+        rr_text(now->rr_prob, got, sizeof got);
+    }
+    DIFFER("--rr-depth", was.rr_depth ? was.rr_depth : TRACE_RR_DEPTH_DEFAULT,
+           now->rr_depth ? now->rr_depth : TRACE_RR_DEPTH_DEFAULT);
+    DIFFER_F("--rr-threshold",
+             was.rr_threshold > 0.0f ? was.rr_threshold : TRACE_RR_THRESHOLD_DEFAULT,
+             now->rr_threshold > 0.0f ? now->rr_threshold : TRACE_RR_THRESHOLD_DEFAULT);
+    if (!opt && was.adaptive != now->adaptive) {
+        opt = "adaptive sampling";
+        snprintf(want, sizeof want, "%s", was.adaptive ? "on" : "off");
+        snprintf(got, sizeof got, "%s", now->adaptive ? "on" : "off");
+    }
+    if (!opt && was.adaptive) {
+        if (was.adaptive_rule != now->adaptive_rule) {
+            opt = "--adaptive-rule";
+            snprintf(want, sizeof want, "%s", scene_adaptive_rule_name(was.adaptive_rule));
+            snprintf(got, sizeof got, "%s", scene_adaptive_rule_name(now->adaptive_rule));
+        }
+        DIFFER("--pilot-spp", was.pilot_spp, now->pilot_spp);
+        DIFFER_F("--tolerance", was.tolerance, now->tolerance);
+        DIFFER_F("--adaptive-floor", was.adaptive_floor, now->adaptive_floor);
+        DIFFER("--batch", was.batch, now->batch);
+        DIFFER("--min-spp", was.min_spp, now->min_spp);
+    }
+#undef DIFFER
+#undef DIFFER_F
+    if (opt)
+        mcpt_error_set(err, run->o.resume_path, 0, 0,
+                       "expected %s %s as in the checkpoint, got %s (a resumed render adds "
+                       "samples of the same estimator)",
+                       opt, want, got);
+    return !opt;
+}
+
 /* The resumed run must render exactly what the interrupted one would have: the same scene
  * bytes, settings and film. */
 static bool resume_matches(const struct run *run, struct mcpt_error *err)
 {
     struct checkpoint_info now;
     checkpoint_info_of(run, &now);
-    if (!checkpoint_matches(run->o.resume_path, &run->saved, &now, err))
+    if (!checkpoint_matches(run->o.resume_path, &run->saved, &now, err) ||
+        !resume_estimator_matches(run, err))
         return false;
     if (run->film.width != run->scene.width || run->film.height != run->scene.height) {
         mcpt_error_set(err, run->o.resume_path, 0, 0,
@@ -954,11 +1078,12 @@ static bool resume_matches(const struct run *run, struct mcpt_error *err)
 
 /* The render's settings: each option given, else the scene's render statement, else the
  * default; checked against each other and, with --resume, against the checkpoint. */
-static bool render_options(struct run *run, struct mcpt_error *err)
+/* The settings that decide what a render estimates, from the options o and the scene's render
+ * statement r: each option given, else the scene's, else the default. */
+static bool estimator_settings(const struct options *o, const struct render_settings *r,
+                               struct trace_options *t, struct mcpt_error *err)
 {
-    const struct options *o = &run->o;
-    const struct render_settings *r = &run->scene.render;
-    run->topt = (struct trace_options){
+    *t = (struct trace_options){
         .spp = o->spp ? o->spp : r->spp,
         .max_depth = o->has_max_depth ? o->max_depth : r->max_depth,
         .seed = o->seed,
@@ -971,7 +1096,13 @@ static bool render_options(struct run *run, struct mcpt_error *err)
         .rr_depth = o->rr_depth ? o->rr_depth : r->rr_depth,
         .rr_threshold = o->rr_threshold > 0.0f ? o->rr_threshold : r->rr_threshold,
     };
-    if (!sampling_options(o, r, &run->topt, err))
+    return sampling_options(o, r, t, err);
+}
+
+static bool render_options(struct run *run, struct mcpt_error *err)
+{
+    const struct options *o = &run->o;
+    if (!estimator_settings(o, &run->scene.render, &run->topt, err))
         return false;
     if (run->topt.adaptive && run->topt.adaptive_rule == RENDER_ADAPTIVE_PILOT) {
         /* the pilot's counts, kept between passes (render_seed clears them for each seed) */

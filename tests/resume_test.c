@@ -254,6 +254,45 @@ Test(resume, mismatch_refused, .init = setup, .fini = teardown)
     cr_assert(test_exists(ckpt), "a refused resume keeps its checkpoint");
 }
 
+/* A resumed render adds samples of the same estimator: another --direct, --split,
+ * --light-samples, roulette, light sampling or adaptive sampling than the checkpoint's options
+ * give with its scene is refused (exit 2, one line naming the checkpoint and the setting), and
+ * nothing is written.  Found by probing: such a resume ran, and wrote an image that mixed two
+ * estimators.  An option that repeats the checkpoint's setting (--split full, the default) is
+ * accepted. */
+Test(resume, changed_estimator_refused, .init = setup, .fini = teardown)
+{
+    char ckpt[300], out[300], err_path[300], err[4096], want[400];
+    snprintf(ckpt, sizeof ckpt, "%s/part.ckpt", tmpdir);
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
+    make_checkpoint(ckpt, 2, 8);
+    const char *changes[][3] = {
+        {"--direct", "light", "--direct mis as in the checkpoint, got light"},
+        {"--split", "indirect", "--split full as in the checkpoint, got indirect"},
+        {"--light-samples", "2", "--light-samples 1 as in the checkpoint, got 2"},
+        {"--rr", "0.5", "--rr throughput as in the checkpoint, got 0.5"},
+        {"--rr-depth", "3", "--rr-depth 2 as in the checkpoint, got 3"},
+        {"--rr-threshold", "1", "--rr-threshold 0.25 as in the checkpoint, got 1"},
+        {"--light-sampling", "solid-angle",
+         "--light-sampling area as in the checkpoint, got solid-angle"},
+        {"--adaptive", NULL, "adaptive sampling off as in the checkpoint, got on"},
+    };
+    for (size_t i = 0; i < sizeof changes / sizeof changes[0]; i++) {
+        const char *args[] = {"--resume", ckpt, "-o", out, changes[i][0], changes[i][1], NULL};
+        cr_assert_eq(test_run_mcpt(args, NULL, err_path, ALARM_S), 2, "case %zu", i);
+        test_read_file(err_path, err, sizeof err);
+        snprintf(want, sizeof want, "%s: error: expected %s (a resumed render adds samples of "
+                 "the same estimator)\n", ckpt, changes[i][2]);
+        cr_assert_str_eq(err, want);
+        cr_assert_not(test_exists(out));
+        cr_assert(test_exists(ckpt), "a refused resume keeps its checkpoint");
+    }
+    const char *same[] = {"--resume", ckpt, "-o", out, "--split", "full", "--quiet", NULL};
+    cr_assert_eq(test_run_mcpt(same, NULL, err_path, ALARM_S), 0);
+    cr_assert(test_exists(out));
+}
+
 /* ---- signals ---- */
 
 /* SIGINT mid-render: exit 130 within a second or so, a valid partial EXR (its samples channel
