@@ -121,7 +121,8 @@ static int run_compare(int argc, char **argv)
         switch (c) {
         case OPT_HEATMAP:
             heatmap = optarg;
-            ok = *optarg || cmd_usage_error(&err, "expected a file name after --heatmap, got ''");
+            ok = (strlen(optarg) > 4 && strcasecmp(optarg + strlen(optarg) - 4, ".png") == 0) ||
+                 cmd_usage_error(&err, "expected --heatmap to name a .png file, got '%s'", optarg);
             break;
         case OPT_JSON:
             json = true;

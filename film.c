@@ -91,6 +91,8 @@ static const char *sums_problem(double sum, double sum_sq, double n)
     const double max_sample = FLT_MAX;
     if (!(fabs(sum) <= n * max_sample))
         return "a sum that is not finite or exceeds the count times the largest float";
+    if (sum < 0.0) /* radiance is never negative, so neither is a sum of its samples */
+        return "a negative sum";
     if (!(sum_sq >= 0.0 && sum_sq <= n * max_sample * max_sample))
         return "a sum of squares below 0, not finite or beyond the count's reach";
     if (sum * sum > n * sum_sq * slack)

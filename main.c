@@ -502,7 +502,8 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
     }
     case OPT_HEATMAP:
         o->heatmap_path = optarg;
-        return *optarg || cmd_usage_error(err, "expected a file name after --heatmap, got ''");
+        return (strlen(optarg) > 4 && strcasecmp(optarg + strlen(optarg) - 4, ".png") == 0) ||
+               cmd_usage_error(err, "expected --heatmap to name a .png file, got '%s'", optarg);
     case OPT_WIDTH:
     case OPT_HEIGHT:
         if (!cmd_parse_u64(optarg, 1, 65535, &v))

@@ -178,7 +178,9 @@ bool stats_compare_where(const struct stats_image *a, const struct stats_image *
         for (size_t i = 0; known && i < n_pixels; i++)
             for (int c = 0; c < 3; c++) {
                 double v = a->var[c][i], x = a->rgb[c][i];
-                if (!isfinite(v) || !isfinite(x) || !pixel_included(ref, i, max_ref_luminance))
+                /* a variance below 0 (no render writes one) is skipped like a NaN */
+                if (!(v >= 0.0 && isfinite(v)) || !isfinite(x) ||
+                    !pixel_included(ref, i, max_ref_luminance))
                     continue;
                 sum_var += v;
                 sum_rel += v / (x * x + STATS_RELMSE_EPS);
@@ -204,7 +206,7 @@ bool stats_compare_where(const struct stats_image *a, const struct stats_image *
         for (int c = 0; c < 3; c++) {
             double x = a->rgb[c][i], r = ref->rgb[c][i];
             double var_r = has_var_r ? ref->var[c][i] : 0.0;
-            if (!isfinite(x) || !isfinite(r) || !isfinite(var_r)) {
+            if (!isfinite(x) || !isfinite(r) || !(var_r >= 0.0 && isfinite(var_r))) {
                 m->n_skipped++;
                 continue;
             }

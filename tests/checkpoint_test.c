@@ -82,9 +82,9 @@ Test(checkpoint, round_trip_and_damage, .init = setup, .fini = teardown)
     /* a valid checksum over values no render writes: a NaN sum, an infinite or negative sum of
      * squares (issue 15) */
     double *fields[] = {&film.pixels[4].sum[1], &film.pixels[4].sum_sq[2],
-                        &film.pixels[4].sum_sq[0]};
-    double values[] = {NAN, INFINITY, -1.0};
-    for (int k = 0; k < 3; k++) {
+                        &film.pixels[4].sum_sq[0], &film.pixels[4].sum[0]};
+    double values[] = {NAN, INFINITY, -1.0, -1e-3}; /* the last: a negative sum (probing) */
+    for (int k = 0; k < 4; k++) {
         double keep = *fields[k];
         *fields[k] = values[k];
         cr_assert(checkpoint_save(path, &film, &info, &err));

@@ -301,6 +301,8 @@ Test(clobber, outputs_never_overwrite_inputs, .init = setup, .fini = teardown)
     char ref_link[300]; /* the reference by a PNG's name */
     snprintf(ref_link, sizeof ref_link, "%s/ref-link.png", tmpdir);
     cr_assert_eq(link(ref, ref_link), 0);
+    char alone_png[300]; /* an 8-bit image only (-o NAME.png), and the heat map's name too */
+    snprintf(alone_png, sizeof alone_png, "%s/alone.png", tmpdir);
 
     struct {
         const char *args[12];
@@ -324,8 +326,8 @@ Test(clobber, outputs_never_overwrite_inputs, .init = setup, .fini = teardown)
         {{scene, "--reference", ref, "-o", ref, NULL},
          ref,
          "expected the image (-o) to be a file of its own, got the same file as the reference"},
-        {{scene, "--adaptive", "--heatmap", out, "-o", out, NULL},
-         out,
+        {{scene, "--adaptive", "--heatmap", alone_png, "-o", alone_png, NULL},
+         alone_png,
          "expected the sample-count map to be a file of its own, got the same file as the image "
          "(-o)"},
         {{scene, "--resume", ckpt, "-o", ckpt_link, NULL},
@@ -341,8 +343,8 @@ Test(clobber, outputs_never_overwrite_inputs, .init = setup, .fini = teardown)
         {{"convert", ref, ref_link, NULL},
          ref_link,
          "expected the PNG (OUT) to be a file of its own, got the same file as the image IN"},
-        {{"compare", ref, part, "--heatmap", ref, NULL},
-         ref,
+        {{"compare", ref, part, "--heatmap", ref_link, NULL},
+         ref_link,
          "expected the heat map (--heatmap) to be a file of its own, got the same file as the "
          "image A"},
     };

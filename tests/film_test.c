@@ -5,6 +5,7 @@
  * squares, more samples than the render takes, an empty pixel with sums, and a sum beyond the
  * Cauchy-Schwarz bound sum^2 <= n sum_sq. */
 #include <criterion/criterion.h>
+#include <string.h>
 
 #include <float.h>
 
@@ -57,6 +58,14 @@ Test(film, impossible_pixels_named)
     p = base;
     p.sum_sq[0] = -1e-300;
     cr_assert_not_null(film_pixel_problem(&p, 8));
+    p = base;
+    p.sum[1] = -p.sum[1]; /* within Cauchy-Schwarz, but radiance is never negative */
+    cr_assert_str_eq(film_pixel_problem(&p, 8), "a negative sum");
+    p = base;
+    p.sum[0] = -0.0; /* -0 is 0: a sum of zero samples may carry the sign */
+    p.sum_sq[0] = 0.0;
+    cr_assert(film_pixel_problem(&p, 8) == NULL ||
+              strcmp(film_pixel_problem(&p, 8), "a negative sum") != 0);
     p = base;
     p.sum_lum_sq = 0.0; /* the luminance's sum is not 0 */
     cr_assert_str_eq(film_pixel_problem(&p, 8),

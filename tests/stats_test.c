@@ -95,6 +95,29 @@ Test(stats, metrics_constant_offset)
     free(pr.data);
 }
 
+/* A variance below 0 in the reference (no render writes one; found by probing) is skipped like
+ * a NaN one: its value is not counted, and the noise floor holds only variances >= 0. */
+Test(stats, negative_reference_variance_skipped)
+{
+    struct planes pa, pr;
+    struct stats_image a = planes_image(&pa, 4, 2, false), r = planes_image(&pr, 4, 2, true);
+    for (int c = 0; c < 3; c++)
+        for (int i = 0; i < 8; i++) {
+            plane(&pr, c)[i] = 0.5f;
+            plane(&pa, c)[i] = 0.5f;
+            plane(&pr, 3 + c)[i] = 0.25f;
+        }
+    plane(&pr, 3)[5] = -1.0f; /* variance.R of pixel 5 */
+    struct stats_metrics m;
+    struct mcpt_error err;
+    cr_assert(stats_compare(&a, &r, &m, &err), "%s", err.msg);
+    cr_assert_eq(m.n_skipped, 1u);
+    cr_assert_eq(m.n_values, 23u);
+    cr_assert_float_eq(m.noise_floor, 0.25, 1e-12);
+    free(pa.data);
+    free(pr.data);
+}
+
 /* a = r + N(0, sigma^2) per value: MSE -> sigma^2 within 4 standard errors, and the standard
  * error itself matches theory, sqrt(2 / (3 n_pixels)) sigma^2 (a pixel's three squared
  * Gaussian errors sum to a scaled chi-square with 3 degrees of freedom). */
