@@ -14,7 +14,6 @@
 #include <getopt.h>
 #include <stdlib.h>
 #include <string.h>
-#include <strings.h>
 
 #include "image.h"
 #include "output.h"
@@ -121,7 +120,7 @@ static int run_compare(int argc, char **argv)
         switch (c) {
         case OPT_HEATMAP:
             heatmap = optarg;
-            ok = (strlen(optarg) > 4 && strcasecmp(optarg + strlen(optarg) - 4, ".png") == 0) ||
+            ok = output_has_extension(optarg, "png") ||
                  cmd_usage_error(&err, "expected --heatmap to name a .png file, got '%s'", optarg);
             break;
         case OPT_JSON:
@@ -530,8 +529,7 @@ static bool parse_convert(int argc, char **argv, const char **in, const char **o
                                argc - optind);
     *in = argv[optind];
     *out = argv[optind + 1];
-    size_t n = strlen(*out);
-    if (n < 4 || strcasecmp(*out + n - 4, ".png") != 0)
+    if (!output_has_extension(*out, "png"))
         return cmd_usage_error(err, "expected OUT to end in .png, got '%s'", *out);
     return true;
 }

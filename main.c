@@ -502,7 +502,7 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
     }
     case OPT_HEATMAP:
         o->heatmap_path = optarg;
-        return (strlen(optarg) > 4 && strcasecmp(optarg + strlen(optarg) - 4, ".png") == 0) ||
+        return output_has_extension(optarg, "png") ||
                cmd_usage_error(err, "expected --heatmap to name a .png file, got '%s'", optarg);
     case OPT_WIDTH:
     case OPT_HEIGHT:

@@ -35,9 +35,7 @@ static bool with_suffix(const char *path, const char *suffix, char *out, size_t 
     return copy_path(out, out_bytes, name, err);
 }
 
-/* Whether path's extension (after the last dot of its last component, not a leading one) is
- * ext, in any case. */
-static bool has_extension(const char *path, const char *ext)
+bool output_has_extension(const char *path, const char *ext)
 {
     const char *slash = strrchr(path, '/');
     const char *base = slash ? slash + 1 : path;
@@ -50,11 +48,11 @@ bool output_paths_init(struct output_paths *p, const char *scene_path, const cha
                        bool has_preview, struct mcpt_error *err)
 {
     memset(p, 0, sizeof *p);
-    if (output && has_extension(output, "png")) {
+    if (output && output_has_extension(output, "png")) {
         if (!copy_path(p->png, sizeof p->png, output, err))
             return false;
     } else if (output) {
-        if (!has_extension(output, "exr")) {
+        if (!output_has_extension(output, "exr")) {
             mcpt_error_set(err, "mcpt", 0, 0,
                            "expected an output name ending in .exr (float image and PNG "
                            "preview) or .png (8-bit sRGB only), got '%.200s'",

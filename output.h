@@ -117,6 +117,10 @@ int output_list(const struct output_paths *p, const char *curve_path, bool snaps
 bool output_check(const struct output_file *outputs, int n_outputs,
                   const struct output_file *inputs, int n_inputs, struct mcpt_error *err);
 
+/* Whether path's extension (after the last dot of its last component, not a leading one) is
+ * ext, in any case: "png" for -o OUT.png, --heatmap and convert's OUT. */
+bool output_has_extension(const char *path, const char *ext);
+
 /* output_check in its two steps: the checks that touch nothing (the same-file rule, each
  * output a regular file or a new name in an existing folder: file_check_name), then the
  * creatability probes and the stale temporaries.  A caller with a check of its own to make
