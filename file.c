@@ -394,6 +394,18 @@ bool file_id_same(const struct file_id *a, const struct file_id *b)
 
 /* ---- outputs ---- */
 
+/* The folder path names its file in: "." for a bare name, "/" for one at the root. */
+static void parent_folder(const char *path, char *dir, size_t dir_bytes)
+{
+    const char *slash = strrchr(path, '/');
+    if (!slash)
+        snprintf(dir, dir_bytes, ".");
+    else if (slash == path)
+        snprintf(dir, dir_bytes, "/");
+    else
+        snprintf(dir, dir_bytes, "%.*s", (int)(slash - path), path);
+}
+
 bool file_check_name(const char *path, struct mcpt_error *err)
 {
     struct stat st;
@@ -403,15 +415,14 @@ bool file_check_name(const char *path, struct mcpt_error *err)
         return false;
     }
     char dir[FILE_PATH_BYTES];
-    const char *slash = strrchr(path, '/');
-    snprintf(dir, sizeof dir, "%.*s", slash ? (int)(slash - path) : 1, slash ? path : ".");
-    if (slash == path)
-        snprintf(dir, sizeof dir, "/");
-    if (stat(dir, &st) != 0 && errno == ENOENT) {
+    parent_folder(path, dir, sizeof dir);
+    if (stat(dir, &st) != 0) {
+        if (errno != ENOENT)
+            return true; /* no permission to look, say: file_check_creatable's probe tells */
         mcpt_error_set(err, path, 0, 0, "cannot create: no folder '%s'", dir);
         return false;
     }
-    if (stat(dir, &st) == 0 && !S_ISDIR(st.st_mode)) {
+    if (!S_ISDIR(st.st_mode)) {
         mcpt_error_set(err, path, 0, 0, "cannot create: '%s' is not a folder", dir);
         return false;
     }
@@ -429,8 +440,7 @@ bool file_check_creatable(const char *path, struct mcpt_error *err)
     }
     int e = errno;
     char dir[FILE_PATH_BYTES];
-    const char *slash = strrchr(path, '/');
-    snprintf(dir, sizeof dir, "%.*s", slash ? (int)(slash - path) : 1, slash ? path : ".");
+    parent_folder(path, dir, sizeof dir);
     if (e == ENOSPC || e == EIO || e == EDQUOT || e == ENOMEM || e == EMFILE || e == ENFILE)
         mcpt_error_runtime(err, path, "cannot create: %s", strerror(e));
     else if (e == ENOENT)

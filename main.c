@@ -1077,8 +1077,6 @@ static bool resume_matches(const struct run *run, struct mcpt_error *err)
     return true;
 }
 
-/* The render's settings: each option given, else the scene's render statement, else the
- * default; checked against each other and, with --resume, against the checkpoint. */
 /* The settings that decide what a render estimates, from the options o and the scene's render
  * statement r: each option given, else the scene's, else the default. */
 static bool estimator_settings(const struct options *o, const struct render_settings *r,
@@ -1100,6 +1098,8 @@ static bool estimator_settings(const struct options *o, const struct render_sett
     return sampling_options(o, r, t, err);
 }
 
+/* The render's settings (estimator_settings), checked against each other and, with --resume,
+ * against the checkpoint. */
 static bool render_options(struct run *run, struct mcpt_error *err)
 {
     const struct options *o = &run->o;
