@@ -214,15 +214,21 @@ Test(resume, from_checkpoint_bit_identical, .init = setup, .fini = teardown)
     cr_assert_not(test_exists(ckpt), "the checkpoint of a finished render is removed");
 }
 
+/* The paths of a refused resume (each 300 bytes) and a checkpoint of 2 of 8 samples a pixel. */
+static void refusal_setup(char *ckpt, char *out, char *err_path)
+{
+    snprintf(ckpt, 300, "%s/part.ckpt", tmpdir);
+    snprintf(out, 300, "%s/out.exr", tmpdir);
+    snprintf(err_path, 300, "%s/stderr.txt", tmpdir);
+    make_checkpoint(ckpt, 2, 8);
+}
+
 /* A resumed run must render what the interrupted one would have: another seed, film size or
  * scene is refused (exit 2, one line naming the checkpoint), and nothing is written. */
 Test(resume, mismatch_refused, .init = setup, .fini = teardown)
 {
     char ckpt[300], out[300], err_path[300], err[4096], want[400];
-    snprintf(ckpt, sizeof ckpt, "%s/part.ckpt", tmpdir);
-    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
-    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
-    make_checkpoint(ckpt, 2, 8);
+    refusal_setup(ckpt, out, err_path);
     const char *seed[] = {SCENE, "--resume", ckpt, "--seed", "5", "-o", out, NULL};
     cr_assert_eq(test_run_mcpt(seed, NULL, err_path, ALARM_S), 2);
     test_read_file(err_path, err, sizeof err);
@@ -263,10 +269,7 @@ Test(resume, mismatch_refused, .init = setup, .fini = teardown)
 Test(resume, changed_estimator_refused, .init = setup, .fini = teardown)
 {
     char ckpt[300], out[300], err_path[300], err[4096], want[400];
-    snprintf(ckpt, sizeof ckpt, "%s/part.ckpt", tmpdir);
-    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
-    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
-    make_checkpoint(ckpt, 2, 8);
+    refusal_setup(ckpt, out, err_path);
     const char *changes[][3] = {
         {"--direct", "light", "--direct mis as in the checkpoint, got light"},
         {"--split", "indirect", "--split full as in the checkpoint, got indirect"},
