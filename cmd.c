@@ -468,7 +468,8 @@ static int run_merge(int argc, char **argv)
     struct partial_info info;
     /* the parts first: bad input touches no output, not even by the creatability probe */
     ok = ok &&
-         partial_merge_files((const char *const *)argv + optind, argc - optind, &film, &info, &err) &&
+         partial_merge_files((const char *const *)argv + optind, argc - optind, &film, &info,
+                             &err) &&
          check_merge_outputs(&paths, argv + optind, argc - optind, &err);
     /* the whole render is an ordinary image, unless asked to stay mergeable */
     bool is_plain = ok && partial_is_whole(&info) && !keep_partial;

@@ -69,8 +69,8 @@ static inline double film_sum_lum(const struct film_pixel *p)
  * (checkpoint.c, partial.c).  With n = p->n: n + n_dropped <= max_samples; an empty pixel is
  * all zeros; each sum in [0, n FLT_MAX] (radiance is never negative) and sum of squares in
  * [0, n FLT_MAX^2] (so finite, as a sample above FLT_MAX is dropped); and per channel and for
- * the luminance the Cauchy-Schwarz bound sum^2 <= n sum_sq, up to rounding.  Returns NULL when it does, else
- * what is wrong, for a message ("a sum of squares below 0", ...). */
+ * the luminance the Cauchy-Schwarz bound sum^2 <= n sum_sq, up to rounding.  Returns NULL when
+ * it does, else what is wrong, for a message ("a sum of squares below 0", ...). */
 const char *film_pixel_problem(const struct film_pixel *p, uint64_t max_samples);
 
 /* Mean of pixel p, channel c; 0 for an empty pixel. */

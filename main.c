@@ -972,6 +972,8 @@ static void rr_text(float rr_prob, char *out, size_t out_bytes)
         snprintf(out, out_bytes, "throughput");
 }
 
+static const char *on_off(bool on) { return on ? "on" : "off"; }
+
 /* The estimator settings of the resumed run against those its checkpoint's options give with
  * the same scene: a resumed render adds samples of the same estimator, or its image would be
  * a mix of two (--split indirect on a full render's samples, say).  False with *err naming the
@@ -1000,25 +1002,21 @@ static bool resume_estimator_matches(const struct run *run, struct mcpt_error *e
             float_pair_text(a, b, want, got, sizeof want);                                         \
         }                                                                                          \
     } while (0)
+#define DIFFER_NAMED(name, a, b, text)                                                             \
+    do {                                                                                           \
+        if (!opt && (a) != (b)) {                                                                  \
+            opt = name;                                                                            \
+            snprintf(want, sizeof want, "%s", text(a));                                            \
+            snprintf(got, sizeof got, "%s", text(b));                                              \
+        }                                                                                          \
+    } while (0)
     enum render_light_sampling ls_was = run->saved_o.has_light_sampling
                                             ? run->saved_o.light_sampling
                                             : run->scene_light_sampling;
-    enum render_light_sampling ls_now = run->scene.render.light_sampling;
-    if (ls_was != ls_now) {
-        opt = "--light-sampling";
-        snprintf(want, sizeof want, "%s", scene_light_sampling_name(ls_was));
-        snprintf(got, sizeof got, "%s", scene_light_sampling_name(ls_now));
-    }
-    if (!opt && was.direct != now->direct) {
-        opt = "--direct";
-        snprintf(want, sizeof want, "%s", scene_direct_name(was.direct));
-        snprintf(got, sizeof got, "%s", scene_direct_name(now->direct));
-    }
-    if (!opt && was.split != now->split) {
-        opt = "--split";
-        snprintf(want, sizeof want, "%s", scene_split_name(was.split));
-        snprintf(got, sizeof got, "%s", scene_split_name(now->split));
-    }
+    DIFFER_NAMED("--light-sampling", ls_was, run->scene.render.light_sampling,
+                 scene_light_sampling_name);
+    DIFFER_NAMED("--direct", was.direct, now->direct, scene_direct_name);
+    DIFFER_NAMED("--split", was.split, now->split, scene_split_name);
     DIFFER("--light-samples", was.light_samples ? was.light_samples : 1u,
            now->light_samples ? now->light_samples : 1u);
     if (!opt && was.rr_prob != now->rr_prob) {
@@ -1031,17 +1029,10 @@ static bool resume_estimator_matches(const struct run *run, struct mcpt_error *e
     DIFFER_F("--rr-threshold",
              was.rr_threshold > 0.0f ? was.rr_threshold : TRACE_RR_THRESHOLD_DEFAULT,
              now->rr_threshold > 0.0f ? now->rr_threshold : TRACE_RR_THRESHOLD_DEFAULT);
-    if (!opt && was.adaptive != now->adaptive) {
-        opt = "adaptive sampling";
-        snprintf(want, sizeof want, "%s", was.adaptive ? "on" : "off");
-        snprintf(got, sizeof got, "%s", now->adaptive ? "on" : "off");
-    }
-    if (!opt && was.adaptive) {
-        if (was.adaptive_rule != now->adaptive_rule) {
-            opt = "--adaptive-rule";
-            snprintf(want, sizeof want, "%s", scene_adaptive_rule_name(was.adaptive_rule));
-            snprintf(got, sizeof got, "%s", scene_adaptive_rule_name(now->adaptive_rule));
-        }
+    DIFFER_NAMED("adaptive sampling", was.adaptive, now->adaptive, on_off);
+    if (was.adaptive) {
+        DIFFER_NAMED("--adaptive-rule", was.adaptive_rule, now->adaptive_rule,
+                     scene_adaptive_rule_name);
         DIFFER("--pilot-spp", was.pilot_spp, now->pilot_spp);
         DIFFER_F("--tolerance", was.tolerance, now->tolerance);
         DIFFER_F("--adaptive-floor", was.adaptive_floor, now->adaptive_floor);
@@ -1050,6 +1041,7 @@ static bool resume_estimator_matches(const struct run *run, struct mcpt_error *e
     }
 #undef DIFFER
 #undef DIFFER_F
+#undef DIFFER_NAMED
     if (opt)
         mcpt_error_set(err, run->o.resume_path, 0, 0,
                        "expected %s %s as in the checkpoint, got %s (a resumed render adds "

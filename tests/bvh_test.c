@@ -911,8 +911,7 @@ Test(bvh, spawned_rays_skip_their_triangle)
         bool brute = bvh_intersect_brute_from(both, &in, prim, &h_brute);
         cr_assert(same_hit(from, &h_from, brute, &h_brute), "triangle %u: aimed, wide vs brute",
                   prim);
-        cr_assert(same_hit(from, &h_from, bin, &h_bin), "triangle %u: aimed, wide vs binary",
-                  prim);
+        cr_assert(same_hit(from, &h_from, bin, &h_bin), "triangle %u: aimed, wide vs binary", prim);
         cr_assert_eq(bvh_occluded_from(both, &in, prim), from);
         cr_assert_eq(bvh_occluded_from(binary, &in, prim), from);
         cr_assert(!from || h_from.prim_idx != prim);
@@ -922,7 +921,8 @@ Test(bvh, spawned_rays_skip_their_triangle)
         }
     }
     cr_log_info("spawned rays: %d, %d of them hit another triangle; %d aimed rays found their "
-                "triangle first, and skipped it with from", n_rays, n_hits, n_own_first);
+                "triangle first, and skipped it with from",
+                n_rays, n_hits, n_own_first);
     cr_assert_gt(n_hits, n_rays / 10);
     cr_assert_gt(n_own_first, 500);
     bvh_free(binary);

@@ -54,9 +54,9 @@ Test(cli, bad_usage, .init = setup, .fini = teardown)
         {"tests/data/cli/tiny.txt", "--adaptive", "--adaptive-rule", "stop", "--pilot-spp", "8"},
         {"tests/data/cli/tiny.txt", "--light-sampling", "sphere", NULL},
         {"tests/data/cli/tiny.txt", "--rr-threshold", "0", NULL},
-        {"", NULL},                                                /* an empty scene name */
-        {"tests/data/cli/tiny.txt", "--exposure", " 2", NULL},     /* decimal numbers only, */
-        {"tests/data/cli/tiny.txt", "--scale", "0x1p-1", NULL},    /* as in the scene format */
+        {"", NULL},                                             /* an empty scene name */
+        {"tests/data/cli/tiny.txt", "--exposure", " 2", NULL},  /* decimal numbers only, */
+        {"tests/data/cli/tiny.txt", "--scale", "0x1p-1", NULL}, /* as in the scene format */
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         char err[4096];

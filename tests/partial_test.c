@@ -204,8 +204,7 @@ Test(partial, read_refuses_impossible_sums, .init = setup, .fini = teardown)
     film.pixels[5].sum[1] = -2.0; /* within the bound, but negative: found by probing */
     cr_assert(partial_write_exr(path, &film, &info, &err));
     cr_assert_not(partial_read_exr(path, &back, &info_back, &err));
-    cr_assert(strstr(err.msg, "got a negative sum") && strstr(err.msg, "pixel 2,1"), "%s",
-              err.msg);
+    cr_assert(strstr(err.msg, "got a negative sum") && strstr(err.msg, "pixel 2,1"), "%s", err.msg);
     cr_assert_null(back.pixels);
     film_free(&film);
 }

@@ -285,8 +285,10 @@ Test(resume, changed_estimator_refused, .init = setup, .fini = teardown)
         const char *args[] = {"--resume", ckpt, "-o", out, changes[i][0], changes[i][1], NULL};
         cr_assert_eq(test_run_mcpt(args, NULL, err_path, ALARM_S), 2, "case %zu", i);
         test_read_file(err_path, err, sizeof err);
-        snprintf(want, sizeof want, "%s: error: expected %s (a resumed render adds samples of "
-                 "the same estimator)\n", ckpt, changes[i][2]);
+        snprintf(want, sizeof want,
+                 "%s: error: expected %s (a resumed render adds samples of "
+                 "the same estimator)\n",
+                 ckpt, changes[i][2]);
         cr_assert_str_eq(err, want);
         cr_assert_not(test_exists(out));
         cr_assert(test_exists(ckpt), "a refused resume keeps its checkpoint");
@@ -389,9 +391,9 @@ Test(interrupt, during_the_adaptive_pilot, .init = setup, .fini = teardown,
     char out[300], err_path[300], err[4096];
     snprintf(out, sizeof out, "%s/out.exr", tmpdir);
     snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
-    const char *args[] = {SCENE,         "--spp",     "2",  "--adaptive", "--pilot-spp",
-                          "100000000",   "--min-spp", "2",  "--threads",  "2",
-                          "-o",          out,         NULL};
+    const char *args[] = {SCENE,       "--spp",     "2", "--adaptive", "--pilot-spp",
+                          "100000000", "--min-spp", "2", "--threads",  "2",
+                          "-o",        out,         NULL};
     pid_t pid = test_start_mcpt(args, NULL, err_path, ALARM_S);
     nanosleep(&(struct timespec){0, 500 * 1000 * 1000}, NULL);
     double t0 = now_s();
