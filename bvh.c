@@ -178,13 +178,6 @@ static void ref_centre(const struct prim_ref *r, float c[3])
         c[a] = 0.5f * (r->min[a] + r->max[a]);
 }
 
-/* Bin of a centre coordinate c in [c_min, c_max], scale = BVH_N_BINS / (c_max - c_min). */
-static int bin_index(float c, float c_min, float scale)
-{
-    int k = (int)((c - c_min) * scale);
-    return k < BVH_N_BINS ? k : BVH_N_BINS - 1;
-}
-
 /* Bin scale of an axis, or 0 where all centres share the coordinate (or their extent is too
  * small to divide): every centre then falls in bin 0 and the axis offers no split. */
 static float bin_scale(const struct box *centre_bounds, int axis)
@@ -201,23 +194,49 @@ static void bins_clear(struct bins *bins)
             bins->b[axis][k] = (struct bin){empty_box, 0};
 }
 
-/* One pass fills the bins of all three axes (Wald 2007, sec. 3.2).  One ref's box, centre and
- * three bin indices are each one 4-lane vector operation (lane 3 is zero padding):
- *   k_a = (int) min((c_a - c_min_a) scale_a, N - 1),  which equals min((int) ..., N - 1)
- * (bin_index's form) for the finite, non-negative values met here. */
+/* What binning needs of a task's centre bounds, as 4-lane vectors (lane 3 is zero padding):
+ * the lower corner, bin_scale per axis and the last bin. */
+struct bin_map {
+    v4f c_min;
+    v4f scale;
+    v4f last;
+};
+
+static struct bin_map bin_map_of(const struct box *centre_bounds)
+{
+    return (
+        struct bin_map){{centre_bounds->min[0], centre_bounds->min[1], centre_bounds->min[2], 0.0f},
+                        {bin_scale(centre_bounds, 0), bin_scale(centre_bounds, 1),
+                         bin_scale(centre_bounds, 2), 0.0f},
+                        {BVH_N_BINS - 1, BVH_N_BINS - 1, BVH_N_BINS - 1, BVH_N_BINS - 1}};
+}
+
+/* The bins of centre c on the three axes in one vector operation,
+ *   k_a = (int) min((c_a - c_min_a) scale_a, N - 1),
+ * the one formula of both binning and partitioning (so a ref goes to the side its bin is on). */
+static inline v4i centre_bins(const struct bin_map *m, v4f c)
+{
+    return __builtin_convertvector(v4_min((c - m->c_min) * m->scale, m->last), v4i);
+}
+
+/* centre_bins(m, c)[axis], with scalar arithmetic (the same operations on the same lane) */
+static inline int centre_bin(const struct bin_map *m, v4f c, int axis)
+{
+    float x = (c[axis] - m->c_min[axis]) * m->scale[axis];
+    return (int)(x < m->last[axis] ? x : m->last[axis]);
+}
+
+/* One pass fills the bins of all three axes (Wald 2007, sec. 3.2): one ref's box, centre and
+ * three bin indices are each one 4-lane vector operation. */
 static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t begin, uint32_t end,
                       const struct box *centre_bounds)
 {
-    const v4f c_min = {centre_bounds->min[0], centre_bounds->min[1], centre_bounds->min[2], 0.0f};
-    const v4f scale = {bin_scale(centre_bounds, 0), bin_scale(centre_bounds, 1),
-                       bin_scale(centre_bounds, 2), 0.0f};
-    const v4f last = {BVH_N_BINS - 1, BVH_N_BINS - 1, BVH_N_BINS - 1, BVH_N_BINS - 1};
+    const struct bin_map m = bin_map_of(centre_bounds);
     for (uint32_t i = begin; i < end; i++) {
         const struct prim_ref *r = &refs[i];
         v4f lo = ref_lo(r);
         v4f hi = ref_hi(r);
-        v4f c = 0.5f * (lo + hi);
-        v4i k = __builtin_convertvector(v4_min((c - c_min) * scale, last), v4i);
+        v4i k = centre_bins(&m, 0.5f * (lo + hi));
         for (int axis = 0; axis < 3; axis++) {
             struct bin *b = &bins->b[axis][k[axis]];
             v4_store(b->box.min, v4_min(lo, v4_load(b->box.min)));
@@ -828,6 +847,91 @@ static bool spatial_partition(const struct build_ctx *ctx, const struct build_ta
     return true;
 }
 
+/* Whether ref r belongs right of the plane after bin `bin` on axis, by the binning's formula. */
+static inline uint32_t ref_goes_right(const struct prim_ref *r, const struct bin_map *m, int axis,
+                                      int bin)
+{
+    return centre_bin(m, 0.5f * (ref_lo(r) + ref_hi(r)), axis) > bin;
+}
+
+static inline void ref_swap(struct prim_ref *a, struct prim_ref *b)
+{
+    struct prim_ref tmp = *a;
+    *a = *b;
+    *b = tmp;
+}
+
+/* Partitions refs[begin, end) into those left of the plane after bin `bin` on axis, then those
+ * right of it, and returns where the right ones start.  A ref's side is unpredictable deep in
+ * the tree, so the bulk runs without a branch on it (Edelkamp & Weiss 2016, "BlockQuicksort:
+ * Avoiding Branch Mispredictions in Quicksort", sec. 3): a block at each end records the
+ * offsets of its misplaced refs, and as many pairs as both blocks have are swapped.  The last
+ * fewer than 2 PARTITION_BLOCK refs are partitioned as Hoare did, with a branch. */
+#define PARTITION_BLOCK 32
+
+static uint32_t partition_refs(struct prim_ref *refs, uint32_t begin, uint32_t end,
+                               const struct bin_map *m, int axis, int bin)
+{
+    uint8_t off_l[PARTITION_BLOCK]; /* right-bound refs in refs[lo, lo + BLOCK) */
+    uint8_t off_r[PARTITION_BLOCK]; /* left-bound refs in refs[hi - BLOCK, hi), from hi down */
+    uint32_t n_l = 0;
+    uint32_t n_r = 0;
+    uint32_t next_l = 0;
+    uint32_t next_r = 0;
+    uint32_t lo = begin; /* refs[begin, lo) are left, refs[hi, end) right */
+    uint32_t hi = end;
+    while (hi - lo >= 2 * PARTITION_BLOCK) {
+        if (n_l == 0) {
+            next_l = 0;
+            for (uint32_t k = 0; k < PARTITION_BLOCK; k++) {
+                off_l[n_l] = (uint8_t)k;
+                n_l += ref_goes_right(&refs[lo + k], m, axis, bin);
+            }
+        }
+        if (n_r == 0) {
+            next_r = 0;
+            for (uint32_t k = 0; k < PARTITION_BLOCK; k++) {
+                off_r[n_r] = (uint8_t)k;
+                n_r += 1 - ref_goes_right(&refs[hi - 1 - k], m, axis, bin);
+            }
+        }
+        uint32_t n_swap = n_l < n_r ? n_l : n_r;
+        for (uint32_t k = 0; k < n_swap; k++)
+            ref_swap(&refs[lo + off_l[next_l + k]], &refs[hi - 1 - off_r[next_r + k]]);
+        n_l -= n_swap;
+        n_r -= n_swap;
+        next_l += n_swap;
+        next_r += n_swap;
+        if (n_l == 0)
+            lo += PARTITION_BLOCK;
+        if (n_r == 0)
+            hi -= PARTITION_BLOCK;
+    }
+    /* a block with refs still misplaced was not passed: [lo, hi) holds it */
+    while (lo < hi) {
+        if (!ref_goes_right(&refs[lo], m, axis, bin))
+            lo++;
+        else
+            ref_swap(&refs[lo], &refs[--hi]);
+    }
+    return lo;
+}
+
+/* Bounds of the centres of refs[begin, end). */
+static void centre_bounds_of(const struct prim_ref *refs, uint32_t begin, uint32_t end,
+                             struct box *out)
+{
+    v4f c_lo = v4_load(empty_box.min);
+    v4f c_hi = v4_load(empty_box.max);
+    for (uint32_t k = begin; k < end; k++) {
+        v4f c = 0.5f * (ref_lo(&refs[k]) + ref_hi(&refs[k]));
+        c_lo = v4_min(c, c_lo);
+        c_hi = v4_max(c, c_hi);
+    }
+    v4_store(out->min, c_lo);
+    v4_store(out->max, c_hi);
+}
+
 /* Decides task's node: false when it is to be a leaf; otherwise partitions its refs and fills
  * the children's ranges and bounds (child[i]: begin, end, cap, bounds, centre_bounds). */
 static bool split_task(const struct build_ctx *ctx, const struct build_task *task, int n_threads,
@@ -891,46 +995,17 @@ static bool split_task(const struct build_ctx *ctx, const struct build_task *tas
     if (spatial.sah_sum < best.sah_sum &&
         spatial_partition(ctx, task, &sbins, &grid, spatial, child))
         return true;
-    /* the object split: left takes the centres in bins 0..best.bin */
-    int axis = best.axis;
-    float c_min = task->centre_bounds.min[axis];
-    float scale = bin_scale(&task->centre_bounds, axis);
-    struct box child_bounds[2];
+    /* The object split: left takes the centres in bins 0..best.bin.  A side's box is the union
+     * of its bins' boxes (the same refs, so the same bits); its centres' bounds come from one
+     * pass over its refs after the partition. */
+    const struct bin_map m = bin_map_of(&task->centre_bounds);
+    uint32_t i = partition_refs(refs, begin, end, &m, best.axis, best.bin);
+    struct box child_bounds[2] = {empty_box, empty_box};
+    for (int k = 0; k < BVH_N_BINS; k++)
+        box_union(&child_bounds[k <= best.bin ? 0 : 1], &bins.b[best.axis][k].box);
     struct box child_centres[2];
-    for (int side = 0; side < 2; side++) {
-        child_bounds[side] = empty_box;
-        child_centres[side] = empty_box;
-    }
-    uint32_t i = begin;
-    uint32_t j = end;
-    /* left takes bins 0..best.bin; each ref's side grows that side's box and centre bounds */
-    v4f side_lo[2] = {v4_load(empty_box.min), v4_load(empty_box.min)};
-    v4f side_hi[2] = {v4_load(empty_box.max), v4_load(empty_box.max)};
-    v4f side_c_lo[2] = {side_lo[0], side_lo[0]};
-    v4f side_c_hi[2] = {side_hi[0], side_hi[0]};
-    while (i < j) {
-        v4f lo = ref_lo(&refs[i]);
-        v4f hi = ref_hi(&refs[i]);
-        v4f c = 0.5f * (lo + hi);
-        int side = bin_index(c[axis], c_min, scale) <= best.bin ? 0 : 1;
-        side_lo[side] = v4_min(lo, side_lo[side]);
-        side_hi[side] = v4_max(hi, side_hi[side]);
-        side_c_lo[side] = v4_min(c, side_c_lo[side]);
-        side_c_hi[side] = v4_max(c, side_c_hi[side]);
-        if (side == 0) {
-            i++;
-        } else {
-            struct prim_ref tmp = refs[i];
-            refs[i] = refs[--j];
-            refs[j] = tmp;
-        }
-    }
-    for (int side = 0; side < 2; side++) {
-        v4_store(child_bounds[side].min, side_lo[side]);
-        v4_store(child_bounds[side].max, side_hi[side]);
-        v4_store(child_centres[side].min, side_c_lo[side]);
-        v4_store(child_centres[side].max, side_c_hi[side]);
-    }
+    centre_bounds_of(refs, begin, i, &child_centres[0]);
+    centre_bounds_of(refs, i, end, &child_centres[1]);
     assert(i > begin && i < end); /* bins_best_split only offers planes with both sides used */
     for (int side = 0; side < 2; side++) {
         child[side].bounds = child_bounds[side];
