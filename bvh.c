@@ -78,14 +78,12 @@ struct prim_ref {
     uint32_t is_degenerate; /* 1 for a zero-area triangle (dropped from the wide layout) */
 };                          /* 32 bytes */
 
-struct bin {
-    struct box box; /* union of the boxes of the triangles whose centre falls in the bin */
-    uint32_t n;     /* number of those triangles */
-};                  /* 36 bytes */
-
+/* Per axis, per bin: the union of the boxes of the triangles whose centre falls in the bin, and
+ * their number (apart, so that each box is one aligned 32-byte line). */
 struct bins {
-    struct bin b[3][BVH_N_BINS]; /* per axis */
-};                               /* 1728 bytes */
+    struct box box[3][BVH_N_BINS] __attribute__((aligned(32)));
+    uint32_t n[3][BVH_N_BINS];
+}; /* 1728 bytes */
 
 /* A node waiting to be built: refs[begin, end) at depth, with the bounds of the refs' boxes
  * and of their centres (computed while the parent partitioned them); refs[end, cap) are spare
@@ -191,7 +189,8 @@ static void bins_clear(struct bins *bins)
 {
     for (int axis = 0; axis < 3; axis++)
         for (int k = 0; k < BVH_N_BINS; k++)
-            bins->b[axis][k] = (struct bin){empty_box, 0};
+            bins->box[axis][k] = empty_box;
+    memset(bins->n, 0, sizeof bins->n);
 }
 
 /* What binning needs of a task's centre bounds, as 4-lane vectors (lane 3 is zero padding):
@@ -238,10 +237,10 @@ static void bins_fill(struct bins *bins, const struct prim_ref *refs, uint32_t b
         v4f hi = ref_hi(r);
         v4i k = centre_bins(&m, 0.5f * (lo + hi));
         for (int axis = 0; axis < 3; axis++) {
-            struct bin *b = &bins->b[axis][k[axis]];
-            v4_store(b->box.min, v4_min(lo, v4_load(b->box.min)));
-            v4_store(b->box.max, v4_max(hi, v4_load(b->box.max)));
-            b->n++;
+            struct box *b = &bins->box[axis][k[axis]];
+            v4_store(b->min, v4_min(lo, v4_load(b->min)));
+            v4_store(b->max, v4_max(hi, v4_load(b->max)));
+            bins->n[axis][k[axis]]++;
         }
     }
 }
@@ -250,8 +249,8 @@ static void bins_merge(struct bins *into, const struct bins *from)
 {
     for (int axis = 0; axis < 3; axis++) {
         for (int k = 0; k < BVH_N_BINS; k++) {
-            box_union(&into->b[axis][k].box, &from->b[axis][k].box);
-            into->b[axis][k].n += from->b[axis][k].n;
+            box_union(&into->box[axis][k], &from->box[axis][k]);
+            into->n[axis][k] += from->n[axis][k];
         }
     }
 }
@@ -273,7 +272,8 @@ static struct split bins_best_split(const struct bins *bins, uint32_t n)
     const v4f empty_lo = v4_load(empty_box.min);
     const v4f empty_hi = v4_load(empty_box.max);
     for (int axis = 0; axis < 3; axis++) {
-        const struct bin *b = bins->b[axis];
+        const struct box *b = bins->box[axis];
+        const uint32_t *b_n = bins->n[axis];
         /* right sweep: right_area[k], right_n[k] describe bins k .. BVH_N_BINS - 1 */
         float right_area[BVH_N_BINS];
         uint32_t right_n[BVH_N_BINS];
@@ -281,9 +281,9 @@ static struct split bins_best_split(const struct bins *bins, uint32_t n)
         v4f hi = empty_hi;
         uint32_t acc_n = 0;
         for (int k = BVH_N_BINS - 1; k > 0; k--) {
-            lo = v4_min(v4_load(b[k].box.min), lo);
-            hi = v4_max(v4_load(b[k].box.max), hi);
-            acc_n += b[k].n;
+            lo = v4_min(v4_load(b[k].min), lo);
+            hi = v4_max(v4_load(b[k].max), hi);
+            acc_n += b_n[k];
             right_area[k] = acc_n > 0 ? half_area_v4(lo, hi) : 0.0f;
             right_n[k] = acc_n;
         }
@@ -292,9 +292,9 @@ static struct split bins_best_split(const struct bins *bins, uint32_t n)
         hi = empty_hi;
         acc_n = 0;
         for (int k = 0; k < BVH_N_BINS - 1; k++) {
-            lo = v4_min(v4_load(b[k].box.min), lo);
-            hi = v4_max(v4_load(b[k].box.max), hi);
-            acc_n += b[k].n;
+            lo = v4_min(v4_load(b[k].min), lo);
+            hi = v4_max(v4_load(b[k].max), hi);
+            acc_n += b_n[k];
             if (acc_n == 0 || acc_n == n)
                 continue; /* one side would be empty */
             float sah_sum = half_area_v4(lo, hi) * (float)acc_n +
@@ -352,7 +352,8 @@ static void *bin_job_run(void *arg)
 static void bins_fill_parallel(struct bins *bins, const struct prim_ref *refs, uint32_t begin,
                                uint32_t end, const struct box *centre_bounds, int n_threads)
 {
-    struct bin_job *jobs = malloc((size_t)n_threads * sizeof *jobs);
+    struct bin_job *jobs = bvh_alloc_aligned((size_t)n_threads,
+                                             sizeof *jobs); /* struct bins is 32-aligned */
     if (!jobs) {
         bins_clear(bins);
         bins_fill(bins, refs, begin, end, centre_bounds);
@@ -863,8 +864,8 @@ static inline void ref_swap(struct prim_ref *a, struct prim_ref *b)
 
 /* Partitions refs[begin, end) into those left of the plane after bin `bin` on axis, then those
  * right of it, and returns where the right ones start.  A ref's side is unpredictable deep in
- * the tree, so the bulk runs without a branch on it (Edelkamp & Weiss 2016, "BlockQuicksort:
- * Avoiding Branch Mispredictions in Quicksort", sec. 3): a block at each end records the
+ * the tree, so the bulk runs without a branch on it (Edelkamp & Weiss, "BlockQuicksort:
+ * Avoiding Branch Mispredictions in Quicksort", ESA 2016): a block at each end records the
  * offsets of its misplaced refs, and as many pairs as both blocks have are swapped.  The last
  * fewer than 2 PARTITION_BLOCK refs are partitioned as Hoare did, with a branch. */
 #define PARTITION_BLOCK 32
@@ -969,7 +970,7 @@ static bool split_task(const struct build_ctx *ctx, const struct build_task *tas
     if (ctx->spatial && n >= BVH_SPATIAL_MIN_REFS) {
         struct box side[2] = {empty_box, empty_box};
         for (int k = 0; k < BVH_N_BINS; k++)
-            box_union(&side[k <= best.bin ? 0 : 1], &bins.b[best.axis][k].box);
+            box_union(&side[k <= best.bin ? 0 : 1], &bins.box[best.axis][k]);
         box_clip(&side[0], &side[1]);
         float overlap = box_is_empty(&side[0]) ? 0.0f : box_half_area(&side[0]);
         if (overlap > ctx->min_overlap &&
@@ -1002,7 +1003,7 @@ static bool split_task(const struct build_ctx *ctx, const struct build_task *tas
     uint32_t i = partition_refs(refs, begin, end, &m, best.axis, best.bin);
     struct box child_bounds[2] = {empty_box, empty_box};
     for (int k = 0; k < BVH_N_BINS; k++)
-        box_union(&child_bounds[k <= best.bin ? 0 : 1], &bins.b[best.axis][k].box);
+        box_union(&child_bounds[k <= best.bin ? 0 : 1], &bins.box[best.axis][k]);
     struct box child_centres[2];
     centre_bounds_of(refs, begin, i, &child_centres[0]);
     centre_bounds_of(refs, i, end, &child_centres[1]);
