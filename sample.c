@@ -328,7 +328,7 @@ static uint32_t pascal_digits(uint32_t index)
 typedef uint32_t u32x8 __attribute__((vector_size(32)));
 typedef int32_t i32x8 __attribute__((vector_size(32)));
 typedef float f32x8 __attribute__((vector_size(32)));
-_Static_assert(SAMPLE_PAD_LANES == 8, "pad_block runs the block as one u32x8");
+_Static_assert(SAMPLE_PAD_LANES == 8, "pad_lanes runs eight lanes as one u32x8");
 
 #if defined(__GFNI__) && defined(__AVX2__)
 /* With GFNI the affine map whose matrix is 0x8040201008040201 reverses the bits of every byte
@@ -420,10 +420,11 @@ static uint32_t nested_uniform_scramble(uint32_t x, uint32_t seed)
     return reverse_bits32(laine_karras_permutation(reverse_bits32(x), seed));
 }
 
-static void pad_block_seeds(const struct sampler *s, uint32_t dim0, struct sample_pad_seeds *seeds);
+static void pad_seeds(const struct sampler *s, uint32_t dim0, uint32_t n, uint32_t *index,
+                      uint32_t *x, uint32_t *y);
 
-/* The first bounce block with a padded dimension: the blocks whose seeds a sampler keeps per
- * pixel are this one and the next SAMPLE_PAD_KEPT - 1. */
+/* The first bounce block with a padded dimension: the blocks whose computations' seeds a
+ * sampler keeps per pixel are this one and the next SAMPLE_PAD_KEPT - 1. */
 static const uint32_t PAD_FIRST_KEPT = SAMPLE_SOBOL_JOINT_DIMS <= SAMPLE_DIM_BOUNCE0
                                            ? 0
                                            : (SAMPLE_SOBOL_JOINT_DIMS - SAMPLE_DIM_BOUNCE0) /
@@ -437,9 +438,8 @@ static void sobol_pixel_seeds(struct sampler *s)
     s->shuffle_seed = dim_seed(s, UINT32_MAX, 0);
     for (uint32_t d = 0; d < SAMPLE_SOBOL_JOINT_LANES; d++)
         s->joint_seed[d] = dim_seed(s, d, 1);
-    for (uint32_t k = 0; k < SAMPLE_PAD_KEPT; k++)
-        pad_block_seeds(s, SAMPLE_DIM_BOUNCE0 + (PAD_FIRST_KEPT + k) * SAMPLE_DIMS_PER_BOUNCE,
-                        &s->pad_kept[k]);
+    pad_seeds(s, SAMPLE_DIM_BOUNCE0 + PAD_FIRST_KEPT * SAMPLE_DIMS_PER_BOUNCE, SAMPLE_PAD_KEPT_DIMS,
+              s->pad_seed_index, s->pad_seed_x, s->pad_seed_y);
 }
 
 /* The joint point of the sample, every dimension at once (Burley 2020: shuffled_scrambled_sobol4d
@@ -497,9 +497,12 @@ static inline vec2 pad_request(uint32_t sample_idx_rev, uint32_t seed_index, uin
 }
 
 /* The padded dimensions of the bounce blocks (sample.h: SAMPLE_DIMS_PER_BOUNCE dimensions from
- * SAMPLE_DIM_BOUNCE0 on) are computed a block at a time, the request at every dimension of the
- * block at once, a lane each (the compiler vectorises the loop, hashes included), and kept until
- * the sample leaves the block: lane l holds x and y of a request at dimension pad_dim0 + l.
+ * SAMPLE_DIM_BOUNCE0 on) are computed SAMPLE_PAD_HELD at a time from the start of a block, the
+ * request at every dimension at once, a lane each (the compiler vectorises the loops, hashes
+ * included), and kept until the sample passes them: lane l holds x and y of the request at
+ * dimension pad_dim0 + l.  The computation is a chain of dependent multiplications, so its
+ * latency, not its work, is what a path waits for: the second vector of lanes, the next
+ * bounce's block, costs little beside the first and spares the next bounce its own wait.
  * Other dimensions (the light-sample block, any dimension below the first bounce) are requested
  * one at a time. */
 static bool pad_in_blocks(uint32_t dim)
@@ -507,30 +510,25 @@ static bool pad_in_blocks(uint32_t dim)
     return dim >= SAMPLE_DIM_BOUNCE0 && dim < SAMPLE_DIM_LIGHT_EXTRA;
 }
 
-/* The seeds of the requests at dimensions dim0 + lane. */
-static void pad_block_seeds(const struct sampler *s, uint32_t dim0, struct sample_pad_seeds *seeds)
+/* The seeds of the requests at dimensions dim0 + k, k < n. */
+static void pad_seeds(const struct sampler *s, uint32_t dim0, uint32_t n, uint32_t *index,
+                      uint32_t *x, uint32_t *y)
 {
-    for (int l = 0; l < SAMPLE_PAD_LANES; l++)
-        request_seeds(s, dim0 + (uint32_t)l, &seeds->index[l], &seeds->x[l], &seeds->y[l]);
+    for (uint32_t k = 0; k < n; k++)
+        request_seeds(s, dim0 + k, &index[k], &x[k], &y[k]);
 }
 
-/* Fills the block cache with the block of dimension dim (pad_in_blocks(dim)). */
-static void pad_block(struct sampler *s, uint32_t dim)
+/* pad_request on eight lanes at once: the requests with seeds index[l], x[l], y[l] into
+ * out_x[l], out_y[l]. */
+static ALWAYS_INLINE void pad_lanes(uint32_t sample_idx_rev, const uint32_t *seeds_index,
+                                    const uint32_t *seeds_x, const uint32_t *seeds_y, float *out_x,
+                                    float *out_y)
 {
-    uint32_t block = (dim - SAMPLE_DIM_BOUNCE0) / SAMPLE_DIMS_PER_BOUNCE;
-    uint32_t dim0 = SAMPLE_DIM_BOUNCE0 + block * SAMPLE_DIMS_PER_BOUNCE;
-    struct sample_pad_seeds computed;
-    const struct sample_pad_seeds *seeds = &computed;
-    if (block - PAD_FIRST_KEPT < SAMPLE_PAD_KEPT)
-        seeds = &s->pad_kept[block - PAD_FIRST_KEPT];
-    else
-        pad_block_seeds(s, dim0, &computed);
-    /* pad_request on every lane at once */
     u32x8 seed_index, seed_x, seed_y;
-    memcpy(&seed_index, seeds->index, sizeof seed_index);
-    memcpy(&seed_x, seeds->x, sizeof seed_x);
-    memcpy(&seed_y, seeds->y, sizeof seed_y);
-    u32x8 index = (u32x8){0} + s->sample_idx_rev;
+    memcpy(&seed_index, seeds_index, sizeof seed_index);
+    memcpy(&seed_x, seeds_x, sizeof seed_x);
+    memcpy(&seed_y, seeds_y, sizeof seed_y);
+    u32x8 index = (u32x8){0} + sample_idx_rev;
     laine_karras_permutation_x8(&index, &seed_index);
     reverse_bits_x8(&index);
     u32x8 x = index, y = index;
@@ -539,8 +537,31 @@ static void pad_block(struct sampler *s, uint32_t dim)
     pascal_digits_x8(&y);
     laine_karras_permutation_x8(&y, &seed_y);
     reverse_bits_x8(&y);
-    fraction_to_float_x8(&x, s->pad_x);
-    fraction_to_float_x8(&y, s->pad_y);
+    fraction_to_float_x8(&x, out_x);
+    fraction_to_float_x8(&y, out_y);
+}
+
+/* Fills the held lanes from the start of the block of dimension dim (pad_in_blocks(dim)). */
+static void pad_block(struct sampler *s, uint32_t dim)
+{
+    uint32_t block = (dim - SAMPLE_DIM_BOUNCE0) / SAMPLE_DIMS_PER_BOUNCE;
+    uint32_t dim0 = SAMPLE_DIM_BOUNCE0 + block * SAMPLE_DIMS_PER_BOUNCE;
+    uint32_t computed_index[SAMPLE_PAD_HELD], computed_x[SAMPLE_PAD_HELD],
+        computed_y[SAMPLE_PAD_HELD];
+    const uint32_t *seed_index = computed_index, *seed_x = computed_x, *seed_y = computed_y;
+    if (block - PAD_FIRST_KEPT < SAMPLE_PAD_KEPT) {
+        uint32_t k = (block - PAD_FIRST_KEPT) * SAMPLE_DIMS_PER_BOUNCE;
+        seed_index = s->pad_seed_index + k;
+        seed_x = s->pad_seed_x + k;
+        seed_y = s->pad_seed_y + k;
+    } else {
+        pad_seeds(s, dim0, SAMPLE_PAD_HELD, computed_index, computed_x, computed_y);
+    }
+    for (int v = 0; v < SAMPLE_PAD_HELD / SAMPLE_PAD_LANES; v++) {
+        int l = v * SAMPLE_PAD_LANES;
+        pad_lanes(s->sample_idx_rev, seed_index + l, seed_x + l, seed_y + l, s->pad_x + l,
+                  s->pad_y + l);
+    }
     s->pad_dim0 = dim0;
 }
 
@@ -548,7 +569,7 @@ static void pad_block(struct sampler *s, uint32_t dim)
 static vec2 sobol_pad(struct sampler *s, uint32_t dim)
 {
     if (pad_in_blocks(dim)) {
-        if (dim - s->pad_dim0 >= SAMPLE_DIMS_PER_BOUNCE)
+        if (dim - s->pad_dim0 >= SAMPLE_PAD_HELD)
             pad_block(s, dim);
         uint32_t lane = dim - s->pad_dim0;
         return (vec2){s->pad_x[lane], s->pad_y[lane]};

@@ -92,24 +92,21 @@ enum {
  * fraction (value / 2^32); direction numbers of Joe & Kuo 2008 (sobol_matrices.h). */
 uint32_t sample_sobol_u32(uint32_t index, uint32_t dim);
 
-/* Sobol' padding is computed a bounce block at a time (sample.c, pad_block), a lane per
- * dimension of the block. */
+/* Sobol' padding is computed SAMPLE_PAD_HELD dimensions at a time from the start of a bounce
+ * block (sample.c, pad_block), a lane per dimension: the bounce's block and the next one. */
 enum {
-    SAMPLE_PAD_LANES = 8, /* lanes of a block: SAMPLE_DIMS_PER_BOUNCE, and one spare */
-    SAMPLE_PAD_KEPT = 3,  /* the first padded blocks, whose seeds are hashed once per pixel */
+    SAMPLE_PAD_LANES = 8,  /* lanes of one vector of the computation */
+    SAMPLE_PAD_HELD = 16,  /* dimensions computed at once: two vectors, two bounces and more */
+    SAMPLE_PAD_KEPT = 3,   /* the first padded blocks, whose seeds are hashed once per pixel */
+    SAMPLE_PAD_KEPT_DIMS = /* the dimensions those blocks' computations read */
+    (SAMPLE_PAD_KEPT - 1) * SAMPLE_DIMS_PER_BOUNCE + SAMPLE_PAD_HELD,
 };
-_Static_assert((int)SAMPLE_PAD_LANES >= (int)SAMPLE_DIMS_PER_BOUNCE,
-               "a padded block is one bounce");
-/* pad_dim0 when no block is held: dim - SAMPLE_PAD_NONE is no lane for any dimension in use
+_Static_assert((int)SAMPLE_PAD_HELD >= 2 * (int)SAMPLE_DIMS_PER_BOUNCE &&
+                   (int)SAMPLE_PAD_HELD == 2 * (int)SAMPLE_PAD_LANES,
+               "the dimensions held are two bounces, two vectors");
+/* pad_dim0 when nothing is held: dim - SAMPLE_PAD_NONE is no lane for any dimension in use
  * (all are below 2^28). */
 #define SAMPLE_PAD_NONE 0xf0000000u
-
-/* The seeds of the padding requests at the dimensions dim0 + lane of one bounce block. */
-struct sample_pad_seeds {
-    uint32_t index[SAMPLE_PAD_LANES]; /* the shuffle of the sample index */
-    uint32_t x[SAMPLE_PAD_LANES];     /* the scramble of the first coordinate */
-    uint32_t y[SAMPLE_PAD_LANES];     /* the scramble of the second */
-};                                    /* 96 bytes */
 
 /* The sample generator for one (pixel, sample index), read dimension by dimension.
  * Independent: a PCG32 stream seeded by hashing (seed, pixel_idx, sample_idx).  Stratified and
@@ -129,17 +126,20 @@ struct sampler {
     uint32_t cmj_cols;   /* stratified: columns m of the m x n multi-jittered grid */
     uint64_t pixel_hash; /* hash of (seed, pixel_idx): root of every scrambling seed */
     /* Sobol', per pixel */
-    uint32_t shuffle_seed;                             /* seed of the joint point's index shuffle */
-    uint32_t joint_seed[SAMPLE_SOBOL_JOINT_LANES];     /* scramble seed of each joint dimension */
-    struct sample_pad_seeds pad_kept[SAMPLE_PAD_KEPT]; /* of the first padded blocks */
+    uint32_t shuffle_seed;                         /* seed of the joint point's index shuffle */
+    uint32_t joint_seed[SAMPLE_SOBOL_JOINT_LANES]; /* scramble seed of each joint dimension */
+    /* the seeds of the padding requests at the first padded block's dimension + k: the shuffle
+     * of the sample index, the scrambles of the first and the second coordinate */
+    uint32_t pad_seed_index[SAMPLE_PAD_KEPT_DIMS];
+    uint32_t pad_seed_x[SAMPLE_PAD_KEPT_DIMS];
+    uint32_t pad_seed_y[SAMPLE_PAD_KEPT_DIMS];
     /* Sobol', per sample */
     uint32_t sample_idx_rev;                 /* sample_idx bit-reversed: the padding's input */
     float joint_u[SAMPLE_SOBOL_JOINT_LANES]; /* the joint point, a value per dimension */
-    uint32_t pad_dim0;                       /* first dimension of the block held, or
-                                             SAMPLE_PAD_NONE */
-    float pad_x[SAMPLE_PAD_LANES];           /* the padding requests at pad_dim0 + lane: x, */
-    float pad_y[SAMPLE_PAD_LANES];           /* and y of a 2D request */
-};                                           /* 464 bytes */
+    uint32_t pad_dim0;                       /* first dimension held, or SAMPLE_PAD_NONE */
+    float pad_x[SAMPLE_PAD_HELD];            /* the padding requests at pad_dim0 + lane: x, */
+    float pad_y[SAMPLE_PAD_HELD];            /* and y of a 2D request */
+};                                           /* 592 bytes */
 
 /* Starts the sample sample_idx of pixel pixel_idx at dimension 0, with set_spp = 0: the
  * stratified sampler then has no strata to fill and gives independent hashed uniforms. */
@@ -175,7 +175,7 @@ static inline float sample_1d(struct sampler *s)
     if (s->kind == SAMPLER_SOBOL) {
         if (dim < SAMPLE_SOBOL_JOINT_DIMS)
             return s->joint_u[dim];
-        if (dim - s->pad_dim0 < SAMPLE_DIMS_PER_BOUNCE)
+        if (dim - s->pad_dim0 < SAMPLE_PAD_HELD)
             return s->pad_x[dim - s->pad_dim0];
     }
     return sample_1d_compute(s, dim);
@@ -190,7 +190,7 @@ static inline vec2 sample_2d(struct sampler *s)
     if (s->kind == SAMPLER_SOBOL) {
         if (dim + 1 < SAMPLE_SOBOL_JOINT_DIMS)
             return (vec2){s->joint_u[dim], s->joint_u[dim + 1]};
-        if (dim >= SAMPLE_SOBOL_JOINT_DIMS && dim - s->pad_dim0 < SAMPLE_DIMS_PER_BOUNCE)
+        if (dim >= SAMPLE_SOBOL_JOINT_DIMS && dim - s->pad_dim0 < SAMPLE_PAD_HELD)
             return (vec2){s->pad_x[dim - s->pad_dim0], s->pad_y[dim - s->pad_dim0]};
     }
     return sample_2d_compute(s, dim);
