@@ -223,7 +223,9 @@ def main(argv):
         for i, c in enumerate("RGB"):
             line = "  %s mean %.6f" % (c, s["mean"][i])
             if s["se"] is not None:
-                line += "  SE %.6f (%.4f%%)" % (s["se"][i], 100.0 * s["se"][i] / s["mean"][i])
+                line += "  SE %.6f" % s["se"][i]
+                if s["mean"][i] != 0.0:  # an all-zero image (a closed box) has no relative SE
+                    line += " (%.4f%%)" % (100.0 * s["se"][i] / s["mean"][i])
             print(line)
     return 0
 
