@@ -79,7 +79,7 @@ struct prim_ref {
 };                          /* 32 bytes */
 
 /* Per axis, per bin: the union of the boxes of the triangles whose centre falls in the bin, and
- * their number (apart, so that each box is one aligned 32-byte line). */
+ * their number (kept apart, so that each box sits on a 32-byte boundary, in one cache line). */
 struct bins {
     struct box box[3][BVH_N_BINS] __attribute__((aligned(32)));
     uint32_t n[3][BVH_N_BINS];
@@ -352,8 +352,8 @@ static void *bin_job_run(void *arg)
 static void bins_fill_parallel(struct bins *bins, const struct prim_ref *refs, uint32_t begin,
                                uint32_t end, const struct box *centre_bounds, int n_threads)
 {
-    struct bin_job *jobs = bvh_alloc_aligned((size_t)n_threads,
-                                             sizeof *jobs); /* struct bins is 32-aligned */
+    /* aligned: struct bins asks for 32 bytes */
+    struct bin_job *jobs = bvh_alloc_aligned((size_t)n_threads, sizeof *jobs);
     if (!jobs) {
         bins_clear(bins);
         bins_fill(bins, refs, begin, end, centre_bounds);
