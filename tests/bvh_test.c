@@ -1141,6 +1141,54 @@ Test(bvh, build_is_independent_of_thread_count)
     mesh_free(&m);
 }
 
+/* bvh.c: a node's box is the union of its bins' boxes, and the partition must send every ref to
+ * the side whose bins hold it (the one bin formula, centre_bins); a ref on the wrong side would
+ * lie outside its node's box.  So a ray aimed at each triangle from 1e-3 above its centre finds
+ * it (or a triangle nearer still), in both layouts, for the binned build on one thread and on
+ * two (70000 triangles: the top nodes' binning is shared and merged) and the spatial build.
+ * Fails when a side's box takes one bin too few (bins 0..bin - 1). */
+Test(bvh, every_triangle_is_found_by_a_ray_aimed_at_it)
+{
+    struct mesh m = {0};
+    make_soup(&m, 70000, 43);
+    const enum bvh_quality qualities[2] = {BVH_QUALITY_BINNED, BVH_QUALITY_SPATIAL};
+    for (int q = 0; q < 2; q++) {
+        for (int n_threads = 1; n_threads <= 2 - q; n_threads++) { /* spatial: one thread */
+            struct bvh_build_options opt = {n_threads, BVH_LAYOUT_BINARY | BVH_LAYOUT_WIDE,
+                                            qualities[q]};
+            struct bvh *bvh = bvh_build_with(m.positions, m.indices, m.n_tris, &opt);
+            cr_assert_not_null(bvh);
+            uint32_t n_aimed = 0;
+            for (uint32_t i = 0; i < m.n_tris; i++) {
+                vec3 p[3];
+                for (int k = 0; k < 3; k++)
+                    p[k] = m.positions[m.indices[3 * i + (uint32_t)k]];
+                vec3 n = v3_cross(v3_sub(p[1], p[0]), v3_sub(p[2], p[0]));
+                float len = v3_length(n);
+                if (!(len > 1e-6f))
+                    continue; /* a sliver: its normal is not worth aiming along */
+                n = v3_scale(n, 1.0f / len);
+                vec3 c = v3_scale(v3_add(v3_add(p[0], p[1]), p[2]), 1.0f / 3.0f);
+                struct ray ray = make_ray(v3_add(c, v3_scale(n, 1e-3f)), v3_neg(n), 0.0f, INFINITY);
+                /* the binary reference, slower, on every fourth triangle */
+                for (int how = WIDE; how <= (i % 4 == 0 ? BINARY : WIDE); how++) {
+                    struct bvh_hit hit;
+                    bool is_hit = trace_with(bvh, (enum traversal)how, &ray, &hit);
+                    cr_assert(is_hit && (hit.prim_idx == i || hit.t <= 1.001e-3f),
+                              "%s build, %d thread(s), %s traversal: triangle %u not found "
+                              "(hit %d, prim %u, t %g)",
+                              q == 0 ? "binned" : "spatial", n_threads, traversal_names[how], i,
+                              is_hit, hit.prim_idx, (double)hit.t);
+                }
+                n_aimed++;
+            }
+            cr_assert_gt(n_aimed, 69000u);
+            bvh_free(bvh);
+        }
+    }
+    mesh_free(&m);
+}
+
 /* ---- spatial splits (Stich, Friedrich, Dietrich 2009) ----------------------------------------
  * A spatial split cuts triangles: each part keeps the triangle, with a box that must contain the
  * part of it on its side of the plane (bvh.c, "Spatial splits").  A box that lost a sliver of
