@@ -95,12 +95,12 @@ uint32_t sample_sobol_u32(uint32_t index, uint32_t dim);
 /* Sobol' padding is computed SAMPLE_PAD_HELD dimensions at a time from the start of a bounce
  * block (sample.c, pad_block), a lane per dimension: the bounce's block and the next one. */
 enum {
-    SAMPLE_PAD_LANES = 8,  /* lanes of one vector of the computation */
-    SAMPLE_PAD_HELD = 16,  /* dimensions computed at once: two vectors, two bounces and more */
-    SAMPLE_PAD_KEPT = 3,   /* the first padded blocks, whose seeds are hashed once per pixel */
-    SAMPLE_PAD_KEPT_DIMS = /* the dimensions those blocks' computations read */
-    (SAMPLE_PAD_KEPT - 1) * SAMPLE_DIMS_PER_BOUNCE + SAMPLE_PAD_HELD,
+    SAMPLE_PAD_LANES = 8, /* lanes of one vector of the computation */
+    SAMPLE_PAD_HELD = 16, /* dimensions computed at once: two vectors, two bounces and more */
+    SAMPLE_PAD_KEPT = 3,  /* the first padded blocks, whose seeds are hashed once per pixel */
 };
+/* The dimensions the computations of those blocks read (from the first one's start). */
+enum { SAMPLE_PAD_KEPT_DIMS = (SAMPLE_PAD_KEPT - 1) * SAMPLE_DIMS_PER_BOUNCE + SAMPLE_PAD_HELD };
 _Static_assert((int)SAMPLE_PAD_HELD >= 2 * (int)SAMPLE_DIMS_PER_BOUNCE &&
                    (int)SAMPLE_PAD_HELD == 2 * (int)SAMPLE_PAD_LANES,
                "the dimensions held are two bounces, two vectors");
@@ -139,7 +139,7 @@ struct sampler {
     uint32_t pad_dim0;                       /* first dimension held, or SAMPLE_PAD_NONE */
     float pad_x[SAMPLE_PAD_HELD];            /* the padding requests at pad_dim0 + lane: x, */
     float pad_y[SAMPLE_PAD_HELD];            /* and y of a 2D request */
-};                                           /* 592 bytes */
+};                                           /* 632 bytes */
 
 /* Starts the sample sample_idx of pixel pixel_idx at dimension 0, with set_spp = 0: the
  * stratified sampler then has no strata to fill and gives independent hashed uniforms. */
