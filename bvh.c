@@ -44,7 +44,7 @@
  *   C_leaf  = N * C_isect
  * with A the surface area of the node's box, A_L/A_R those of the children's boxes and N_L/N_R
  * their triangle counts.  A node becomes a leaf when C_leaf <= C_split and N <= BVH_MAX_LEAF_TRIS,
- * when N == 1, or at depth BVH_MAX_DEPTH (any size).  When all centres coincide no plane
+ * when N <= BVH_UNBINNED_LEAF_TRIS (without binning), or at depth BVH_MAX_DEPTH (any size).  When all centres coincide no plane
  * separates them: a node of more than BVH_MAX_LEAF_TRIS triangles is then cut in the middle of
  * its index range, so leaves stay bounded and depth grows only as log2(N).
  * Threads: every node's split depends only on its own range of refs, so the tree is the same
@@ -63,6 +63,14 @@
 #define BVH_COST_INTERSECT 0.5f /* C_isect: one triangle test, in units of C_trav */
 #define BVH_N_BINS 16           /* bins per axis */
 #define BVH_MAX_LEAF_TRIS 8     /* a larger node is split even when the SAH prefers a leaf */
+/* A node of at most 6 triangles is a leaf without being binned.  The wide layout tests 8
+ * triangles at once and its collapse (bvh_wide.c) merged most such subtrees into one leaf
+ * anyway; binning the nodes of at most 8 took a fifth of the build.  Measured (docs/bvh.md, "Build constants"):
+ * dragon binned build -19 to -21% (8: -27%), the collapse's SAH cost +0.2-0.9%, Sponza's
+ * camera-ray packets 1% slower (8: 5%, a packet tests a leaf's triangles one by one). */
+#define BVH_UNBINNED_LEAF_TRIS 6
+_Static_assert(BVH_UNBINNED_LEAF_TRIS >= 2 && BVH_UNBINNED_LEAF_TRIS <= BVH_MAX_LEAF_TRIS,
+               "at N <= C_trav / C_isect = 2 the leaf always wins; leaves stay <= 8");
 /* BVH_MAX_DEPTH (64, deepest node) is in bvh_internal.h: the wide layout's stacks depend on it */
 #define BVH_PARALLEL_MIN_TRIS 65536 /* fewer: build on one thread (the threads cost more) */
 #define BVH_PARALLEL_BIN_MIN 16384  /* top nodes with more refs share their binning */
@@ -942,9 +950,7 @@ static bool split_task(const struct build_ctx *ctx, const struct build_task *tas
     uint32_t begin = task->begin;
     uint32_t end = task->end;
     uint32_t n = end - begin;
-    /* C_split >= C_trav A (children's areas are >= 0) while C_leaf = C_isect N A: for
-     * N <= C_trav / C_isect (= 2) the leaf always wins, and binning is skipped */
-    if (n * BVH_COST_INTERSECT <= BVH_COST_TRAVERSAL || task->depth >= BVH_MAX_DEPTH)
+    if (n <= BVH_UNBINNED_LEAF_TRIS || task->depth >= BVH_MAX_DEPTH)
         return false;
     struct bins bins;
     if (n_threads > 1 && n >= BVH_PARALLEL_BIN_MIN) {
