@@ -66,7 +66,7 @@
 /* A node of at most 6 triangles is a leaf without being binned.  The wide layout tests 8
  * triangles at once and its collapse (bvh_wide.c) merged most such subtrees into one leaf
  * anyway; binning the nodes of at most 8 took a fifth of the build.  Measured (docs/bvh.md, "Build constants"):
- * dragon binned build -19 to -21% (8: -27%), the collapse's SAH cost +0.2-0.9%, Sponza's
+ * dragon binned build -21 to -22% (8: -25%), the collapse's SAH cost +0.2-0.9%, Sponza's
  * camera-ray packets 1% slower (8: 5%, a packet tests a leaf's triangles one by one). */
 #define BVH_UNBINNED_LEAF_TRIS 6
 _Static_assert(BVH_UNBINNED_LEAF_TRIS >= 2 && BVH_UNBINNED_LEAF_TRIS <= BVH_MAX_LEAF_TRIS,
