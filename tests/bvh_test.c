@@ -1095,6 +1095,42 @@ Test(bvh, stats_are_consistent)
 
 /* ---- the build ------------------------------------------------------------------------------- */
 
+/* bvh.c's BVH_UNBINNED_LEAF_TRIS: a node of at most 6 triangles is a leaf, even where the SAH
+ * would split it (tiny triangles far apart: two children cost far less than their parent); one
+ * of 7 such triangles is split.  Every triangle is still found by a ray aimed at its centre. */
+Test(bvh, small_nodes_are_leaves)
+{
+    for (uint32_t n = 1; n <= 8; n++) {
+        struct mesh m = {0};
+        for (uint32_t i = 0; i < n; i++) {
+            vec3 c = v3((float)(i % 2) * 100.0f, (float)(i / 2 % 2) * 100.0f,
+                        (float)(i / 4) * 100.0f);
+            mesh_add_tri_pos(&m, c, v3_add(c, v3(0.1f, 0.0f, 0.0f)),
+                             v3_add(c, v3(0.0f, 0.1f, 0.0f)));
+        }
+        struct bvh *bvh = build(&m);
+        struct bvh_stats st = bvh_get_stats(bvh);
+        if (n <= 6)
+            cr_assert_eq(st.n_nodes, 1u, "%u triangles: one leaf, got %u nodes", n, st.n_nodes);
+        else
+            cr_assert_gt(st.n_nodes, 1u, "%u triangles far apart are split", n);
+        for (uint32_t i = 0; i < n; i++) {
+            vec3 p = tri_point(&m, i, 1.0f / 3.0f, 1.0f / 3.0f);
+            struct ray ray = make_ray(v3_add(p, v3(0.0f, 0.0f, 1.0f)), v3(0.0f, 0.0f, -1.0f), 0.0f,
+                                      INFINITY);
+            for (int layout = 0; layout < 2; layout++) {
+                struct bvh_hit hit;
+                enum bvh_layout l = layout ? BVH_LAYOUT_BINARY : BVH_LAYOUT_WIDE;
+                cr_assert(bvh_intersect_layout(bvh, l, &ray, &hit), "n %u, triangle %u missed", n,
+                          i);
+                cr_assert_eq(hit.prim_idx, i);
+            }
+        }
+        bvh_free(bvh);
+        mesh_free(&m);
+    }
+}
+
 /* bvh.h: the tree is the same for every thread count (each node's split depends only on its own
  * refs; parallel binning merges exact box unions and counts): same stats to the bit and the
  * same hit, t and prim_idx for every ray.  70000 triangles, above the parallel threshold. */
