@@ -44,9 +44,10 @@
  *   C_leaf  = N * C_isect
  * with A the surface area of the node's box, A_L/A_R those of the children's boxes and N_L/N_R
  * their triangle counts.  A node becomes a leaf when C_leaf <= C_split and N <= BVH_MAX_LEAF_TRIS,
- * when N <= BVH_UNBINNED_LEAF_TRIS (without binning), or at depth BVH_MAX_DEPTH (any size).  When all centres coincide no plane
- * separates them: a node of more than BVH_MAX_LEAF_TRIS triangles is then cut in the middle of
- * its index range, so leaves stay bounded and depth grows only as log2(N).
+ * when N <= BVH_UNBINNED_LEAF_TRIS (without binning), or at depth BVH_MAX_DEPTH (any size).
+ * When all centres coincide no plane separates them: a node of more than BVH_MAX_LEAF_TRIS
+ * triangles is then cut in the middle of its index range, so leaves stay bounded and depth grows
+ * only as log2(N).
  * Threads: every node's split depends only on its own range of refs, so the tree is the same
  * for any thread count.  With several threads the top nodes are split first, their binning
  * shared by all threads (each fills private bins over a slice, then they are merged: box
@@ -65,9 +66,10 @@
 #define BVH_MAX_LEAF_TRIS 8     /* a larger node is split even when the SAH prefers a leaf */
 /* A node of at most 6 triangles is a leaf without being binned.  The wide layout tests 8
  * triangles at once and its collapse (bvh_wide.c) merged most such subtrees into one leaf
- * anyway; binning the nodes of at most 8 took a fifth of the build.  Measured (docs/bvh.md, "Build constants"):
- * dragon binned build -21 to -22% (8: -25%), the collapse's SAH cost +0.2-0.9%, Sponza's
- * camera-ray packets 1% slower (8: 5%, a packet tests a leaf's triangles one by one). */
+ * anyway; binning the nodes of at most 8 took a fifth of the build.  Measured (docs/bvh.md,
+ * "Small nodes"): dragon binned build -21 to -22% (8: -25%), the collapse's SAH cost
+ * +0.2-0.9%, Sponza's camera-ray packets 1% slower (8: 5%, a packet tests a leaf's triangles
+ * one by one). */
 #define BVH_UNBINNED_LEAF_TRIS 6
 _Static_assert(BVH_UNBINNED_LEAF_TRIS >= 2 && BVH_UNBINNED_LEAF_TRIS <= BVH_MAX_LEAF_TRIS,
                "at N <= C_trav / C_isect = 2 the leaf always wins; leaves stay <= 8");
