@@ -316,9 +316,7 @@ static struct split bins_best_split(const struct bins *bins, uint32_t n)
     return best;
 }
 
-/* Fork-join on up to n_threads threads: fn(arg + i * arg_bytes) for i in [0, n_jobs), job 0 on
- * the calling thread.  A thread that cannot be started runs its job inline. */
-static void run_jobs(int n_jobs, void *(*fn)(void *), void *args, size_t arg_bytes)
+void bvh_run_jobs(int n_jobs, void *(*fn)(void *), void *args, size_t arg_bytes)
 {
     pthread_t threads[BVH_MAX_THREADS];
     bool started[BVH_MAX_THREADS] = {false};
@@ -376,7 +374,7 @@ static void bins_fill_parallel(struct bins *bins, const struct prim_ref *refs, u
         jobs[i].end = slice_begin(begin, n, i + 1, n_threads);
         jobs[i].centre_bounds = centre_bounds;
     }
-    run_jobs(n_threads, bin_job_run, jobs, sizeof *jobs);
+    bvh_run_jobs(n_threads, bin_job_run, jobs, sizeof *jobs);
     *bins = jobs[0].bins;
     for (int i = 1; i < n_threads; i++)
         bins_merge(bins, &jobs[i].bins);
@@ -669,7 +667,7 @@ static void spatial_bins_fill_parallel(struct spatial_bins *sb, const struct bui
                                        .begin = slice_begin(begin, end - begin, i, n_threads),
                                        .end = slice_begin(begin, end - begin, i + 1, n_threads),
                                        .grid = g};
-    run_jobs(n_threads, spatial_job_run, jobs, sizeof *jobs);
+    bvh_run_jobs(n_threads, spatial_job_run, jobs, sizeof *jobs);
     for (int i = 0; i < n_threads; i++) {
         for (int a = 0; a < 3; a++) {
             for (int k = 0; k < BVH_N_SPATIAL_BINS; k++) {
@@ -1235,7 +1233,7 @@ static uint32_t build_tree(struct build_ctx *ctx, uint32_t n, uint32_t cap,
         struct subtree_pool *handles[BVH_MAX_THREADS];
         for (int i = 0; i < ctx->n_threads; i++)
             handles[i] = &pool;
-        run_jobs(ctx->n_threads, subtree_worker, handles, sizeof handles[0]);
+        bvh_run_jobs(ctx->n_threads, subtree_worker, handles, sizeof handles[0]);
         max_depth = atomic_load(&pool.max_depth);
         free(pending);
         n_used = count_nodes(work);
@@ -1353,7 +1351,7 @@ static void make_refs(struct prim_ref *refs, const vec3 *positions, const uint32
                                    slice_begin(0, n_tris, i + 1, n_jobs),
                                    empty_box,
                                    empty_box};
-    run_jobs(n_jobs, ref_job_run, jobs, sizeof jobs[0]);
+    bvh_run_jobs(n_jobs, ref_job_run, jobs, sizeof jobs[0]);
     *bounds = empty_box;
     *centres = empty_box;
     for (int i = 0; i < n_jobs; i++) {
@@ -1460,7 +1458,8 @@ struct bvh *bvh_build_with(const vec3 *positions, const uint32_t *indices, uint3
         compute_stats(bvh); /* of the binary tree, before it may be dropped */
         if (layouts & BVH_LAYOUT_WIDE) {
             double t_convert_ms = now_ms();
-            if (!bvh_wide_convert(bvh, positions, indices, degenerate))
+            if (!bvh_wide_convert(bvh, positions, indices, degenerate,
+                                  n_tris >= BVH_PARALLEL_MIN_TRIS ? n_threads : 1))
                 goto fail;
             bvh->stats.convert_ms = now_ms() - t_convert_ms;
         }

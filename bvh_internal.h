@@ -228,6 +228,10 @@ bool bvh_tri_hit_double(const struct bvh_tri *tri, const struct ray_pre *rp, con
 void bvh_brute_step(const struct bvh_tri *tri, uint32_t prim, const struct ray_pre *rp, float t_min,
                     struct bvh_hit *best);
 
+/* Fork-join on n_jobs (at most 64) threads: fn(args + i * arg_bytes) for i in [0, n_jobs),
+ * job 0 on the calling thread.  A thread that cannot be started runs its job inline. */
+void bvh_run_jobs(int n_jobs, void *(*fn)(void *), void *args, size_t arg_bytes);
+
 /* ---- What bvh_wide.c lends bvh.c ------------------------------------------------------------- */
 
 /* Converts the binary tree of bvh (nodes, prim_idx; degenerate[i] flags the zero-area triangle
@@ -235,7 +239,7 @@ void bvh_brute_step(const struct bvh_tri *tri, uint32_t prim, const struct ray_p
  * Fills the wide fields of bvh and of bvh->stats; false when out of memory (bvh_free frees
  * whatever was allocated). */
 bool bvh_wide_convert(struct bvh *bvh, const vec3 *positions, const uint32_t *indices,
-                      const uint8_t *degenerate);
+                      const uint8_t *degenerate, int n_threads);
 
 /* bvh_intersect / bvh_occluded through the wide layout, which bvh must carry. */
 bool bvh_wide_intersect(const struct bvh *bvh, const struct ray *ray, uint32_t from,

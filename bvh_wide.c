@@ -12,6 +12,7 @@
 
 #include <assert.h>
 #include <float.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 
 /* ---- The 8-wide layout --------------------------------------------------------------------------
@@ -69,7 +70,9 @@ static inline uint32_t wide_n_children(const struct wide_node *w)
  * node's children have larger indices), then the wide tree is emitted top down following the
  * recorded choices.  A binary leaf of more than 8 triangles (only the depth cap makes one)
  * becomes a small wide subtree of 8-triangle parts.  A first pass counts nodes and triangles so
- * that the arrays are allocated once at their exact size. */
+ * that the arrays are allocated once at their exact size.  With threads, that pass also notes
+ * where each wide subtree two levels below the root begins; the second pass writes the levels
+ * above them and the threads write the subtrees there, so the layout is the same bits. */
 #define WIDE_COST_NODE 1.0f /* c_node: one wide node visit (eight box tests) */
 #define WIDE_COST_LEAF                                                                             \
     1.0f /* c_leaf: one leaf (woop8), in units of c_node; 1.5 and 2.0 gave
@@ -102,7 +105,23 @@ struct convert {
     uint32_t n_leaves;       /* wide leaves */
     uint32_t depth;          /* current wide depth, root = 0 */
     uint32_t max_depth;      /* deepest wide node */
+    /* Subtrees written by the threads (bvh_wide_convert): the wide nodes opened at depth
+     * CONVERT_TASK_DEPTH.  The counting pass records them in order (tasks, n_tasks; NULL: do
+     * not), the writing pass skips them (skip_tasks), leaving their places to the threads. */
+    struct convert_task *tasks;
+    uint32_t n_tasks;
+    bool skip_tasks;
 };
+
+/* A subtree of the wide tree: binary node idx emitted as a wide node, and the wide nodes,
+ * triangles and leaves the counting pass saw before it (begin) and after it (end). */
+struct convert_task {
+    uint32_t idx;
+    uint32_t wide_begin, wide_end;
+    uint32_t tris_begin, tris_end;
+    uint32_t leaves_begin, leaves_end;
+};
+#define CONVERT_TASK_DEPTH 2 /* up to 64 subtrees, for up to 64 threads */
 
 /* Wide depth stays below the binary depth cap plus the levels of one oversized leaf
  * (8-way splits of at most 2^28 triangles). */
@@ -343,6 +362,22 @@ static bool emit_slot(struct convert *cv, uint32_t idx, uint32_t *ref)
 {
     if (cv->dp[idx].choice[0] == CHOICE_LEAF)
         return emit_subtree_leaf(cv, idx, ref);
+    if (cv->tasks && cv->depth == CONVERT_TASK_DEPTH) {
+        struct convert_task *t = &cv->tasks[cv->n_tasks++];
+        if (cv->skip_tasks) { /* the thread writes it where the counting pass found it */
+            *ref = t->wide_begin;
+            cv->n_wide = t->wide_end;
+            cv->n_wide_tris = t->tris_end;
+            cv->n_leaves = t->leaves_end;
+            return true;
+        }
+        *t = (struct convert_task){idx, cv->n_wide, 0, cv->n_wide_tris, 0, cv->n_leaves, 0};
+        *ref = emit_wide(cv, idx);
+        t->wide_end = cv->n_wide;
+        t->tris_end = cv->n_wide_tris;
+        t->leaves_end = cv->n_leaves;
+        return true;
+    }
     *ref = emit_wide(cv, idx);
     return true;
 }
@@ -388,27 +423,88 @@ static void emit_root(struct convert *cv)
         wide_node_set_order(&cv->wide[w]);
 }
 
+/* The threads' share of the writing pass: subtrees taken largest first from a shared counter,
+ * each written by the operations the single-thread pass would perform, at the places the
+ * counting pass found for it, so the layout is the same bits for any thread count. */
+struct convert_job {
+    const struct convert *proto; /* the writing pass's state, arrays included */
+    const struct convert_task *tasks;
+    const uint32_t *order; /* task indices, largest subtree first */
+    uint32_t n_tasks;
+    _Atomic uint32_t *next; /* the next entry of order to take */
+    uint32_t *scratch;      /* this thread's, room for the largest leaf */
+};
+
+static void *convert_job_run(void *arg)
+{
+    const struct convert_job *job = arg;
+    for (;;) {
+        uint32_t k = atomic_fetch_add(job->next, 1u);
+        if (k >= job->n_tasks)
+            return NULL;
+        const struct convert_task *t = &job->tasks[job->order[k]];
+        struct convert cv = *job->proto;
+        cv.scratch = job->scratch;
+        cv.tasks = NULL;
+        cv.n_wide = t->wide_begin;
+        cv.n_wide_tris = t->tris_begin;
+        cv.n_leaves = t->leaves_begin;
+        cv.depth = CONVERT_TASK_DEPTH;
+        emit_wide(&cv, t->idx);
+        assert(cv.n_wide == t->wide_end && cv.n_wide_tris == t->tris_end);
+    }
+}
+
+/* order[0 .. n) = 0 .. n - 1 sorted by the subtrees' triangle counts, largest first (an
+ * insertion sort of at most 64 entries; ties keep their order). */
+static void order_tasks(const struct convert_task *tasks, uint32_t n, uint32_t *order)
+{
+    for (uint32_t i = 0; i < n; i++) {
+        uint32_t work = tasks[i].tris_end - tasks[i].tris_begin;
+        uint32_t j = i;
+        for (; j > 0; j--) {
+            const struct convert_task *t = &tasks[order[j - 1]];
+            if (t->tris_end - t->tris_begin >= work)
+                break;
+            order[j] = order[j - 1];
+        }
+        order[j] = i;
+    }
+}
+
 bool bvh_wide_convert(struct bvh *bvh, const vec3 *positions, const uint32_t *indices,
-                      const uint8_t *degenerate)
+                      const uint8_t *degenerate, int n_threads)
 {
     bool ok = false;
+    enum { MAX_TASKS = BVH_WIDTH * BVH_WIDTH };
+    struct convert_task tasks[MAX_TASKS];
+    uint32_t order[MAX_TASKS];
+    /* a scratch list of one leaf's triangles per thread: a wide leaf merges at most 8, a binary
+     * leaf can hold more where the depth cap stopped the build */
+    size_t max_leaf = BVH_WIDTH;
+    for (uint32_t i = 0; i < bvh->n_nodes; i++)
+        if (i != 1 && bvh->nodes[i].n_tris > max_leaf)
+            max_leaf = bvh->nodes[i].n_tris;
+    int n_jobs = n_threads > 1 ? (n_threads < MAX_TASKS ? n_threads : MAX_TASKS) : 1;
     struct collapse_entry *dp = bvh_alloc_array(bvh->n_nodes, sizeof *dp);
-    uint32_t *scratch = bvh_alloc_array(bvh->n_refs, sizeof *scratch);
+    uint32_t *scratch = bvh_alloc_array((size_t)n_jobs * max_leaf, sizeof *scratch);
     if (!dp || !scratch)
         goto done;
     collapse_costs(bvh, dp);
-    /* pass 1: count */
+    /* pass 1: count (and, for threads, find the subtrees they will write) */
     struct convert cv = {.bvh = bvh,
                          .degenerate = degenerate,
                          .dp = dp,
                          .positions = positions,
                          .indices = indices,
-                         .scratch = scratch};
+                         .scratch = scratch,
+                         .tasks = n_jobs > 1 ? tasks : NULL};
     emit_root(&cv);
-    assert(cv.max_depth <= WIDE_MAX_DEPTH);
+    assert(cv.max_depth <= WIDE_MAX_DEPTH && cv.n_tasks <= MAX_TASKS);
     uint32_t n_wide = cv.n_wide;
     uint32_t n_wide_tris = cv.n_wide_tris;
-    /* pass 2: write */
+    uint32_t n_tasks = cv.n_tasks;
+    /* pass 2: write, the top levels here, the subtrees below them on the threads */
     bvh->wide = bvh_alloc_aligned(n_wide, sizeof *bvh->wide);
     bvh->leaf_tris = bvh_alloc_aligned(9 * (size_t)n_wide_tris + 8, sizeof(float));
     bvh->wide_prim_idx = bvh_alloc_array(n_wide_tris, sizeof(uint32_t));
@@ -423,9 +519,26 @@ bool bvh_wide_convert(struct bvh *bvh, const vec3 *positions, const uint32_t *in
                           .wide = bvh->wide,
                           .leaf_tris = bvh->leaf_tris,
                           .prim_idx = bvh->wide_prim_idx,
-                          .scratch = scratch};
+                          .scratch = scratch,
+                          .tasks = n_tasks > 0 ? tasks : NULL,
+                          .skip_tasks = true};
     emit_root(&cv);
     assert(cv.n_wide == n_wide && cv.n_wide_tris == n_wide_tris);
+    if (n_tasks > 0) {
+        order_tasks(tasks, n_tasks, order);
+        _Atomic uint32_t next = 0;
+        if (n_jobs > (int)n_tasks)
+            n_jobs = (int)n_tasks;
+        struct convert_job jobs[MAX_TASKS];
+        for (int i = 0; i < n_jobs; i++)
+            jobs[i] = (struct convert_job){.proto = &cv,
+                                           .tasks = tasks,
+                                           .order = order,
+                                           .n_tasks = n_tasks,
+                                           .next = &next,
+                                           .scratch = scratch + (size_t)i * max_leaf};
+        bvh_run_jobs(n_jobs, convert_job_run, jobs, sizeof jobs[0]);
+    }
     bvh->n_wide = n_wide;
     bvh->n_wide_tris = n_wide_tris;
     bvh->bounds = bvh->nodes[0];

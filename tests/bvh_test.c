@@ -1159,6 +1159,20 @@ Test(bvh, build_is_independent_of_thread_count)
         cr_assert_eq(st.n_wide_nodes, st_ref.n_wide_nodes);
         cr_assert_eq(st.n_wide_leaves, st_ref.n_wide_leaves);
         cr_assert_eq(st.bytes, st_ref.bytes);
+        /* rays aimed at every 5th triangle: the wide layout, which the threads write by
+         * subtrees, gives the same hits as the one written by one thread */
+        for (uint32_t k = 0; k < m.n_tris; k += 5) {
+            vec3 p = tri_point(&m, k, 1.0f / 3.0f, 1.0f / 3.0f);
+            struct ray ray = make_ray(v3_add(p, v3(0.0f, 0.0f, 3.0f)), v3(0.0f, 0.0f, -1.0f), 0.0f,
+                                      INFINITY);
+            struct bvh_hit a;
+            struct bvh_hit b;
+            bool hit_a = bvh_intersect(ref, &ray, &a);
+            cr_assert(hit_a, "triangle %u: its ray hits something", k);
+            cr_assert(bvh_intersect(bvh, &ray, &b) && same_bits(a.t, b.t) &&
+                          a.prim_idx == b.prim_idx,
+                      "%d threads, triangle %u", n_threads, k);
+        }
         for (int i = 0; i < 2000; i++) {
             struct bvh_hit a;
             struct bvh_hit b;
