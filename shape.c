@@ -12,6 +12,7 @@
 #include "shape.h"
 
 #include <float.h>
+#include <string.h>
 
 #include "sample.h"
 
@@ -61,11 +62,17 @@ static double gamma_d(int n)
     return ((double)n * u) / (1.0 - (double)n * u);
 }
 
-/* A float that is >= x (x >= 0): the rounded value, moved up when rounding went down. */
+/* A float that is >= x (x >= 0): the rounded value, moved up when rounding went down.  For
+ * x >= 0 that step is next_float_up's bits + 1, here without its branches (from the largest
+ * float it gives infinity, as next_float_up does). */
 static float float_up(double x)
 {
     float f = (float)x;
-    return (double)f < x ? next_float_up(f) : f;
+    uint32_t bits;
+    memcpy(&bits, &f, sizeof bits);
+    bits += (uint32_t)((double)f < x);
+    memcpy(&f, &bits, sizeof f);
+    return f;
 }
 
 /* The float point nearest p_d, where p_d is within err_d (per component) of the exact point,
