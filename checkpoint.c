@@ -181,6 +181,26 @@ static bool read_header(struct ckpt_file *cf, const char *path, uint64_t size_by
     return true; /* a short read here shows as the wrong length, next */
 }
 
+bool checkpoint_is_one(const char *path)
+{
+    const char *not_regular;
+    int fd = file_open_input(path, false, &not_regular); /* a FIFO must not block */
+    if (fd < 0)
+        return false;
+    char magic[sizeof CKPT_MAGIC];
+    size_t n_read = 0;
+    while (n_read < sizeof magic) {
+        ssize_t n = read(fd, magic + n_read, sizeof magic - n_read);
+        if (n < 0 && errno == EINTR)
+            continue;
+        if (n <= 0)
+            break;
+        n_read += (size_t)n;
+    }
+    close(fd);
+    return n_read == sizeof magic && memcmp(magic, CKPT_MAGIC, sizeof magic) == 0;
+}
+
 bool checkpoint_load(const char *path, struct film *film, struct checkpoint_info *info,
                      struct mcpt_error *err)
 {

@@ -46,6 +46,11 @@ bool checkpoint_save(const char *path, const struct film *film, const struct che
 bool checkpoint_load(const char *path, struct film *film, struct checkpoint_info *info,
                      struct mcpt_error *err);
 
+/* Whether path is a regular file that starts as checkpoint_save writes one (the magic
+ * "MCPTCKPT"), read without blocking.  A render may discard such a file (--restart) and never
+ * another: false for a missing, unreadable or non-regular path and for any other content. */
+bool checkpoint_is_one(const char *path);
+
 /* Whether a run with the settings in *run repeats the render saved in *saved (read from
  * path): the same scene bytes, spp target, seed, depth, sampler and sample offset.  False
  * with *err (bad input; file = path) naming the first setting that differs, e.g. "expected

@@ -1210,7 +1210,7 @@ static bool check_memory(const struct run *run, struct mcpt_error *err)
  * scene, the meshes and MTL files it loaded, the reference, the checkpoint resumed from unless
  * it is the one to rewrite) or another output, every output must be creatable (output_check), and a checkpoint left by an
  * interrupted render of this output is not overwritten unless --restart says so (it is then
- * removed here). */
+ * removed here); a file there that is not a checkpoint is refused, never removed. */
 static bool check_outputs(struct run *run, struct mcpt_error *err)
 {
     const struct options *o = &run->o;
@@ -1249,6 +1249,13 @@ static bool check_outputs(struct run *run, struct mcpt_error *err)
     bool has_checkpoint = !is_resumed_here && stat(run->out.checkpoint, &st) == 0;
     if (n_out > 0 && !output_check_names(files, n_out, in, n_in, err)) {
         free(files);
+        return false;
+    }
+    if (n_out > 0 && has_checkpoint && !checkpoint_is_one(run->out.checkpoint)) {
+        free(files); /* not a checkpoint: neither --restart nor a finished render removes it */
+        mcpt_error_set(err, run->out.checkpoint, 0, 0,
+                       "expected an mcpt checkpoint or a new name for the checkpoint, got a file "
+                       "that is not one (it is kept; --checkpoint names another)");
         return false;
     }
     if (n_out > 0 && has_checkpoint && !o->restart) {

@@ -554,6 +554,35 @@ Test(restart, existing_checkpoint_refused_until_resume_or_restart, .init = setup
     cr_assert(strstr(err, want), "want %s\ngot  %s", want, err);
 }
 
+/* A file at the checkpoint path that is not a checkpoint (notes, an image: --checkpoint given
+ * the wrong word) is refused, with --restart too, and kept: --restart once removed whatever
+ * was there, as a finished render would. */
+Test(restart, file_that_is_not_a_checkpoint_is_kept, .init = setup, .fini = teardown)
+{
+    char notes[300], out[300], err[4096], want[600], kept[64];
+    snprintf(notes, sizeof notes, "%s/notes.txt", tmpdir);
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    FILE *f = fopen(notes, "w");
+    cr_assert_not_null(f);
+    fputs("my notes\n", f);
+    cr_assert_eq(fclose(f), 0);
+    snprintf(want, sizeof want,
+             "%s: error: expected an mcpt checkpoint or a new name for the checkpoint, got a "
+             "file that is not one (it is kept; --checkpoint names another)\n",
+             notes);
+    for (int restart = 0; restart < 2; restart++) {
+        const char *args[] = {TINY,  "--spp",   "1",
+                              "-o",  out,       "--checkpoint",
+                              notes, "--quiet", restart ? "--restart" : NULL,
+                              NULL};
+        cr_assert_eq(run(args, err, sizeof err), 2, "restart %d: %s", restart, err);
+        cr_assert_str_eq(err, want, "restart %d", restart);
+        cr_assert_eq(test_read_file(notes, kept, sizeof kept), 9, "restart %d", restart);
+        cr_assert_str_eq(kept, "my notes\n", "restart %d", restart);
+        cr_assert_not(test_exists(out), "restart %d", restart);
+    }
+}
+
 /* ---- a full disk, kill -9: the image and its preview stay a pair ---- */
 
 /* Mounts a tmpfs of size_kib at dir (made here); false when this process may not mount. */
