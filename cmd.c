@@ -198,7 +198,8 @@ struct integrate_options {
     bool is_help;  /* --help: printed, nothing to run */
 };
 
-/* --sampler: "all", or a comma-separated list of sampler names. */
+/* --sampler: "all", or a comma-separated list of sampler names, none of them empty (an
+ * empty list once ran nothing and exited 0). */
 static bool parse_samplers(const char *arg, bool use[SAMPLER_COUNT], struct mcpt_error *err)
 {
     bool is_all = strcmp(arg, "all") == 0;
@@ -206,18 +207,22 @@ static bool parse_samplers(const char *arg, bool use[SAMPLER_COUNT], struct mcpt
         use[k] = is_all;
     if (is_all)
         return true;
-    char list[256];
-    snprintf(list, sizeof list, "%s", arg);
-    for (char *save, *name = strtok_r(list, ",", &save); name; name = strtok_r(NULL, ",", &save)) {
+    for (const char *name = arg;; name++) {
+        size_t n_name = strcspn(name, ",");
+        char word[32];
         enum sampler_kind kind;
-        if (!sample_sampler_parse(name, &kind))
+        snprintf(word, sizeof word, "%.*s", (int)(n_name < sizeof word ? n_name : sizeof word - 1),
+                 name);
+        if (n_name >= sizeof word || !sample_sampler_parse(word, &kind))
             return cmd_usage_error(err,
-                                   "expected --sampler independent, stratified, sobol or all, "
-                                   "got '%s'",
-                                   name);
+                                   "expected --sampler independent, stratified, sobol, all or a "
+                                   "comma-separated list of the three, got '%.*s' in '%s'",
+                                   (int)n_name, name, arg);
         use[kind] = true;
+        name += n_name;
+        if (*name == '\0')
+            return true;
     }
-    return true;
 }
 
 /* Parses argv into *o (printing the help for --help); false with *err on bad usage. */

@@ -115,3 +115,29 @@ Test(cmd, subcommand_exit_statuses, .init = setup, .fini = teardown, .timeout = 
              tmpdir);
     cr_assert_str_eq(err, want);
 }
+
+/* integrate --sampler: every name of the comma-separated list must be a sampler.  An empty list
+ * ('' or ','), or one past 255 bytes of commas, ran no sampler and exited 0 with only the CSV
+ * header; an empty item ('sobol,') is refused too. */
+Test(cmd, integrate_sampler_list_has_no_empty_name, .init = setup, .fini = teardown,
+     .timeout = TEST_TIMEOUT_S(60))
+{
+    static char commas[301];
+    memset(commas, ',', sizeof commas - 1);
+    const char *bad[] = {"", ",", "sobol,", ",sobol", "sobol,,independent", commas, "all,sobol"};
+    const char *got[] = {"''", "''", "''", "''", "''", "''", "'all'"};
+    char err[4096], want[200];
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        const char *args[] = {"integrate", "disk",      "--spp", "2", "--seeds",
+                              "1",         "--sampler", bad[i],  NULL};
+        cr_assert_eq(run_mcpt(args, err, sizeof err), 2, "'%s': %s", bad[i], err);
+        snprintf(want, sizeof want,
+                 "mcpt: error: expected --sampler independent, stratified, sobol, all or a "
+                 "comma-separated list of the three, got %s in '",
+                 got[i]);
+        cr_assert(strncmp(err, want, strlen(want)) == 0, "'%s': %s", bad[i], err);
+    }
+    const char *good[] = {"integrate",         "disk", "--spp", "2", "--seeds", "1", "--sampler",
+                          "sobol,independent", NULL};
+    cr_assert_eq(run_mcpt(good, err, sizeof err), 0, "%s", err);
+}
