@@ -53,7 +53,7 @@ enum mcpt_error_kind {
 };
 
 struct mcpt_error {
-    char file[256];
+    char file[4096]; /* PATH_MAX: a longer path's message named a file cut to 255 bytes */
     int line;
     int col;
     char msg[256];

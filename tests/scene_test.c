@@ -926,6 +926,48 @@ Test(scene, scene_file_kinds, .timeout = TEST_TIMEOUT_S(10))
     rmdir(dir);
 }
 
+/* A path longer than 255 bytes (PATH_MAX is 4096) is named whole: err.file held 256 bytes and
+ * cut the scene's and the OBJ's paths, so the message named a file that did not exist. */
+Test(scene, error_names_a_long_path_whole, .timeout = TEST_TIMEOUT_S(10))
+{
+    char dir[] = "/tmp/mcpt-scene-test-XXXXXX", deep[700], scene[760], obj[760], want[800];
+    cr_assert_not_null(mkdtemp(dir));
+    int n = snprintf(deep, sizeof deep, "%s", dir);
+    for (int level = 0; level < 3; level++) {
+        n += snprintf(deep + n, sizeof deep - (size_t)n, "/%0200d", level);
+        cr_assert_eq(mkdir(deep, 0700), 0, "%s", deep);
+    }
+    snprintf(scene, sizeof scene, "%s/scene.txt", deep);
+    snprintf(obj, sizeof obj, "%s/bad.obj", deep);
+    FILE *f = fopen(scene, "w");
+    fputs(CAM "film width=8 width=8\n", f);
+    fclose(f);
+    struct scene sc;
+    struct mcpt_error err = {0};
+    cr_assert_not(scene_load(scene, &sc, &err));
+    cr_assert_str_eq(err.file, scene);
+    cr_assert(err.line == 2 && err.col == 14, "%d:%d", err.line, err.col);
+    f = fopen(obj, "w");
+    fputs("v 0 0 0\nf 1 2 3\n", f);
+    fclose(f);
+    f = fopen(scene, "w");
+    fputs(CAM "mesh file=bad.obj\n", f);
+    fclose(f);
+    cr_assert_not(scene_load(scene, &sc, &err));
+    cr_assert_str_eq(err.file, obj);
+    char line[sizeof err.file + sizeof err.msg + 64];
+    mcpt_error_format(&err, line, sizeof line);
+    snprintf(want, sizeof want, "%s:2:5: error: ", obj);
+    cr_assert(strncmp(line, want, strlen(want)) == 0, "%s", line);
+    unlink(obj);
+    unlink(scene);
+    for (int level = 0; level < 3; level++) {
+        rmdir(deep);
+        *strrchr(deep, '/') = '\0';
+    }
+    rmdir(dir);
+}
+
 /* Camera vectors far from 1 that computing the frame after an exact power-of-two scaling makes
  * well defined: look-at 1e-30 from the eye, up of length 1e-30 or 3e38, a denormal up. */
 Test(scene, camera_tiny_and_huge_vectors_load)
