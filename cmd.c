@@ -24,7 +24,7 @@
 
 int cmd_fail(const struct mcpt_error *err)
 {
-    char line[sizeof err->file + sizeof err->msg + 64]; /* ":line:col: error: " fits */
+    char line[MCPT_ERROR_LINE_BYTES];
     mcpt_error_format(err, line, sizeof line);
     fprintf(stderr, "%s\n", line);
     return err->kind == MCPT_ERROR_RUNTIME ? CMD_EXIT_RUNTIME : CMD_EXIT_INPUT;

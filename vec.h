@@ -59,6 +59,9 @@ struct mcpt_error {
     char msg[256];
     enum mcpt_error_kind kind;
 };
+/* Room for mcpt_error_format's longest line: file, ":line:col: error: " and msg. */
+#define MCPT_ERROR_LINE_BYTES                                                                      \
+    (sizeof((struct mcpt_error *)0)->file + sizeof((struct mcpt_error *)0)->msg + 64)
 
 static inline void mcpt_error_setv(struct mcpt_error *err, enum mcpt_error_kind kind,
                                    const char *file, int line, int col, const char *fmt, va_list ap)

@@ -30,7 +30,7 @@ Test(cmd, fail_maps_kinds_to_exit_statuses)
 {
     struct mcpt_error err;
     cr_assert_not(cmd_usage_error(&err, "expected %s, got %d", "one", 2));
-    char line[1024];
+    char line[MCPT_ERROR_LINE_BYTES];
     mcpt_error_format(&err, line, sizeof line);
     cr_assert_str_eq(line, "mcpt: error: expected one, got 2 (see mcpt --help)");
     cr_assert_eq(err.kind, MCPT_ERROR_INPUT);

@@ -28,7 +28,7 @@
 static void load_ok(const char *path, struct obj_mesh *mesh)
 {
     struct mcpt_error err = {0};
-    char msg[600];
+    char msg[MCPT_ERROR_LINE_BYTES];
     bool ok = obj_load(path, mesh, &err);
     mcpt_error_format(&err, msg, sizeof msg);
     cr_assert(ok, "%s failed: %s", path, msg);
@@ -345,7 +345,7 @@ static void check_golden(const struct golden *cases, size_t n_cases)
         struct mcpt_error err = {0};
         bool ok = obj_load(cases[i].path, &m, &err);
         cr_expect_not(ok, "%s loaded but should fail", cases[i].path);
-        char got[600];
+        char got[MCPT_ERROR_LINE_BYTES];
         mcpt_error_format(&err, got, sizeof got);
         cr_expect_str_eq(got, cases[i].message);
         struct obj_mesh zero;
@@ -504,7 +504,7 @@ static void expect_error(const char *path, const char *golden)
     struct obj_mesh m;
     struct mcpt_error err = {0};
     cr_assert_not(obj_load(path, &m, &err), "%s loaded but should fail", path);
-    char got[700];
+    char got[MCPT_ERROR_LINE_BYTES];
     mcpt_error_format(&err, got, sizeof got);
     size_t n_dir = strlen(tmp_dir);
     const char *shown = strncmp(got, tmp_dir, n_dir) == 0 ? got + n_dir + 1 : got;
@@ -517,7 +517,7 @@ static void expect_error_anywhere(const char *path, const char *golden)
     struct obj_mesh m;
     struct mcpt_error err = {0};
     cr_assert_not(obj_load(path, &m, &err), "%s loaded but should fail", path);
-    char got[700], cut[700];
+    char got[MCPT_ERROR_LINE_BYTES], cut[MCPT_ERROR_LINE_BYTES];
     mcpt_error_format(&err, got, sizeof got);
     size_t n_dir = strlen(tmp_dir), n = 0;
     for (const char *s = got; *s;) {

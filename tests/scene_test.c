@@ -64,7 +64,7 @@ static bool load_text(const char *text, size_t len, struct scene *sc, char *msg,
     remove(path);
     rmdir(dir);
     if (!ok) {
-        char full[640];
+        char full[MCPT_ERROR_LINE_BYTES];
         mcpt_error_format(&err, full, sizeof full);
         size_t n_dir = strlen(dir);
         cr_assert(strncmp(full, dir, n_dir) == 0 && full[n_dir] == '/', "%s", full);
@@ -91,7 +91,7 @@ static void check_file_error(const char *path, const char *golden)
 {
     struct scene sc;
     struct mcpt_error err = {0};
-    char msg[640];
+    char msg[MCPT_ERROR_LINE_BYTES];
     cr_assert(!scene_load(path, &sc, &err), "expected an error for %s", path);
     mcpt_error_format(&err, msg, sizeof msg);
     cr_assert_str_eq(msg, golden);
@@ -710,7 +710,7 @@ Test(scene, error_mesh_passes_obj_errors)
     struct obj_mesh mesh = {0};
     struct mcpt_error obj_err = {0};
     cr_assert(!obj_load("tests/data/scene/bad.obj", &mesh, &obj_err));
-    char golden[640];
+    char golden[MCPT_ERROR_LINE_BYTES];
     mcpt_error_format(&obj_err, golden, sizeof golden);
     cr_assert(strncmp(golden, "tests/data/scene/bad.obj:2:", 27) == 0, "%s", golden);
     check_file_error("tests/data/scene/bad-mesh.txt", golden);
@@ -830,7 +830,7 @@ static bool load_with_files(const char *scene_text, const char *const *files, st
     cr_assert_eq(fclose(f), 0);
     struct mcpt_error err = {0};
     bool ok = scene_load(path, sc, &err);
-    char full[700], cmd[100];
+    char full[MCPT_ERROR_LINE_BYTES], cmd[100];
     mcpt_error_format(&err, full, sizeof full);
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
     cr_assert_eq(system(cmd), 0);
@@ -955,7 +955,7 @@ Test(scene, error_names_a_long_path_whole, .timeout = TEST_TIMEOUT_S(10))
     fclose(f);
     cr_assert_not(scene_load(scene, &sc, &err));
     cr_assert_str_eq(err.file, obj);
-    char line[sizeof err.file + sizeof err.msg + 64];
+    char line[MCPT_ERROR_LINE_BYTES];
     mcpt_error_format(&err, line, sizeof line);
     snprintf(want, sizeof want, "%s:2:5: error: ", obj);
     cr_assert(strncmp(line, want, strlen(want)) == 0, "%s", line);
