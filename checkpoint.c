@@ -287,7 +287,7 @@ bool checkpoint_matches(const char *path, const struct checkpoint_info *saved,
     if (saved->scene_hash != run->scene_hash) {
         mcpt_error_set(err, path, 0, 0,
                        "expected the scene the checkpoint was made from "
-                       "('%.200s', FNV-1a %016llx), got files with hash %016llx (the scene, or "
+                       "('%s', FNV-1a %016llx), got files with hash %016llx (the scene, or "
                        "a mesh or MTL file it loads, changed)",
                        saved->scene_path, (unsigned long long)saved->scene_hash,
                        (unsigned long long)run->scene_hash);

@@ -1264,7 +1264,7 @@ static bool check_outputs(struct run *run, struct mcpt_error *err)
         resume_command(run, run->out.checkpoint, cmd, sizeof cmd);
         mcpt_error_set(err, run->out.checkpoint, 0, 0,
                        "expected no checkpoint of an interrupted render here, got one: continue "
-                       "it with '%.600s', or discard it with --restart",
+                       "it with '%s', or discard it with --restart",
                        cmd);
         return false;
     }
@@ -1677,9 +1677,9 @@ static bool write_interrupted(struct run *run, struct mcpt_error *err)
     if (is_checkpoint_saved)
         return is_image_written;
     append_msg(err,
-               is_image_written ? "; the partial image %.60s was written, but the render "
+               is_image_written ? "; the partial image %s was written, but the render "
                                   "cannot be resumed"
-                                : "; nor could the partial image %.60s be written",
+                                : "; nor could the partial image %s be written",
                output_image_path(&run->out));
     return false;
 }
@@ -1700,7 +1700,7 @@ static bool write_outputs(struct run *run, struct mcpt_error *err)
     if (!output_write_image(&run->out, &run->film, o->has_range ? &run->part : NULL, &meta, &look,
                             err)) {
         if (run->has_periodic_checkpoint)
-            append_msg(err, "; the checkpoint %.60s has the render as of %.0f s before its end",
+            append_msg(err, "; the checkpoint %s has the render as of %.0f s before its end",
                        run->out.checkpoint, now_seconds() - run->t_checkpoint);
         return false;
     }

@@ -210,7 +210,7 @@ static bool write_pair(const char *exr_path, const char *png_path, const struct 
     unlink(png_path);
     size_t len = strnlen(err->msg, sizeof err->msg);
     snprintf(err->msg + len, sizeof err->msg - len,
-             " (the image %.60s was written; the old preview was removed, as it showed an "
+             " (the image %s was written; the old preview was removed, as it showed an "
              "older image)",
              exr_path);
     return false;

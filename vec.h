@@ -56,7 +56,7 @@ struct mcpt_error {
     char file[4096]; /* PATH_MAX: a longer path's message named a file cut to 255 bytes */
     int line;
     int col;
-    char msg[256];
+    char msg[3 * 4096 + 1024]; /* the paths a message names, whole (a resume command: three) */
     enum mcpt_error_kind kind;
 };
 /* Room for mcpt_error_format's longest line: file, ":line:col: error: " and msg. */

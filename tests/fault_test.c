@@ -583,6 +583,32 @@ Test(restart, file_that_is_not_a_checkpoint_is_kept, .init = setup, .fini = tear
     }
 }
 
+/* The hint to resume names the checkpoint whole however long its path: the message (256 bytes
+ * until now) cut the command it suggests, so pasting it named another file. */
+Test(restart, resume_hint_names_a_long_path_whole, .init = setup, .fini = teardown)
+{
+    char dir[700], ckpt[800], out[800], err[8192], want[900];
+    char word[201];
+    memset(word, 'd', sizeof word - 1);
+    word[sizeof word - 1] = '\0';
+    snprintf(dir, sizeof dir, "%s/%s", tmpdir, word);
+    cr_assert_eq(mkdir(dir, 0700), 0);
+    snprintf(dir, sizeof dir, "%s/%s/%s", tmpdir, word, word);
+    cr_assert_eq(mkdir(dir, 0700), 0);
+    snprintf(ckpt, sizeof ckpt, "%s/c.ckpt", dir);
+    snprintf(out, sizeof out, "%s/out.exr", dir);
+    FILE *f = fopen(ckpt, "w");
+    cr_assert_not_null(f);
+    fputs("MCPTCKPT", f); /* what checkpoint_is_one looks at */
+    cr_assert_eq(fclose(f), 0);
+    const char *args[] = {TINY, "--spp", "1", "-o", out, "--checkpoint", ckpt, "--quiet", NULL};
+    cr_assert_eq(run(args, err, sizeof err), 2, "%s", err);
+    snprintf(want, sizeof want, " --resume %s', or discard it with --restart\n", ckpt);
+    size_t n_err = strlen(err), n_want = strlen(want);
+    cr_assert(n_err > n_want && strcmp(err + n_err - n_want, want) == 0, "%s", err);
+    cr_assert(test_exists(ckpt) && !test_exists(out));
+}
+
 /* ---- a full disk, kill -9: the image and its preview stay a pair ---- */
 
 /* Mounts a tmpfs of size_kib at dir (made here); false when this process may not mount. */
