@@ -185,20 +185,17 @@ bool checkpoint_is_one(const char *path)
 {
     const char *not_regular;
     int fd = file_open_input(path, false, &not_regular); /* a FIFO must not block */
-    if (fd < 0)
+    struct ckpt_file cf = {.hash = FILE_FNV_OFFSET, .ok = true};
+    cf.f = fd >= 0 ? fdopen(fd, "rb") : NULL;
+    if (!cf.f) {
+        if (fd >= 0)
+            close(fd);
         return false;
-    char magic[sizeof CKPT_MAGIC];
-    size_t n_read = 0;
-    while (n_read < sizeof magic) {
-        ssize_t n = read(fd, magic + n_read, sizeof magic - n_read);
-        if (n < 0 && errno == EINTR)
-            continue;
-        if (n <= 0)
-            break;
-        n_read += (size_t)n;
     }
-    close(fd);
-    return n_read == sizeof magic && memcmp(magic, CKPT_MAGIC, sizeof magic) == 0;
+    char magic[sizeof CKPT_MAGIC];
+    bool is_one = get(&cf, magic, sizeof magic) && memcmp(magic, CKPT_MAGIC, sizeof magic) == 0;
+    fclose(cf.f);
+    return is_one;
 }
 
 bool checkpoint_load(const char *path, struct film *film, struct checkpoint_info *info,
