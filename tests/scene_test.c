@@ -940,6 +940,7 @@ Test(scene, error_names_a_long_path_whole, .timeout = TEST_TIMEOUT_S(10))
     snprintf(scene, sizeof scene, "%s/scene.txt", deep);
     snprintf(obj, sizeof obj, "%s/bad.obj", deep);
     FILE *f = fopen(scene, "w");
+    cr_assert_not_null(f, "%s", scene);
     fputs(CAM "film width=8 width=8\n", f);
     fclose(f);
     struct scene sc;
@@ -948,9 +949,11 @@ Test(scene, error_names_a_long_path_whole, .timeout = TEST_TIMEOUT_S(10))
     cr_assert_str_eq(err.file, scene);
     cr_assert(err.line == 2 && err.col == 14, "%d:%d", err.line, err.col);
     f = fopen(obj, "w");
+    cr_assert_not_null(f, "%s", obj);
     fputs("v 0 0 0\nf 1 2 3\n", f);
     fclose(f);
     f = fopen(scene, "w");
+    cr_assert_not_null(f, "%s", scene);
     fputs(CAM "mesh file=bad.obj\n", f);
     fclose(f);
     cr_assert_not(scene_load(scene, &sc, &err));
