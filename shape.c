@@ -370,13 +370,20 @@ bool shape_sphere_intersect(const struct sphere *s, const struct ray *ray, float
     double a = d3_dot(d, d);
     if (!(a > 0.0))
         return false;
-    double inv_a = 1.0 / a;
     double b = d3_dot(f, d);
-    double c = d3_dot(f, f) - r * r;
+    double ff = d3_dot(f, f);
+    double scale2 = 2.0 * (ff + r * r);
+    /* most rays pass most spheres: a ray whose closest approach to the centre is certainly
+     * outside, -disc = a (f.f - r^2) - b^2 > 2^-40 a S2 (its rounding here is below 10 u a S2),
+     * is one the test below rejects too (disc < -disc_err), found without its division and
+     * square root */
+    if (a * ff - b * b - a * (r * r) > 0x1p-40 * a * scale2)
+        return false;
+    double inv_a = 1.0 / a;
+    double c = ff - r * r;
     struct dvec3 l = d3_sub(f, d3_scale(d, b * inv_a));
     double len_l = d3_length(l);
     double disc = a * (r - len_l) * (r + len_l);
-    double scale2 = 2.0 * (d3_dot(f, f) + r * r);
     double disc_err = 128.0 * u * a * scale2;
     if (disc < -disc_err)
         return false; /* certainly past the sphere */
@@ -531,31 +538,32 @@ static bool plane_t(struct dvec3 q, struct dvec3 n, struct dvec3 n_abs, const st
 
 /* ---- quad ---- */
 
-/* The quad's planar coordinates of the ray's hit, in double: pd = o + t d - corner =
- * alpha e1 + beta e2, alpha = (pd x e2) . n / n . n, beta = (e1 x pd) . n / n . n. */
-static bool quad_hit(const struct quad *q, const struct ray *ray, double *t, double *alpha,
-                     double *beta)
+/* The quad's planar coordinates of the point o + t d on its plane, in double: pd = o + t d -
+ * corner = alpha e1 + beta e2, alpha = (pd x e2) . n / n . n, beta = (e1 x pd) . n / n . n. */
+static void quad_coords(const struct quad *q, const struct ray *ray, double t, double *alpha,
+                        double *beta)
 {
     struct dvec3 e1 = d3(q->e1);
     struct dvec3 e2 = d3(q->e2);
     struct dvec3 n = d3_cross(e1, e2);
-    if (!plane_t(d3(q->corner), n, d3_cross_abs(e1, e2), ray, t))
-        return false;
-    struct dvec3 pd = d3_sub(d3_add(d3(ray->o), d3_scale(d3(ray->d), *t)), d3(q->corner));
+    struct dvec3 pd = d3_sub(d3_add(d3(ray->o), d3_scale(d3(ray->d), t)), d3(q->corner));
     double inv_nn = 1.0 / d3_dot(n, n);
     *alpha = d3_dot(d3_cross(pd, e2), n) * inv_nn;
     *beta = d3_dot(d3_cross(e1, pd), n) * inv_nn;
-    return true;
 }
 
 bool shape_quad_intersect(const struct quad *q, const struct ray *ray, float *t_hit)
 {
+    /* the plane first, then the interval, then the edges: most rays that meet the plane meet
+     * it behind the origin or beyond t_max, and need no planar coordinates */
+    struct dvec3 e1 = d3(q->e1);
+    struct dvec3 e2 = d3(q->e2);
     double t, alpha, beta;
-    if (!quad_hit(q, ray, &t, &alpha, &beta))
+    if (!plane_t(d3(q->corner), d3_cross(e1, e2), d3_cross_abs(e1, e2), ray, &t) ||
+        !t_to_float(t, ray, t_hit))
         return false;
-    if (!(alpha >= 0.0 && alpha <= 1.0 && beta >= 0.0 && beta <= 1.0))
-        return false;
-    return t_to_float(t, ray, t_hit);
+    quad_coords(q, ray, t, &alpha, &beta);
+    return alpha >= 0.0 && alpha <= 1.0 && beta >= 0.0 && beta <= 1.0;
 }
 
 /* The quad's point corner + alpha e1 + beta e2 with its error bound and unit normal, pulled

@@ -5,6 +5,7 @@
  * Interface").  The distributions of the samples are tested in light_test.c (chi-square). */
 #include <criterion/criterion.h>
 
+#include "bvh_test_util.h"
 #include "shape.h"
 
 static struct ray mkray(vec3 o, vec3 d)
@@ -63,6 +64,58 @@ Test(shape, huge_sphere_precision)
     float dist = v3_length(v3_sub(sf.p, s.center));
     cr_assert(fabsf(dist - s.radius) <= 4.0f * v3_max_comp(sf.p_error) + 1e-2f,
               "reprojected point is on the sphere: |p-c| = %.6f", dist);
+}
+
+/* Rays that pass a sphere's surface closely, at every scale: where the sign of the
+ * discriminant is certain in long double (64-bit mantissa: the float inputs' products are exact
+ * there), the double test must agree with it, hit for a ray whose closest approach lies inside
+ * by more than 1e-9 a S2 (S2 = 2 (|f|^2 + r^2)), miss for one outside by as much.  The closest
+ * approach r (1 + delta), |delta| from 1e-12 to 1e-2, puts rays on both sides of the quick
+ * rejection's margin (2^-40 a S2) and of the near-tangent fallback's. */
+Test(shape, sphere_near_tangent_rays_agree_with_long_double)
+{
+    struct rng rng = {12345};
+    int n_hit = 0, n_miss = 0;
+    for (int i = 0; i < 200000; i++) {
+        /* scales 1e-6 .. 1e6, a closest approach of r (1 + delta), delta in +-[1e-12, 1e-2] */
+        double scale = pow(10.0, 12.0 * rng_float(&rng) - 6.0);
+        double delta = (rng_float(&rng) < 0.5f ? -1.0 : 1.0) *
+                       pow(10.0, 10.0 * rng_float(&rng) - 12.0);
+        vec3 c = rng_in_box(&rng, -1.0f, 1.0f);
+        struct sphere s = {.center = v3_scale(c, (float)scale), .radius = (float)(0.5 * scale)};
+        vec3 d = rng_dir(&rng);
+        vec3 e = v3_normalize(v3_cross(d, fabsf(d.x) < 0.9f ? v3(1, 0, 0) : v3(0, 1, 0)));
+        double dist = (double)s.radius * (1.0 + delta);
+        double back = 4.0 * (double)s.radius;
+        vec3 o = v3((float)(s.center.x + dist * e.x - back * d.x),
+                    (float)(s.center.y + dist * e.y - back * d.y),
+                    (float)(s.center.z + dist * e.z - back * d.z));
+        struct ray r = mkray(o, d);
+        /* the reference, from the float inputs as they are */
+        long double f[3] = {(long double)o.x - s.center.x, (long double)o.y - s.center.y,
+                            (long double)o.z - s.center.z};
+        long double dd[3] = {d.x, d.y, d.z};
+        long double a = 0, b = 0, ff = 0, rr = (long double)s.radius * s.radius;
+        for (int k = 0; k < 3; k++) {
+            a += dd[k] * dd[k];
+            b += f[k] * dd[k];
+            ff += f[k] * f[k];
+        }
+        long double disc = b * b - a * (ff - rr); /* the root's sign: hit where > 0 */
+        long double s2 = 2.0L * (ff + rr);
+        float t;
+        bool hit = shape_sphere_intersect(&s, &r, &t);
+        if (disc > 1e-9L * a * s2) {
+            cr_assert(hit, "ray %d: inside by %Lg of a S2 (scale %g), missed", i, disc / (a * s2),
+                      scale);
+            n_hit++;
+        } else if (disc < -1e-9L * a * s2) {
+            cr_assert_not(hit, "ray %d: outside by %Lg of a S2 (scale %g), hit", i,
+                          -disc / (a * s2), scale);
+            n_miss++;
+        }
+    }
+    cr_assert(n_hit > 10000 && n_miss > 10000, "decisive rays: %d hits, %d misses", n_hit, n_miss);
 }
 
 /* Quad hits inside, on an edge (alpha = 0) and at a corner count; just outside does not. */
