@@ -595,13 +595,10 @@ struct surface shape_quad_surface(const struct quad *q, const struct ray *ray, f
 {
     struct surface sf;
     /* the planar coordinates of o + t_hit d; the point is rebuilt on the plane from them */
-    struct dvec3 e1 = d3(q->e1);
-    struct dvec3 e2 = d3(q->e2);
-    struct dvec3 n = d3_cross(e1, e2);
-    struct dvec3 pd = d3_sub(d3_add(d3(ray->o), d3_scale(d3(ray->d), t_hit)), d3(q->corner));
-    double inv_nn = 1.0 / d3_dot(n, n);
-    double alpha = fmin(1.0, fmax(0.0, d3_dot(d3_cross(pd, e2), n) * inv_nn));
-    double beta = fmin(1.0, fmax(0.0, d3_dot(d3_cross(e1, pd), n) * inv_nn));
+    double alpha, beta;
+    quad_coords(q, ray, t_hit, &alpha, &beta);
+    alpha = fmin(1.0, fmax(0.0, alpha));
+    beta = fmin(1.0, fmax(0.0, beta));
     sf.p = quad_point(q, alpha, beta, &sf.ng, &sf.p_error);
     sf.ns = sf.ng;
     sf.uv = (vec2){(float)alpha, (float)beta};
