@@ -935,14 +935,15 @@ Test(scene, error_names_a_long_path_whole, .timeout = TEST_TIMEOUT_S(10))
     int n = snprintf(deep, sizeof deep, "%s", dir);
     for (int level = 0; level < 3; level++) {
         n += snprintf(deep + n, sizeof deep - (size_t)n, "/%0200d", level);
+        cr_assert_lt((size_t)n, sizeof deep, "the test's own buffer");
         cr_assert_eq(mkdir(deep, 0700), 0, "%s", deep);
     }
-    snprintf(scene, sizeof scene, "%s/scene.txt", deep);
-    snprintf(obj, sizeof obj, "%s/bad.obj", deep);
+    cr_assert_lt((size_t)snprintf(scene, sizeof scene, "%s/scene.txt", deep), sizeof scene);
+    cr_assert_lt((size_t)snprintf(obj, sizeof obj, "%s/bad.obj", deep), sizeof obj);
     FILE *f = fopen(scene, "w");
     cr_assert_not_null(f, "%s", scene);
     fputs(CAM "film width=8 width=8\n", f);
-    fclose(f);
+    cr_assert_eq(fclose(f), 0);
     struct scene sc;
     struct mcpt_error err = {0};
     cr_assert_not(scene_load(scene, &sc, &err));
@@ -951,11 +952,11 @@ Test(scene, error_names_a_long_path_whole, .timeout = TEST_TIMEOUT_S(10))
     f = fopen(obj, "w");
     cr_assert_not_null(f, "%s", obj);
     fputs("v 0 0 0\nf 1 2 3\n", f);
-    fclose(f);
+    cr_assert_eq(fclose(f), 0);
     f = fopen(scene, "w");
     cr_assert_not_null(f, "%s", scene);
     fputs(CAM "mesh file=bad.obj\n", f);
-    fclose(f);
+    cr_assert_eq(fclose(f), 0);
     cr_assert_not(scene_load(scene, &sc, &err));
     cr_assert_str_eq(err.file, obj);
     char line[MCPT_ERROR_LINE_BYTES];
