@@ -385,10 +385,17 @@ static ALWAYS_INLINE void pascal_digits_x8(u32x8 *x)
     *x = v;
 }
 
-/* fraction_to_float into out[8]: x >> 8 < 2^24 converts exactly through int32 */
+/* fraction_to_float lane by lane: x >> 8 < 2^24 converts exactly through int32 */
+static ALWAYS_INLINE void fraction_to_float_v8(const u32x8 *x, f32x8 *out)
+{
+    *out = __builtin_convertvector((i32x8)(*x >> 8), f32x8) * 0x1p-24f;
+}
+
+/* fraction_to_float_v8 into out[8] */
 static ALWAYS_INLINE void fraction_to_float_x8(const u32x8 *x, float *out)
 {
-    f32x8 f = __builtin_convertvector((i32x8)(*x >> 8), f32x8) * 0x1p-24f;
+    f32x8 f;
+    fraction_to_float_v8(x, &f);
     memcpy(out, &f, sizeof f);
 }
 
@@ -441,11 +448,11 @@ static ALWAYS_INLINE void nested_uniform_scramble_x8(u32x8 *x, const u32x8 *seed
     reverse_bits_x8(x);
 }
 
-static void pad_seeds(const struct sampler *s, uint32_t dim0, uint32_t n, uint32_t *index,
-                      uint32_t *x, uint32_t *y);
+static void pad_seeds(const struct sampler *s, uint32_t dim0, uint32_t *index, uint32_t *x,
+                      uint32_t *y, uint32_t n);
 
-/* The first bounce block with a padded dimension: the blocks whose computations' seeds a
- * sampler keeps per pixel are this one and the next SAMPLE_PAD_KEPT - 1. */
+/* The first bounce block with a padded dimension: the fills whose seeds a sampler keeps per
+ * pixel are those from this block and from the next SAMPLE_PAD_KEPT - 1. */
 static const uint32_t PAD_FIRST_KEPT = SAMPLE_SOBOL_JOINT_DIMS <= SAMPLE_DIM_BOUNCE0
                                            ? 0
                                            : (SAMPLE_SOBOL_JOINT_DIMS - SAMPLE_DIM_BOUNCE0) /
@@ -459,8 +466,8 @@ static void sobol_pixel_seeds(struct sampler *s)
     s->shuffle_seed = dim_seed(s, UINT32_MAX, 0);
     for (uint32_t d = 0; d < SAMPLE_SOBOL_JOINT_LANES; d++)
         s->joint_seed[d] = dim_seed(s, d, 1);
-    pad_seeds(s, SAMPLE_DIM_BOUNCE0 + PAD_FIRST_KEPT * SAMPLE_DIMS_PER_BOUNCE, SAMPLE_PAD_KEPT_DIMS,
-              s->pad_seed_index, s->pad_seed_x, s->pad_seed_y);
+    pad_seeds(s, SAMPLE_DIM_BOUNCE0 + PAD_FIRST_KEPT * SAMPLE_DIMS_PER_BOUNCE, s->pad_seed_index,
+              s->pad_seed_x, s->pad_seed_y, SAMPLE_PAD_KEPT_REQUESTS);
 }
 
 /* The joint point of the sample, every dimension at once (Burley 2020: shuffled_scrambled_sobol4d
@@ -525,32 +532,43 @@ static inline vec2 pad_request(uint32_t sample_idx_rev, uint32_t seed_index, uin
 }
 
 /* The padded dimensions of the bounce blocks (sample.h: SAMPLE_DIMS_PER_BOUNCE dimensions from
- * SAMPLE_DIM_BOUNCE0 on) are computed SAMPLE_PAD_HELD at a time from the start of a block, the
- * request at every dimension at once, a lane each (the compiler vectorises the loops, hashes
- * included), and kept until the sample passes them: lane l holds x and y of the request at
- * dimension pad_dim0 + l.  The computation is a chain of dependent multiplications, so its
- * latency, not its work, is what a path waits for: the second vector of lanes, the next
- * bounce's block, costs little beside the first and spares the next bounce its own wait.
- * Other dimensions (the light-sample block, any dimension below the first bounce) are requested
- * one at a time. */
+ * SAMPLE_DIM_BOUNCE0 on) are computed a fill at a time: from the start of a block, the requests
+ * of SAMPLE_PAD_BLOCKS blocks at once, a lane each (two vectors), kept until the sample passes
+ * them: pad_x[k] and pad_y[k] hold x and y of the request at dimension pad_dim0 + k.  A fill
+ * costs its two vectors whatever they hold, so they hold requests only, not the places of
+ * second coordinates: one fill serves the first three bounces of a path, which with the
+ * roulette threshold most paths reach (a fill per two bounces before).  Other dimensions (the
+ * light-sample block, any dimension below the first bounce, a second coordinate read alone)
+ * are requested one at a time. */
 static bool pad_in_blocks(uint32_t dim)
 {
-    return dim >= SAMPLE_DIM_BOUNCE0 && dim < SAMPLE_DIM_LIGHT_EXTRA;
+    return dim >= SAMPLE_DIM_BOUNCE0 && dim < SAMPLE_DIM_LIGHT_EXTRA &&
+           (SAMPLE_BLOCK_REQUESTS >> (dim - SAMPLE_DIM_BOUNCE0) % SAMPLE_DIMS_PER_BOUNCE & 1u);
 }
 
-/* The seeds of the requests at dimensions dim0 + k, k < n. */
-static void pad_seeds(const struct sampler *s, uint32_t dim0, uint32_t n, uint32_t *index,
-                      uint32_t *x, uint32_t *y)
+/* The dimension of request k of the blocks from dimension dim0 (a block's start): request
+ * r = k % 5 of block k / 5 is at the block's offset r + (r >= 2) + (r >= 4), the r-th of the
+ * offsets 0, 1, 3, 4, 6 of SAMPLE_BLOCK_REQUESTS. */
+static uint32_t pad_request_dim(uint32_t dim0, uint32_t k)
+{
+    _Static_assert(SAMPLE_BLOCK_REQUESTS == 0x5b, "requests at block offsets 0, 1, 3, 4, 6");
+    uint32_t r = k % SAMPLE_REQUESTS_PER_BOUNCE;
+    return dim0 + k / SAMPLE_REQUESTS_PER_BOUNCE * SAMPLE_DIMS_PER_BOUNCE + r + (r >= 2) + (r >= 4);
+}
+
+/* The seeds of requests k < n of the blocks from dimension dim0. */
+static void pad_seeds(const struct sampler *s, uint32_t dim0, uint32_t *index, uint32_t *x,
+                      uint32_t *y, uint32_t n)
 {
     for (uint32_t k = 0; k < n; k++)
-        request_seeds(s, dim0 + k, &index[k], &x[k], &y[k]);
+        request_seeds(s, pad_request_dim(dim0, k), &index[k], &x[k], &y[k]);
 }
 
 /* pad_request on eight lanes at once: the requests with seeds index[l], x[l], y[l] into
- * out_x[l], out_y[l]. */
+ * x[l], y[l]. */
 static ALWAYS_INLINE void pad_lanes(uint32_t sample_idx_rev, const uint32_t *seeds_index,
-                                    const uint32_t *seeds_x, const uint32_t *seeds_y, float *out_x,
-                                    float *out_y)
+                                    const uint32_t *seeds_x, const uint32_t *seeds_y, f32x8 *out_x,
+                                    f32x8 *out_y)
 {
     u32x8 seed_index, seed_x, seed_y;
     memcpy(&seed_index, seeds_index, sizeof seed_index);
@@ -565,11 +583,25 @@ static ALWAYS_INLINE void pad_lanes(uint32_t sample_idx_rev, const uint32_t *see
     pascal_digits_x8(&y);
     laine_karras_permutation_x8(&y, &seed_y);
     reverse_bits_x8(&y);
-    fraction_to_float_x8(&x, out_x);
-    fraction_to_float_x8(&y, out_y);
+    fraction_to_float_v8(&x, out_x);
+    fraction_to_float_v8(&y, out_y);
 }
 
-/* Fills the held lanes from the start of the block of dimension dim (pad_in_blocks(dim)). */
+/* The 15 requests of lanes *lo (0-7) and *hi (8-15) in dimension order: request k to
+ * out[pad_request_dim(0, k)] of out[SAMPLE_PAD_SPAN_STORED], the places of the second
+ * coordinates (never read) filled with copies.  Three shuffles in registers: copying lane by
+ * lane from a stored vector stalls each load on store forwarding (measured on Zen 3). */
+static ALWAYS_INLINE void pad_spread(const f32x8 *lo, const f32x8 *hi, float *out)
+{
+    f32x8 v0 = __builtin_shufflevector(*lo, *hi, 0, 1, 1, 2, 3, 3, 4, 5);
+    f32x8 v1 = __builtin_shufflevector(*lo, *hi, 6, 6, 7, 8, 8, 9, 10, 11);
+    f32x8 v2 = __builtin_shufflevector(*hi, *hi, 3, 4, 5, 5, 6, 6, 6, 6);
+    memcpy(out, &v0, sizeof v0);
+    memcpy(out + 8, &v1, sizeof v1);
+    memcpy(out + 16, &v2, sizeof v2);
+}
+
+/* Fills the held requests from the start of the block of dimension dim (pad_in_blocks(dim)). */
 static void pad_block(struct sampler *s, uint32_t dim)
 {
     uint32_t block = (dim - SAMPLE_DIM_BOUNCE0) / SAMPLE_DIMS_PER_BOUNCE;
@@ -578,18 +610,19 @@ static void pad_block(struct sampler *s, uint32_t dim)
         computed_y[SAMPLE_PAD_HELD];
     const uint32_t *seed_index = computed_index, *seed_x = computed_x, *seed_y = computed_y;
     if (block - PAD_FIRST_KEPT < SAMPLE_PAD_KEPT) {
-        uint32_t k = (block - PAD_FIRST_KEPT) * SAMPLE_DIMS_PER_BOUNCE;
+        uint32_t k = (block - PAD_FIRST_KEPT) * SAMPLE_REQUESTS_PER_BOUNCE;
         seed_index = s->pad_seed_index + k;
         seed_x = s->pad_seed_x + k;
         seed_y = s->pad_seed_y + k;
     } else {
-        pad_seeds(s, dim0, SAMPLE_PAD_HELD, computed_index, computed_x, computed_y);
+        pad_seeds(s, dim0, computed_index, computed_x, computed_y, SAMPLE_PAD_HELD);
     }
-    for (int v = 0; v < SAMPLE_PAD_HELD / SAMPLE_PAD_LANES; v++) {
-        int l = v * SAMPLE_PAD_LANES;
-        pad_lanes(s->sample_idx_rev, seed_index + l, seed_x + l, seed_y + l, s->pad_x + l,
-                  s->pad_y + l);
-    }
+    f32x8 x_lo, y_lo, x_hi, y_hi;
+    pad_lanes(s->sample_idx_rev, seed_index, seed_x, seed_y, &x_lo, &y_lo);
+    pad_lanes(s->sample_idx_rev, seed_index + SAMPLE_PAD_LANES, seed_x + SAMPLE_PAD_LANES,
+              seed_y + SAMPLE_PAD_LANES, &x_hi, &y_hi);
+    pad_spread(&x_lo, &x_hi, s->pad_x);
+    pad_spread(&y_lo, &y_hi, s->pad_y);
     s->pad_dim0 = dim0;
 }
 
@@ -597,11 +630,16 @@ static void pad_block(struct sampler *s, uint32_t dim)
 static vec2 sobol_pad(struct sampler *s, uint32_t dim)
 {
     if (pad_in_blocks(dim)) {
-        if (dim - s->pad_dim0 >= SAMPLE_PAD_HELD)
+        if (!sample_pad_holds(s, dim))
             pad_block(s, dim);
-        uint32_t lane = dim - s->pad_dim0;
-        return (vec2){s->pad_x[lane], s->pad_y[lane]};
+        uint32_t k = dim - s->pad_dim0;
+        return (vec2){s->pad_x[k], s->pad_y[k]};
     }
+    return sample_sobol_request(s, dim);
+}
+
+vec2 sample_sobol_request(const struct sampler *s, uint32_t dim)
+{
     uint32_t seed_index, seed_x, seed_y;
     request_seeds(s, dim, &seed_index, &seed_x, &seed_y);
     return pad_request(s->sample_idx_rev, seed_index, seed_x, seed_y);

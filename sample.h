@@ -92,20 +92,43 @@ enum {
  * fraction (value / 2^32); direction numbers of Joe & Kuo 2008 (sobol_matrices.h). */
 uint32_t sample_sobol_u32(uint32_t index, uint32_t dim);
 
-/* Sobol' padding is computed SAMPLE_PAD_HELD dimensions at a time from the start of a bounce
- * block (sample.c, pad_block), a lane per dimension: the bounce's block and the next one. */
+/* Sobol' padding is computed a fill at a time (sample.c, pad_block): from the start of a bounce
+ * block, the requests of SAMPLE_PAD_BLOCKS blocks, a lane per request.  A block's requests start
+ * at its offsets SAMPLE_BOUNCE_* (SAMPLE_BLOCK_REQUESTS); the two others are the second
+ * coordinates of the 2D requests before them, read with them. */
 enum {
-    SAMPLE_PAD_LANES = 8, /* lanes of one vector of the computation */
-    SAMPLE_PAD_HELD = 16, /* dimensions computed at once: two vectors, two bounces and more */
-    SAMPLE_PAD_KEPT = 3,  /* the first padded blocks, whose seeds are hashed once per pixel */
+    SAMPLE_PAD_LANES = 8,           /* lanes of one vector of the computation */
+    SAMPLE_PAD_HELD = 16,           /* lanes of one fill: two vectors */
+    SAMPLE_PAD_BLOCKS = 3,          /* bounce blocks one fill covers: 15 of its lanes */
+    SAMPLE_REQUESTS_PER_BOUNCE = 5, /* requests of a bounce block */
+    SAMPLE_PAD_KEPT = 4,            /* the fills from the first padded blocks, whose seeds are
+                                        hashed once per pixel */
+    SAMPLE_PAD_SPAN = SAMPLE_PAD_BLOCKS * SAMPLE_DIMS_PER_BOUNCE, /* dimensions a fill covers */
+    SAMPLE_PAD_SPAN_STORED = 3 * SAMPLE_PAD_LANES                 /* the span in whole vectors */
 };
-/* The dimensions the computations of those blocks read (from the first one's start). */
-enum { SAMPLE_PAD_KEPT_DIMS = (SAMPLE_PAD_KEPT - 1) * SAMPLE_DIMS_PER_BOUNCE + SAMPLE_PAD_HELD };
-_Static_assert((int)SAMPLE_PAD_HELD >= 2 * (int)SAMPLE_DIMS_PER_BOUNCE &&
+enum {
+    SAMPLE_BLOCK_REQUESTS = 1 << SAMPLE_BOUNCE_LIGHT_CHOICE | 1 << SAMPLE_BOUNCE_LIGHT_POS |
+                            1 << SAMPLE_BOUNCE_BSDF_LOBE | 1 << SAMPLE_BOUNCE_BSDF_DIR |
+                            1 << SAMPLE_BOUNCE_ROULETTE,
+    /* bit k: dimension pad_dim0 + k is a request a fill holds */
+    SAMPLE_PAD_REQUEST_MASK = SAMPLE_BLOCK_REQUESTS |
+                              SAMPLE_BLOCK_REQUESTS << SAMPLE_DIMS_PER_BOUNCE |
+                              SAMPLE_BLOCK_REQUESTS << 2 * SAMPLE_DIMS_PER_BOUNCE
+};
+/* The requests whose seeds the first SAMPLE_PAD_KEPT fills read (from the first one's start). */
+enum {
+    SAMPLE_PAD_KEPT_REQUESTS = (SAMPLE_PAD_KEPT - 1) * SAMPLE_REQUESTS_PER_BOUNCE + SAMPLE_PAD_HELD
+};
+_Static_assert(__builtin_popcount(SAMPLE_BLOCK_REQUESTS) == SAMPLE_REQUESTS_PER_BOUNCE &&
+                   SAMPLE_BLOCK_REQUESTS >> SAMPLE_DIMS_PER_BOUNCE == 0 &&
+                   (int)SAMPLE_PAD_BLOCKS == 3 &&
+                   (int)SAMPLE_PAD_SPAN <= (int)SAMPLE_PAD_SPAN_STORED &&
+                   (int)SAMPLE_PAD_BLOCKS * (int)SAMPLE_REQUESTS_PER_BOUNCE <=
+                       (int)SAMPLE_PAD_HELD &&
                    (int)SAMPLE_PAD_HELD == 2 * (int)SAMPLE_PAD_LANES,
-               "the dimensions held are two bounces, two vectors");
-/* pad_dim0 when nothing is held: dim - SAMPLE_PAD_NONE is no lane for any dimension in use
- * (all are below 2^28). */
+               "a fill is three bounce blocks' requests in two vectors");
+/* pad_dim0 when nothing is held: dim - SAMPLE_PAD_NONE is past the span for any dimension in
+ * use (all are below 2^28). */
 #define SAMPLE_PAD_NONE 0xf0000000u
 
 /* The sample generator for one (pixel, sample index), read dimension by dimension.
@@ -128,18 +151,19 @@ struct sampler {
     /* Sobol', per pixel */
     uint32_t shuffle_seed;                         /* seed of the joint point's index shuffle */
     uint32_t joint_seed[SAMPLE_SOBOL_JOINT_LANES]; /* scramble seed of each joint dimension */
-    /* the seeds of the padding requests at the first padded block's dimension + k: the shuffle
-     * of the sample index, the scrambles of the first and the second coordinate */
-    uint32_t pad_seed_index[SAMPLE_PAD_KEPT_DIMS];
-    uint32_t pad_seed_x[SAMPLE_PAD_KEPT_DIMS];
-    uint32_t pad_seed_y[SAMPLE_PAD_KEPT_DIMS];
+    /* the seeds of the padding requests from the first padded block's start, request k at a
+     * time (sample.c, pad_request_dim): the shuffle of the sample index, the scrambles of the
+     * first and the second coordinate */
+    uint32_t pad_seed_index[SAMPLE_PAD_KEPT_REQUESTS];
+    uint32_t pad_seed_x[SAMPLE_PAD_KEPT_REQUESTS];
+    uint32_t pad_seed_y[SAMPLE_PAD_KEPT_REQUESTS];
     /* Sobol', per sample */
     uint32_t sample_idx_rev;                 /* sample_idx bit-reversed: the padding's input */
     float joint_u[SAMPLE_SOBOL_JOINT_LANES]; /* the joint point, a value per dimension */
     uint32_t pad_dim0;                       /* first dimension held, or SAMPLE_PAD_NONE */
-    float pad_x[SAMPLE_PAD_HELD];            /* the padding requests at pad_dim0 + lane: x, */
-    float pad_y[SAMPLE_PAD_HELD];            /* and y of a 2D request */
-};                                           /* 632 bytes */
+    float pad_x[SAMPLE_PAD_SPAN_STORED];     /* the padding request at pad_dim0 + k, where */
+    float pad_y[SAMPLE_PAD_SPAN_STORED];     /* sample_pad_holds: x, and y of a 2D request */
+};                                           /* 704 bytes */
 
 /* Starts the sample sample_idx of pixel pixel_idx at dimension 0, with set_spp = 0: the
  * stratified sampler then has no strata to fill and gives independent hashed uniforms. */
@@ -165,6 +189,17 @@ void sample_set_dim(struct sampler *s, uint32_t dim);
  * the sampler holds. */
 float sample_1d_compute(struct sampler *s, uint32_t dim);
 vec2 sample_2d_compute(struct sampler *s, uint32_t dim);
+/* The Sobol' sampler's padded request at dimension dim >= SAMPLE_SOBOL_JOINT_DIMS of its current
+ * sample, computed alone (sample.c, "Padding"): what sample_2d (and, for x, sample_1d) return
+ * there, however the sampler computed them. */
+vec2 sample_sobol_request(const struct sampler *s, uint32_t dim);
+
+/* Whether dimension dim is a request the Sobol' sampler holds from its last fill. */
+static inline bool sample_pad_holds(const struct sampler *s, uint32_t dim)
+{
+    uint32_t k = dim - s->pad_dim0;
+    return k < SAMPLE_PAD_SPAN && (SAMPLE_PAD_REQUEST_MASK >> k & 1u);
+}
 
 /* The value of the next dimension, in [0, 1).  Inline because a path reads a dozen or more per
  * sample: Sobol' values the sampler holds (the joint point, the current padded block) are one
@@ -175,7 +210,7 @@ static inline float sample_1d(struct sampler *s)
     if (s->kind == SAMPLER_SOBOL) {
         if (dim < SAMPLE_SOBOL_JOINT_DIMS)
             return s->joint_u[dim];
-        if (dim - s->pad_dim0 < SAMPLE_PAD_HELD)
+        if (sample_pad_holds(s, dim))
             return s->pad_x[dim - s->pad_dim0];
     }
     return sample_1d_compute(s, dim);
@@ -190,7 +225,7 @@ static inline vec2 sample_2d(struct sampler *s)
     if (s->kind == SAMPLER_SOBOL) {
         if (dim + 1 < SAMPLE_SOBOL_JOINT_DIMS)
             return (vec2){s->joint_u[dim], s->joint_u[dim + 1]};
-        if (dim >= SAMPLE_SOBOL_JOINT_DIMS && dim - s->pad_dim0 < SAMPLE_PAD_HELD)
+        if (dim >= SAMPLE_SOBOL_JOINT_DIMS && sample_pad_holds(s, dim))
             return (vec2){s->pad_x[dim - s->pad_dim0], s->pad_y[dim - s->pad_dim0]};
     }
     return sample_2d_compute(s, dim);

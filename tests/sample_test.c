@@ -212,6 +212,47 @@ Test(sample, pixel_start_matches_sample_start)
     }
 }
 
+/* The Sobol' sampler computes its padded requests many at a time (sample.c, pad_block: three
+ * bounce blocks' requests a fill, as lanes placed by shuffles), and per pixel keeps the seeds
+ * of the first fills.  Whatever the order of reads (every bounce block in turn, 1D and 2D reads
+ * at every offset of a block, jumps across blocks, the kept fills and those past them), each
+ * value must be the request at its dimension computed alone. */
+Test(sample, sobol_held_requests_match_requests_alone)
+{
+    static const uint32_t samples[] = {0, 1, 7, 255, 4097};
+    for (uint32_t pixel = 0; pixel < 3; pixel++) {
+        struct sampler px;
+        sample_start_pixel(&px, SAMPLER_SOBOL, 5u + pixel, 9000u + pixel, 0u);
+        for (size_t i = 0; i < sizeof samples / sizeof samples[0]; i++) {
+            for (uint32_t pattern = 0; pattern < 4; pattern++) {
+                sample_start_index(&px, samples[i]);
+                uint32_t dim = SAMPLE_SOBOL_JOINT_DIMS + pattern;
+                sample_set_dim(&px, dim);
+                while (dim < SAMPLE_DIM_BOUNCE0 + 30 * SAMPLE_DIMS_PER_BOUNCE) {
+                    vec2 want = sample_sobol_request(&px, dim);
+                    /* patterns: 2D reads, 1D reads, both alternately, and 1D reads that jump */
+                    bool is_2d = pattern == 0 || (pattern == 2 && dim % 2 == 0);
+                    if (is_2d) {
+                        vec2 got = sample_2d(&px);
+                        cr_assert(got.x == want.x && got.y == want.y,
+                                  "pixel %u sample %u dim %u (2D, pattern %u)", pixel, samples[i],
+                                  dim, pattern);
+                    } else {
+                        cr_assert(sample_1d(&px) == want.x,
+                                  "pixel %u sample %u dim %u (pattern %u)", pixel, samples[i], dim,
+                                  pattern);
+                    }
+                    dim += is_2d ? 2 : 1;
+                    if (pattern == 3 && dim % 5 == 0) {
+                        dim += 2 * SAMPLE_DIMS_PER_BOUNCE + 1;
+                        sample_set_dim(&px, dim);
+                    }
+                }
+            }
+        }
+    }
+}
+
 /* Is every elementary interval [a 2^-j, (a+1) 2^-j) x [b 2^-(m-j), (b+1) 2^-(m-j)) hit exactly
  * once by the 2^m points (x, y) (fractions of 2^32)?  That is a (0,m,2)-net in base 2. */
 static bool is_02_net(const uint32_t *x, const uint32_t *y, int m)
