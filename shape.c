@@ -539,13 +539,13 @@ static bool plane_t(struct dvec3 q, struct dvec3 n, struct dvec3 n_abs, const st
 /* ---- quad ---- */
 
 /* The quad's planar coordinates of the point o + t d on its plane, in double: pd = o + t d -
- * corner = alpha e1 + beta e2, alpha = (pd x e2) . n / n . n, beta = (e1 x pd) . n / n . n. */
-static void quad_coords(const struct quad *q, const struct ray *ray, double t, double *alpha,
-                        double *beta)
+ * corner = alpha e1 + beta e2, alpha = (pd x e2) . n / n . n, beta = (e1 x pd) . n / n . n,
+ * with n = e1 x e2 in double (d3_cross). */
+static void quad_coords(const struct quad *q, struct dvec3 n, const struct ray *ray, double t,
+                        double *alpha, double *beta)
 {
     struct dvec3 e1 = d3(q->e1);
     struct dvec3 e2 = d3(q->e2);
-    struct dvec3 n = d3_cross(e1, e2);
     struct dvec3 pd = d3_sub(d3_add(d3(ray->o), d3_scale(d3(ray->d), t)), d3(q->corner));
     double inv_nn = 1.0 / d3_dot(n, n);
     *alpha = d3_dot(d3_cross(pd, e2), n) * inv_nn;
@@ -558,11 +558,11 @@ bool shape_quad_intersect(const struct quad *q, const struct ray *ray, float *t_
      * it behind the origin or beyond t_max, and need no planar coordinates */
     struct dvec3 e1 = d3(q->e1);
     struct dvec3 e2 = d3(q->e2);
+    struct dvec3 n = d3_cross(e1, e2);
     double t, alpha, beta;
-    if (!plane_t(d3(q->corner), d3_cross(e1, e2), d3_cross_abs(e1, e2), ray, &t) ||
-        !t_to_float(t, ray, t_hit))
+    if (!plane_t(d3(q->corner), n, d3_cross_abs(e1, e2), ray, &t) || !t_to_float(t, ray, t_hit))
         return false;
-    quad_coords(q, ray, t, &alpha, &beta);
+    quad_coords(q, n, ray, t, &alpha, &beta);
     return alpha >= 0.0 && alpha <= 1.0 && beta >= 0.0 && beta <= 1.0;
 }
 
@@ -596,7 +596,7 @@ struct surface shape_quad_surface(const struct quad *q, const struct ray *ray, f
     struct surface sf;
     /* the planar coordinates of o + t_hit d; the point is rebuilt on the plane from them */
     double alpha, beta;
-    quad_coords(q, ray, t_hit, &alpha, &beta);
+    quad_coords(q, d3_cross(d3(q->e1), d3(q->e2)), ray, t_hit, &alpha, &beta);
     alpha = fmin(1.0, fmax(0.0, alpha));
     beta = fmin(1.0, fmax(0.0, beta));
     sf.p = quad_point(q, alpha, beta, &sf.ng, &sf.p_error);
