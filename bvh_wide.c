@@ -883,20 +883,33 @@ static inline struct m8 m8_permute(struct m8 a, struct i8 idx)
     return r;
 #endif
 }
+#if BVH_AVX2 && !(defined(__AVX512F__) && defined(__AVX512VL__))
+/* The positions of the set bits of a nibble, in order, one per byte (unused bytes 0). */
+static const uint32_t nibble_lanes[16] = {
+    0x00000000, 0x00000000, 0x00000001, 0x00000100, 0x00000002, 0x00000200,
+    0x00000201, 0x00020100, 0x00000003, 0x00000300, 0x00000301, 0x00030100,
+    0x00000302, 0x00030200, 0x00030201, 0x03020100,
+};
+#endif
+
 /* The lanes i of a whose bit i is set, in order, moved to lanes 0, 1, ...; the rest is 0.
- * AVX-512 has the instruction (vpcompressd); with AVX2 the permutation that does it is built
- * from the bits with BMI2 (pdep spreads each bit over a byte, pext gathers those bytes' lane
- * numbers). */
+ * AVX-512 has the instruction (vpcompressd).  With AVX2 the permutation that does it is
+ * looked up a nibble of bits at a time: the high nibble's lane numbers (+ 4) follow the low
+ * nibble's count of them.  (BMI2's pdep/pext build it in two instructions, but on AMD before
+ * Zen 3 they are microcoded, with a latency that grows with the bits set: 10% of the closest-hit
+ * loop's samples fell on them there; docs/bvh.md, "Levers measured".) */
 static inline struct i8 i8_compress(struct i8 a, uint32_t bits)
 {
 #if BVH_AVX2 && defined(__AVX512F__) && defined(__AVX512VL__)
     return (struct i8){_mm256_maskz_compress_epi32((__mmask8)bits, a.v)};
-#elif BVH_AVX2 && defined(__BMI2__)
-    uint64_t byte_mask = _pdep_u64(bits, 0x0101010101010101ull) * 0xFF;
-    uint64_t lanes = _pext_u64(0x0706050403020100ull, byte_mask);
+#elif BVH_AVX2
+    uint32_t low = bits & 15u;
+    uint64_t lanes = (uint64_t)nibble_lanes[low] |
+                     (uint64_t)(nibble_lanes[bits >> 4 & 15u] | 0x04040404u)
+                         << (8 * __builtin_popcount(low));
     __m256i idx = _mm256_cvtepu8_epi32(_mm_cvtsi64_si128((long long)lanes));
     __m256i kept = _mm256_permutevar8x32_epi32(a.v, idx);
-    /* zero the lanes past the count (pext left them 0, which would repeat lane 0) */
+    /* zero the lanes past the count (the table's unused bytes repeat lane 0 or 4) */
     __m256i count = _mm256_set1_epi32(__builtin_popcount(bits));
     __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     return (struct i8){_mm256_and_si256(kept, _mm256_cmpgt_epi32(count, lane))};
@@ -908,11 +921,7 @@ static inline struct i8 i8_compress(struct i8 a, uint32_t bits)
     for (int i = 0; i < 8; i++)
         if (bits >> i & 1u)
             out[n++] = in[i];
-#if BVH_AVX2
-    return (struct i8){_mm256_loadu_si256((const __m256i *)out)};
-#else
     return i8_load(out);
-#endif
 #endif
 }
 /* lane i of a */
