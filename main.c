@@ -987,6 +987,8 @@ static bool resume_estimator_matches(const struct run *run, struct mcpt_error *e
     const struct trace_options *now = &run->topt;
     const char *opt = NULL;
     char want[64], got[64];
+    /* the whole render's samples per pixel: a range's samples are stratified for them */
+    uint32_t now_spp = run->o.has_range ? now->sampler_spp : now->spp;
 #define DIFFER(name, a, b)                                                                         \
     do {                                                                                           \
         if (!opt && (a) != (b)) {                                                                  \
@@ -1010,6 +1012,7 @@ static bool resume_estimator_matches(const struct run *run, struct mcpt_error *e
             snprintf(got, sizeof got, "%s", text(b));                                              \
         }                                                                                          \
     } while (0)
+    DIFFER("--spp", was.spp, now_spp);
     enum render_light_sampling ls_was = run->saved_o.has_light_sampling
                                             ? run->saved_o.light_sampling
                                             : run->scene_light_sampling;
@@ -1050,13 +1053,35 @@ static bool resume_estimator_matches(const struct run *run, struct mcpt_error *e
     return !opt;
 }
 
+/* The resumed run's --sample-range against the checkpoint's: the same range, or none in both
+ * (a range changes which samples the checkpoint's counts stand for). */
+static bool resume_range_matches(const struct run *run, struct mcpt_error *err)
+{
+    const struct options *was = &run->saved_o, *now = &run->o;
+    if (was->has_range == now->has_range &&
+        (!was->has_range ||
+         (was->range.begin == now->range.begin && was->range.end == now->range.end)))
+        return true;
+    char want[48] = "no --sample-range", got[48] = "none";
+    if (was->has_range)
+        snprintf(want, sizeof want, "--sample-range %u:%u", was->range.begin, was->range.end);
+    if (now->has_range)
+        snprintf(got, sizeof got, "--sample-range %u:%u", now->range.begin, now->range.end);
+    mcpt_error_set(err, run->o.resume_path, 0, 0,
+                   "expected %s as in the checkpoint, got %s (a resumed render adds the "
+                   "samples the interrupted one would have)",
+                   want, got);
+    return false;
+}
+
 /* The resumed run must render exactly what the interrupted one would have: the same scene
  * bytes, settings and film. */
 static bool resume_matches(const struct run *run, struct mcpt_error *err)
 {
     struct checkpoint_info now;
     checkpoint_info_of(run, &now);
-    if (!checkpoint_matches(run->o.resume_path, &run->saved, &now, err) ||
+    if (!resume_range_matches(run, err) ||
+        !checkpoint_matches(run->o.resume_path, &run->saved, &now, err) ||
         !resume_estimator_matches(run, err))
         return false;
     if (run->film.width != run->scene.width || run->film.height != run->scene.height) {

@@ -160,8 +160,10 @@ static uint64_t fnv1a_file(const char *path)
 }
 
 /* Renders SCENE in-process to spp_done samples per pixel and saves a checkpoint that targets
- * spp_target, as an interrupted `mcpt SCENE --spp spp_target` would have (its options stored). */
-static void make_checkpoint(const char *path, uint32_t spp_done, uint32_t spp_target)
+ * spp_target, as an interrupted `mcpt SCENE --spp spp_target` would have (its options stored);
+ * with range_end > 0, as `... --sample-range range_begin:range_end` would have. */
+static void make_checkpoint_of(const char *path, uint32_t spp_done, uint32_t spp_target,
+                               uint32_t range_begin, uint32_t range_end)
 {
     struct scene scene;
     struct mcpt_error err;
@@ -174,22 +176,34 @@ static void make_checkpoint(const char *path, uint32_t spp_done, uint32_t spp_ta
                                 .max_depth = scene.render.max_depth,
                                 .seed = 0,
                                 .sampler = SAMPLER_INDEPENDENT,
-                                .n_threads = 2};
+                                .n_threads = 2,
+                                .sample_offset = range_begin,
+                                .sampler_spp = range_end ? spp_target : 0};
     struct trace_result res;
     cr_assert(trace_render(ts, &opt, &film, &res, &err));
     struct checkpoint_info info = {.scene_hash = fnv1a_file(SCENE),
                                    .seed = 0,
-                                   .spp = spp_target,
+                                   .spp = range_end ? range_end - range_begin : spp_target,
                                    .max_depth = opt.max_depth,
-                                   .sampler = SAMPLER_INDEPENDENT};
+                                   .sampler = SAMPLER_INDEPENDENT,
+                                   .sample_offset = range_begin};
     snprintf(info.scene_path, sizeof info.scene_path, "%s", SCENE);
     int n = snprintf(info.args, sizeof info.args, "--spp=%u", spp_target) + 1;
     n += snprintf(info.args + n, sizeof info.args - (size_t)n, "--sampler=independent") + 1;
+    if (range_end)
+        n += snprintf(info.args + n, sizeof info.args - (size_t)n, "--sample-range=%u:%u",
+                      range_begin, range_end) +
+             1;
     info.args_bytes = (uint32_t)n;
     cr_assert(checkpoint_save(path, &film, &info, &err), "%s", err.msg);
     film_free(&film);
     trace_free(ts);
     scene_free(&scene);
+}
+
+static void make_checkpoint(const char *path, uint32_t spp_done, uint32_t spp_target)
+{
+    make_checkpoint_of(path, spp_done, spp_target, 0, 0);
 }
 
 /* A checkpoint of 13 of 64 spp, resumed by mcpt (scene named by the checkpoint), gives the
@@ -294,6 +308,59 @@ Test(resume, changed_estimator_refused, .init = setup, .fini = teardown)
         cr_assert(test_exists(ckpt), "a refused resume keeps its checkpoint");
     }
     const char *same[] = {"--resume", ckpt, "-o", out, "--split", "full", "--quiet", NULL};
+    cr_assert_eq(test_run_mcpt(same, NULL, err_path, ALARM_S), 0);
+    cr_assert(test_exists(out));
+}
+
+/* A part of a render (--sample-range) is stratified for the whole render's spp, so resuming
+ * it with another --spp, or with another range or none, would mix samples of two renders; a
+ * plain render's checkpoint resumed with a range likewise.  Each is refused (exit 2, one line
+ * naming the checkpoint and the option), nothing is written, the checkpoint is kept.  Found by
+ * probing: `--resume PART.ckpt --spp N` with the range's own count N ran and wrote a part
+ * labelled as N's; `--sample-range 7:9` on a plain checkpoint said "expected --spp 8 ..., got
+ * 2", naming an option not given. */
+Test(resume, changed_sample_range_or_whole_spp_refused, .init = setup, .fini = teardown)
+{
+    char part[300], plain[300], out[300], err_path[300], err[4096], want[400];
+    snprintf(part, sizeof part, "%s/part.ckpt", tmpdir);
+    snprintf(plain, sizeof plain, "%s/plain.ckpt", tmpdir);
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
+    make_checkpoint_of(part, 2, 16, 0, 8); /* samples 0..7 of a 16-spp render, 2 done */
+    make_checkpoint(plain, 2, 8);
+    struct {
+        const char *ckpt;
+        const char *args[4];
+        const char *msg;
+    } cases[] = {
+        {part, {"--spp", "8"}, "expected --spp 16 as in the checkpoint, got 8 (a resumed render "
+                               "adds samples of the same estimator)"},
+        {part, {"--sample-range", "0:4"}, "expected --sample-range 0:8 as in the checkpoint, got "
+                                          "--sample-range 0:4 (a resumed render adds the samples "
+                                          "the interrupted one would have)"},
+        {part, {"--spp", "8", "--sample-range", "0:8"},
+         "expected --spp 16 as in the checkpoint, got 8 (a resumed render adds samples of the "
+         "same estimator)"},
+        {plain, {"--sample-range", "0:8"},
+         "expected no --sample-range as in the checkpoint, got --sample-range 0:8 (a resumed "
+         "render adds the samples the interrupted one would have)"},
+        {plain, {"--spp", "16", "--sample-range", "0:8"},
+         "expected no --sample-range as in the checkpoint, got --sample-range 0:8 (a resumed "
+         "render adds the samples the interrupted one would have)"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        const char *a[] = {"--resume", cases[i].ckpt, "-o",          out,
+                           cases[i].args[0], cases[i].args[1], cases[i].args[2], cases[i].args[3],
+                           NULL};
+        cr_assert_eq(test_run_mcpt(a, NULL, err_path, ALARM_S), 2, "case %zu", i);
+        test_read_file(err_path, err, sizeof err);
+        snprintf(want, sizeof want, "%s: error: %s\n", cases[i].ckpt, cases[i].msg);
+        cr_assert_str_eq(err, want, "case %zu", i);
+        cr_assert_not(test_exists(out), "case %zu", i);
+        cr_assert(test_exists(cases[i].ckpt), "a refused resume keeps its checkpoint");
+    }
+    /* the part resumed as it was made completes it */
+    const char *same[] = {"--resume", part, "-o", out, "--quiet", NULL};
     cr_assert_eq(test_run_mcpt(same, NULL, err_path, ALARM_S), 0);
     cr_assert(test_exists(out));
 }
