@@ -162,6 +162,13 @@ static int run_compare(int argc, char **argv)
         snprintf(err.file, sizeof err.file, "%s", ref_path);
         ok = false;
     }
+    if (ok && m.n_values == 0) { /* each image has usable pixels (read_image), none in common */
+        mcpt_error_set(&err, ref_path, 0, 0,
+                       "expected pixels to compare, got none (%zu channel values NaN or infinite "
+                       "in either image, %zu of %dx%d pixels above --max-ref-luminance)",
+                       m.n_skipped, m.n_pixels_masked, m.width, m.height);
+        ok = false;
+    }
     ok = ok && (!heatmap || output_check(files, 1, files + 1, 2, &err));
     if (ok) {
         if (json)

@@ -72,7 +72,20 @@ bool stats_image_from_exr(const struct image *img, const char *path, struct stat
         out->var[0] = out->var[1] = out->var[2] = NULL;
     int idx = image_find_channel(img, "samples");
     out->count = idx >= 0 ? img->data[idx] : NULL;
-    return true;
+    /* an image without one pixel the metrics can use would give NaN for every one of them */
+    size_t n_pixels = (size_t)img->width * (size_t)img->height;
+    for (size_t i = 0; i < n_pixels; i++) {
+        bool usable = true;
+        for (int c = 0; c < 3; c++)
+            usable = usable && isfinite(out->rgb[c][i]) &&
+                     (!out->var[0] || (out->var[c][i] >= 0.0f && isfinite(out->var[c][i])));
+        if (usable)
+            return true;
+    }
+    mcpt_error_set(err, path, 0, 0,
+                   "expected a pixel with finite R, G and B%s, got none in %dx%d",
+                   out->var[0] ? " and variances >= 0" : "", img->width, img->height);
+    return false;
 }
 
 void stats_image_from_film(const struct film *film, float *planes, struct stats_image *out)

@@ -28,8 +28,9 @@ struct stats_image {
 };
 
 /* Points out at the R, G, B channels of img and, when all three are present, at variance.R/G/B
- * and samples.  Fails (err: file = path, msg "expected channels R, G and B, got ...") when a
- * colour channel is missing. */
+ * and samples.  Fails (err: file = path, msg "expected ...") when a colour channel is missing,
+ * or when no pixel has finite R, G, B (and, with variance channels, finite variances >= 0):
+ * every metric would be NaN. */
 bool stats_image_from_exr(const struct image *img, const char *path, struct stats_image *out,
                           struct mcpt_error *err);
 

@@ -8,6 +8,7 @@
 #include <criterion/criterion.h>
 
 #include "cmd.h"
+#include "image.h"
 #include "test_util.h"
 
 Test(cmd, numbers_are_parsed_strictly)
@@ -140,4 +141,71 @@ Test(cmd, integrate_sampler_list_has_no_empty_name, .init = setup, .fini = teard
     const char *good[] = {"integrate",         "disk", "--spp", "2", "--seeds", "1", "--sampler",
                           "sobol,independent", NULL};
     cr_assert_eq(run_mcpt(good, err, sizeof err), 0, "%s", err);
+}
+
+/* Writes a 4x3 EXR of R, G, B, every value v (with all_nan, one channel of each pixel NaN)
+ * and, with var, variance.R/G/B of value *var. */
+static void write_rgb(const char *path, float v, bool all_nan, const float *var)
+{
+    struct image img = {.width = 4, .height = 3, .n_channels = var ? 6 : 3};
+    const char *names[] = {"R", "G", "B", "variance.R", "variance.G", "variance.B"};
+    float planes[6][12];
+    for (int c = 0; c < img.n_channels; c++) {
+        snprintf(img.names[c], sizeof img.names[c], "%s", names[c]);
+        for (int i = 0; i < 12; i++)
+            planes[c][i] = c >= 3 ? *var : all_nan && (c == i % 3) ? NAN : v;
+        img.data[c] = planes[c];
+    }
+    struct mcpt_error err;
+    cr_assert(image_write_exr(path, &img, &err), "%s", err.msg);
+}
+
+/* An image whose every pixel has a NaN or infinite channel (a half-float EXR of values over
+ * 65504), or variances below 0, leaves no pixel to measure: compare and --reference refuse it
+ * (exit 2, one line naming the file) instead of printing NaN for every metric and exiting 0;
+ * so does compare when the usable pixels of the two images never meet or --max-ref-luminance
+ * leaves none.  Found by probing. */
+Test(cmd, images_without_usable_pixels_refused, .init = setup, .fini = teardown,
+     .timeout = TEST_TIMEOUT_S(60))
+{
+    char good[300], nan_img[300], neg_var[300], out[300], csv[300], err[4096], want[800];
+    snprintf(good, sizeof good, "%s/good.exr", tmpdir);
+    snprintf(nan_img, sizeof nan_img, "%s/nan.exr", tmpdir);
+    snprintf(neg_var, sizeof neg_var, "%s/negvar.exr", tmpdir);
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    snprintf(csv, sizeof csv, "%s/curve.csv", tmpdir);
+    float var_ok = 0.0f, var_neg = -1.0f;
+    write_rgb(good, 1.0f, false, &var_ok);
+    write_rgb(nan_img, 1.0f, true, NULL);
+    write_rgb(neg_var, 1.0f, false, &var_neg);
+
+    const char *cases[][2] = {{good, nan_img}, {nan_img, good}, {good, neg_var}};
+    const char *bad[] = {nan_img, nan_img, neg_var};
+    const char *what[] = {"", "", " and variances >= 0"};
+    for (int i = 0; i < 3; i++) {
+        const char *a[] = {"compare", cases[i][0], cases[i][1], NULL};
+        cr_assert_eq(run_mcpt(a, err, sizeof err), 2, "case %d: %s", i, err);
+        snprintf(want, sizeof want,
+                 "%s: error: expected a pixel with finite R, G and B%s, got none in 4x3\n", bad[i],
+                 what[i]);
+        cr_assert_str_eq(err, want, "case %d", i);
+    }
+    const char *masked[] = {"compare", good, good, "--max-ref-luminance", "0.5", NULL};
+    cr_assert_eq(run_mcpt(masked, err, sizeof err), 2, "%s", err);
+    snprintf(want, sizeof want,
+             "%s: error: expected pixels to compare, got none (0 channel values NaN or infinite "
+             "in either image, 12 of 4x3 pixels above --max-ref-luminance)\n",
+             good);
+    cr_assert_str_eq(err, want);
+
+    /* a render measured against such a reference stops before rendering, writing nothing */
+    const char *render[] = {"tests/data/cli/tiny.txt", "--width", "4", "--height", "3",
+                            "--spp", "2", "--reference", nan_img, "--curve", csv, "-o", out,
+                            NULL};
+    cr_assert_eq(run_mcpt(render, err, sizeof err), 2, "%s", err);
+    snprintf(want, sizeof want, "%s: error: expected a pixel with finite R, G and B, got none in "
+                                "4x3\n", nan_img);
+    cr_assert_str_eq(err, want);
+    cr_assert_not(test_exists(out));
+    cr_assert_not(test_exists(csv));
 }
