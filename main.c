@@ -474,11 +474,14 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
                cmd_usage_error(err, "expected --adaptive-rule to be pilot or stop, got '%s'",
                                optarg);
     case OPT_TOLERANCE:
-        return (cmd_parse_float(optarg, 0.0f, 1e6f, &o->tolerance) && o->tolerance > 0.0f) ||
-               cmd_usage_error(err, "expected --tolerance to be a number > 0, got '%s'", optarg);
+        return (cmd_parse_float(optarg, 0.0f, SCENE_MAX_TOLERANCE, &o->tolerance) &&
+                o->tolerance > 0.0f) ||
+               cmd_usage_error(err, "expected --tolerance to be a number in (0, 1e6], got '%s'",
+                               optarg);
     case OPT_ADAPTIVE_FLOOR:
-        return cmd_parse_float(optarg, 0.0f, 1e30f, &o->adaptive_floor) ||
-               cmd_usage_error(err, "expected --adaptive-floor to be a number >= 0, got '%s'",
+        return cmd_parse_float(optarg, 0.0f, SCENE_MAX_ADAPTIVE_FLOOR, &o->adaptive_floor) ||
+               cmd_usage_error(err, "expected --adaptive-floor to be a number in [0, 1e30], got "
+                                    "'%s'",
                                optarg);
     case OPT_BATCH:
     case OPT_MIN_SPP:
@@ -803,6 +806,14 @@ static bool load(struct run *run, struct mcpt_error *err)
     if (!run->out.exr[0] && (o->has_range || o->no_preview)) /* they are about the EXR */
         return cmd_usage_error(err, "expected -o OUT.exr with %s, got '%s'",
                                o->has_range ? "--sample-range" : "--no-preview", o->output);
+    /* options that would do nothing */
+    if (o->preview_every > 0.0 && o->no_preview)
+        return cmd_usage_error(err, "expected --preview-every without --no-preview (it rewrites "
+                                    "the PNG preview), got both");
+    if (o->target_rmse > 0.0 &&
+        !(o->snapshots || o->curve_path || o->reference_path || o->n_seeds > 1))
+        return cmd_usage_error(err, "expected --curve, --reference, --snapshots or --seeds with "
+                                    "--target-rmse (it extrapolates their error curve), got none");
     if (!o->resume_path && !film_init(&run->film, run->scene.width, run->scene.height, err)) {
         snprintf(err->file, sizeof err->file, "%s", o->scene_path); /* its film statement */
         return false;
@@ -884,6 +895,13 @@ static bool sampling_options(const struct options *o, const struct render_settin
     topt->batch = o->batch ? o->batch : r->batch ? r->batch : TRACE_ADAPTIVE_BATCH;
     uint32_t min_default = TRACE_ADAPTIVE_MIN_SPP < topt->spp ? TRACE_ADAPTIVE_MIN_SPP : topt->spp;
     topt->min_spp = o->min_spp ? o->min_spp : r->min_spp ? r->min_spp : min_default;
+    if (topt->min_spp > topt->spp && !o->min_spp && r->min_spp) { /* the scene's min-spp */
+        mcpt_error_set(err, o->scene_path, r->min_spp_line, r->min_spp_col,
+                       "expected 'min-spp' <= the run's most samples per pixel (%u: max-spp, "
+                       "else spp), got %u",
+                       topt->spp, topt->min_spp);
+        return false;
+    }
     if (topt->min_spp > topt->spp)
         return cmd_usage_error(err,
                                "expected --min-spp <= the most samples per pixel (%u), got "

@@ -1730,10 +1730,18 @@ static bool do_render(struct parser *ps, const struct stmt *st)
     }
     if ((p = get(st, "pilot-spp"))->key)
         r->pilot_spp = p->u; /* >= 2 (RANGE_SPREAD) */
-    if ((p = get(st, "tolerance"))->key)
+    /* the command line's bounds (--tolerance, --adaptive-floor), so the two accept the same */
+    if ((p = get(st, "tolerance"))->key) {
+        if (p->f[0] > SCENE_MAX_TOLERANCE)
+            return fail(ps, p->val_col, "expected 'tolerance' in (0, 1e6], got %s", p->text);
         r->tolerance = p->f[0];
-    if ((p = get(st, "adaptive-floor"))->key)
+    }
+    if ((p = get(st, "adaptive-floor"))->key) {
+        if (p->f[0] > SCENE_MAX_ADAPTIVE_FLOOR)
+            return fail(ps, p->val_col, "expected 'adaptive-floor' in [0, 1e30], got %s",
+                        p->text);
         r->adaptive_floor = p->f[0];
+    }
     if ((p = get(st, "batch"))->key)
         r->batch = p->u;
     if ((p = get(st, "max-spp"))->key)
@@ -1758,6 +1766,8 @@ static bool do_render(struct parser *ps, const struct stmt *st)
             return fail(ps, p->val_col, "expected 'min-spp' <= 'max-spp' (%u), got %s", r->max_spp,
                         p->text);
         r->min_spp = p->u;
+        r->min_spp_line = ps->line;
+        r->min_spp_col = p->val_col;
     }
     return true;
 }

@@ -99,6 +99,10 @@ const char *scene_split_name(enum render_split split);
 bool scene_split_parse(const char *name, enum render_split *split);
 
 /* Render defaults from the scene's "render" statement; the CLI overrides them. */
+/* The largest adaptive tolerance and luminance floor, in a scene and on the command line. */
+#define SCENE_MAX_TOLERANCE 1e6f
+#define SCENE_MAX_ADAPTIVE_FLOOR 1e30f
+
 struct render_settings {
     uint32_t spp;       /* samples per pixel */
     uint32_t max_depth; /* longest path in segments from the camera; 0 = emission only */
@@ -111,6 +115,8 @@ struct render_settings {
     float adaptive_floor; /* adaptive: absolute luminance floor; < 0: not given */
     uint32_t batch;       /* adaptive: samples between tests, or the pilot's unit */
     uint32_t min_spp;     /* adaptive: samples before the first test, or the least */
+    int min_spp_line;     /* where min-spp was written (1-based), for main.c's check against */
+    int min_spp_col;      /* the samples per pixel the run ends up with */
     uint32_t max_spp;     /* adaptive: most samples per pixel */
     uint32_t pilot_spp;   /* adaptive pilot: the pilot's samples */
     /* light transport (trace.c); 0 in a count or probability: not given, the CLI's default */
