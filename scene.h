@@ -98,11 +98,11 @@ bool scene_direct_parse(const char *name, enum render_direct *direct);
 const char *scene_split_name(enum render_split split);
 bool scene_split_parse(const char *name, enum render_split *split);
 
-/* Render defaults from the scene's "render" statement; the CLI overrides them. */
 /* The largest adaptive tolerance and luminance floor, in a scene and on the command line. */
 #define SCENE_MAX_TOLERANCE 1e6f
 #define SCENE_MAX_ADAPTIVE_FLOOR 1e30f
 
+/* Render defaults from the scene's "render" statement; the CLI overrides them. */
 struct render_settings {
     uint32_t spp;       /* samples per pixel */
     uint32_t max_depth; /* longest path in segments from the camera; 0 = emission only */
