@@ -49,10 +49,11 @@
  * triangles is then cut in the middle of its index range, so leaves stay bounded and depth grows
  * only as log2(N).
  * Threads: every node's split depends only on its own range of refs, so the tree is the same
- * for any thread count.  With several threads the top nodes are split first, their binning
- * shared by all threads (each fills private bins over a slice, then they are merged: box
- * unions and counts are exact), until there are BVH_SUBTREES_PER_THREAD subtrees per thread;
- * those are built in parallel into reserved node ranges and renumbered into the order above. */
+ * for any thread count.  With several threads the top nodes are split first, in waves: the
+ * largest pending nodes, up to one per thread, are split side by side, each binned on its share
+ * of the threads (each fills private bins over a slice, then they are merged: box unions and
+ * counts are exact), until there are BVH_SUBTREES_PER_THREAD subtrees per thread; those are
+ * built in parallel into reserved node ranges and renumbered into the order above. */
 
 /* The constants were chosen by measurement (docs/bvh.md, "Build constants"): for the binary
  * reference on the 100k-triangle dragon, C_isect = 0.5 traced 15-25% faster than 1.0 and 0.75
@@ -76,6 +77,7 @@ _Static_assert(BVH_UNBINNED_LEAF_TRIS >= 2 && BVH_UNBINNED_LEAF_TRIS <= BVH_MAX_
 /* BVH_MAX_DEPTH (64, deepest node) is in bvh_internal.h: the wide layout's stacks depend on it */
 #define BVH_PARALLEL_MIN_TRIS 65536 /* fewer: build on one thread (the threads cost more) */
 #define BVH_PARALLEL_BIN_MIN 16384  /* top nodes with more refs share their binning */
+#define BVH_WAVE_MIN_REFS 2048      /* smaller pending nodes are not split before the subtrees */
 #define BVH_SUBTREES_PER_THREAD 4   /* subtrees handed to the threads, per thread */
 #define BVH_MAX_THREADS 64
 
@@ -1176,6 +1178,23 @@ void *bvh_alloc_array(size_t n, size_t size)
 /* Builds the binary tree over ctx->refs[0, n) (with room for cap refs) into a fresh exact-size
  * node array (*out_nodes, *out_n_nodes).  Returns the maximum depth, or UINT32_MAX when out of
  * memory. */
+/* One task of a wave of top nodes (build_tree): split on its share of the threads. */
+struct wave_job {
+    const struct build_ctx *ctx;
+    struct build_task task;
+    int n_threads;
+    uint32_t next;             /* the child pair's node index, if it splits */
+    bool split;
+    struct build_task child[2];
+};
+
+static void *wave_job_run(void *arg)
+{
+    struct wave_job *job = arg;
+    job->split = build_node(job->ctx, &job->task, job->n_threads, &job->next, job->child);
+    return NULL;
+}
+
 static uint32_t build_tree(struct build_ctx *ctx, uint32_t n, uint32_t cap,
                            const struct box *root_bounds, const struct box *root_centres,
                            struct bvh_node **out_nodes, uint32_t *out_n_nodes)
@@ -1205,22 +1224,37 @@ static uint32_t build_tree(struct build_ctx *ctx, uint32_t n, uint32_t cap,
         pending[n_pending++] = root;
         uint32_t next = 2;
         while (n_pending < target) {
-            uint32_t largest = 0;
-            for (uint32_t i = 1; i < n_pending; i++)
-                if (pending[i].end - pending[i].begin >
-                    pending[largest].end - pending[largest].begin)
-                    largest = i;
-            struct build_task task = pending[largest];
-            if (task.end - task.begin < BVH_PARALLEL_BIN_MIN)
+            /* a wave: the largest pending tasks of at least BVH_WAVE_MIN_REFS refs, at most
+             * one per thread and no more than the subtrees still wanted, split side by side,
+             * the threads shared among them (the root alone has them all) */
+            qsort(pending, n_pending, sizeof *pending, compare_task_size);
+            uint32_t k = 0;
+            while (k < n_pending && k < (uint32_t)ctx->n_threads && k < target - n_pending &&
+                   pending[k].end - pending[k].begin >= BVH_WAVE_MIN_REFS)
+                k++;
+            if (k == 0)
                 break; /* the rest is small: leave it to the subtree threads */
-            pending[largest] = pending[--n_pending];
-            if (task.depth > max_depth)
-                max_depth = task.depth;
-            struct build_task child[2];
-            if (!build_node(ctx, &task, ctx->n_threads, &next, child))
-                continue;
-            pending[n_pending++] = child[0];
-            pending[n_pending++] = child[1];
+            struct wave_job jobs[BVH_MAX_THREADS];
+            for (uint32_t j = 0; j < k; j++) {
+                jobs[j].ctx = ctx;
+                jobs[j].task = pending[j];
+                jobs[j].n_threads = ctx->n_threads / (int)k + ((int)j < ctx->n_threads % (int)k);
+                jobs[j].next = next + 2 * j; /* a pair each; a task that ends as a leaf leaves
+                                              * a hole, covered by its refs' unused reserve */
+                if (pending[j].depth > max_depth)
+                    max_depth = pending[j].depth;
+            }
+            next += 2 * k;
+            bvh_run_jobs((int)k, wave_job_run, jobs, sizeof jobs[0]);
+            uint32_t n_rest = n_pending - k;
+            memmove(pending, pending + k, n_rest * sizeof *pending);
+            n_pending = n_rest;
+            for (uint32_t j = 0; j < k; j++) {
+                if (!jobs[j].split)
+                    continue;
+                pending[n_pending++] = jobs[j].child[0];
+                pending[n_pending++] = jobs[j].child[1];
+            }
         }
         /* a subtree of at most m refs (cap - begin) has at most 2 (m - 1) nodes below its root */
         qsort(pending, n_pending, sizeof *pending, compare_task_size);
