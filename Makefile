@@ -40,7 +40,7 @@ LIB_OBJS := $(LIB_SRCS:%.c=$(BUILD)/%.o)
 TEST_OBJS := $(TEST_SRCS:%.c=$(BUILD)/%.o)
 
 .PHONY: all test check-sanitize check-valgrind fuzz clean sobol-table ggx-table gallery install \
-        uninstall bench bench-embree bench-render bench-cycles
+        uninstall bench bench-embree bench-render bench-cycles bench-scaling
 all: mcpt
 
 # The flags stamp: $(BUILD)/flags.stamp holds the command objects were compiled with, and every
@@ -252,6 +252,16 @@ BENCH_BASE_DIR := $(BUILD)/bench-base/$(BENCH_BASE)
 bench-render: mcpt bench/raybench bench/raydump bench/packetbench $(if $(BENCH_BASE),$(BENCH_BASE_DIR)/mcpt)
 	python3 scripts/bench_render.py --mcpt ./mcpt --runs $(BENCH_RENDER_RUNS) \
 	    --threads $(BENCH_THREADS) $(if $(BENCH_BASE),--base $(BENCH_BASE_DIR)/mcpt)
+
+# `make bench-scaling` (scripts/bench_scaling.py): the render (cornell-box, bunny at 256 pixels
+# wide; whole process and render alone, beside a control of as many independent one-thread
+# renders) and the BVH build (raybench --build-only: Lucy, Sponza, torus:1M) at 1, 2, 4, ...
+# threads up to the CPUs; medians over BENCH_SCALING_RUNS interleaved rounds.  Meant for a
+# many-core machine (docs/performance.md, "Thread scaling").
+BENCH_SCALING_RUNS ?= 3
+bench-scaling: mcpt bench/raybench
+	python3 scripts/bench_scaling.py --mcpt ./mcpt --raybench bench/raybench \
+	    --runs $(BENCH_SCALING_RUNS)
 
 # the baseline: `git archive` of BENCH_BASE, built in its own folder with its own Makefile
 $(BUILD)/bench-base/%/mcpt:

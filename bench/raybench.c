@@ -14,6 +14,7 @@ static const char usage[] =
     "       raybench MODEL --gen SET -o RAYS.bin    write a standard ray set\n"
     "       raybench MODEL --gen all -o PREFIX      write PREFIX-primary.bin, -diffuse, -shadow\n"
     "       raybench MODEL --sets [--set SET] [options]  generate and trace the three sets\n"
+    "       raybench MODEL --build-only [--threads N] [--build-runs B]  time the build alone\n"
     "MODEL is an OBJ file or torus:N, a generated bumpy torus of N triangles (N may end in k =\n"
     "2^10 or M = 2^20: torus:1M has exactly 2^20).  SET is primary, diffuse or shadow.\n"
     "options:\n"
@@ -33,6 +34,7 @@ struct options {
     const char *gen_set;
     const char *out_path;
     bool sets;
+    bool build_only; /* --build-only: time the build at --threads, no rays */
     int only_set; /* --set, or -1 */
     int threads;
     int runs;
@@ -272,7 +274,8 @@ int main(int argc, char **argv)
         {"build-runs", required_argument, NULL, 'b'}, {"packets", no_argument, NULL, 'p'},
         {"layout", required_argument, NULL, 'l'},     {"no-bvh", no_argument, NULL, 'n'},
         {"subset", required_argument, NULL, 'k'},     {"help", no_argument, NULL, 'h'},
-        {"set", required_argument, NULL, 's'},        {NULL, 0, NULL, 0}};
+        {"set", required_argument, NULL, 's'},        {"build-only", no_argument, NULL, 'B'},
+        {NULL, 0, NULL, 0}};
     int c;
     while ((c = getopt_long(argc, argv, "o:h", long_opts, NULL)) != -1) {
         switch (c) {
@@ -293,6 +296,9 @@ int main(int argc, char **argv)
             break;
         case 'b':
             opt.build_runs = parse_int(optarg, "--build-runs", 0);
+            break;
+        case 'B':
+            opt.build_only = true;
             break;
         case 'p':
             opt.packets = true;
@@ -331,7 +337,7 @@ int main(int argc, char **argv)
     if (opt.build_runs < 0)
         opt.build_runs = opt.runs;
     int n_pos = argc - optind;
-    bool trace_files = !opt.gen_set && !opt.sets;
+    bool trace_files = !opt.gen_set && !opt.sets && !opt.build_only;
     if (n_pos < 1 || (trace_files ? n_pos < 2 : n_pos != 1) || (opt.gen_set && !opt.out_path)) {
         fputs(usage, stderr);
         return 2;
@@ -397,6 +403,21 @@ int main(int argc, char **argv)
             printf("wrote %s: %llu %s rays\n", path, (unsigned long long)sets[set].n,
                    bench_set_names[set]);
         }
+        status = 0;
+        goto done;
+    }
+    if (opt.build_only) { /* one line: the median build on --threads threads */
+        double ms = 0.0;
+        bvh = timed_build(&mesh, opt.threads, opt.layout, opt.build_runs, &ms);
+        if (!bvh)
+            goto done;
+        struct bvh_stats bs = bvh_get_stats(bvh);
+        printf("{\"model\":\"%s\",\"triangles\":%u,\"threads\":%d,\"build_ms\":%.3f,"
+               "\"convert_ms\":%.3f,\"build_runs\":%d,\"bytes_per_tri\":%.2f,\"sah_cost\":%.4f,"
+               "\"peak_rss_mib\":%.1f}\n",
+               opt.model, mesh.n_tris, opt.threads, ms, bs.convert_ms, opt.build_runs,
+               mesh.n_tris ? (double)bs.bytes / (double)mesh.n_tris : 0.0, bs.sah_cost,
+               (double)bench_peak_rss_kib() / 1024.0);
         status = 0;
         goto done;
     }
