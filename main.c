@@ -222,6 +222,8 @@ struct run {
     double t_render_s;
     double t_cpu_s;               /* CPU time of the render, all threads (SIGSTOP stops it) */
     double t_checkpoint;          /* now_seconds() of the last periodic checkpoint, or 0 */
+    double checkpoint_write_s;    /* how long it took to write (output_save_interval) */
+    double preview_write_s;       /* likewise the last --preview-every preview */
     bool is_checkpoint_failed;    /* a periodic checkpoint could not be written: warned once */
     bool has_periodic_checkpoint; /* one was written: the checkpoint file is this run's */
     bool is_preview_failed;       /* a --preview-every preview could not be written: warned */
@@ -1537,8 +1539,11 @@ static void save_periodic_checkpoint(struct run *run, const struct film *f)
     struct checkpoint_info info;
     struct mcpt_error err = {0};
     checkpoint_info_of(run, &info);
+    double t0 = now_seconds();
+    bool saved = checkpoint_save(run->out.checkpoint, f, &info, &err);
     run->t_checkpoint = now_seconds();
-    if (checkpoint_save(run->out.checkpoint, f, &info, &err)) {
+    run->checkpoint_write_s = run->t_checkpoint - t0;
+    if (saved) {
         run->has_periodic_checkpoint = true;
         return;
     }
@@ -1571,11 +1576,14 @@ static bool render_seed(struct run *run, struct film *f, uint32_t k, struct mcpt
     for (uint32_t done_spp = k == 0 ? least_count(f) : 0; done_spp < spp_final;) {
         uint32_t next = run->cv.measuring ? stats_next_pow2(done_spp, spp_final) : spp_final;
         /* the pass ends when the next preview or checkpoint is due */
+        double preview_every = output_save_interval(o->preview_every, run->preview_write_s);
+        double checkpoint_every = output_save_interval(o->checkpoint_every,
+                                                       run->checkpoint_write_s);
         double due_s = INFINITY, now = now_seconds();
         if (is_previewed)
-            due_s = fmin(due_s, t_preview + o->preview_every - now);
+            due_s = fmin(due_s, t_preview + preview_every - now);
         if (is_checkpointed)
-            due_s = fmin(due_s, run->t_checkpoint + o->checkpoint_every - now);
+            due_s = fmin(due_s, run->t_checkpoint + checkpoint_every - now);
         if (due_s < INFINITY) {
             double step = seconds_per_spp > 0.0 ? due_s / seconds_per_spp : 1.0;
             if (step < (double)(next - done_spp))
@@ -1598,10 +1606,11 @@ static bool render_seed(struct run *run, struct film *f, uint32_t k, struct mcpt
         if (run->cv.measuring && (is_pow2(done_spp) || done_spp == spp_final) &&
             !measure(run, f, pass.seed, done_spp, seconds, k == 0, err))
             return false;
-        if (is_previewed && done_spp < spp_final && now_seconds() - t_preview >= o->preview_every) {
+        if (is_previewed && done_spp < spp_final && now_seconds() - t_preview >= preview_every) {
             /* a preview that cannot be written (a full disk) must not cost the render */
             struct image_look look = look_of(o);
             struct mcpt_error preview_err = {0};
+            double t0_preview = now_seconds();
             if (!output_write_preview(&run->out, f, &look, &preview_err) &&
                 !run->is_preview_failed) {
                 fprintf(stderr, "%s: warning: %s (the render goes on)\n", preview_err.file,
@@ -1609,9 +1618,10 @@ static bool render_seed(struct run *run, struct film *f, uint32_t k, struct mcpt
                 run->is_preview_failed = true;
             }
             t_preview = now_seconds();
+            run->preview_write_s = t_preview - t0_preview;
         }
         if (is_checkpointed && done_spp < spp_final &&
-            now_seconds() - run->t_checkpoint >= o->checkpoint_every)
+            now_seconds() - run->t_checkpoint >= checkpoint_every)
             save_periodic_checkpoint(run, f);
     }
     return true;

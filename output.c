@@ -270,6 +270,12 @@ bool output_write_convergence(const struct output_paths *p, const char *curve_pa
 /* ---- before a render: the memory its writes need, the files it may write and the harm they
  * could do ---- */
 
+double output_save_interval(double asked_s, double last_write_s)
+{
+    double least = last_write_s > 0.0 ? last_write_s / OUTPUT_MAX_WRITE_SHARE : 0.0;
+    return asked_s > least ? asked_s : least;
+}
+
 size_t output_peak_bytes(int width, int height, bool is_partial)
 {
     size_t n_pixels = (size_t)width * (size_t)height;

@@ -174,3 +174,15 @@ Test(output, check_refuses_shared_files)
     cr_assert(strstr(err.msg, "got the same file as the scene file"), "%s", err.msg);
     test_remove_dir(dir);
 }
+
+/* output_save_interval: the interval asked for, unless the last write took more than
+ * OUTPUT_MAX_WRITE_SHARE of it; then 1 / that share times the write (10x at the share 0.1). */
+Test(output, save_interval_bounds_the_time_spent_writing)
+{
+    cr_assert_eq(output_save_interval(60.0, 0.0), 60.0);    /* nothing written yet */
+    cr_assert_eq(output_save_interval(60.0, 0.5), 60.0);    /* 0.5 s of 60: under the share */
+    cr_assert_eq(output_save_interval(0.001, 0.0), 0.001);
+    double least = output_save_interval(0.001, 0.25);       /* a tiny interval, a slow write */
+    cr_assert_float_eq(least, 0.25 / OUTPUT_MAX_WRITE_SHARE, 1e-12);
+    cr_assert_float_eq(0.25 / least, OUTPUT_MAX_WRITE_SHARE, 1e-12);
+}
