@@ -10,6 +10,7 @@
  * double-precision accumulation (film.h); NaN and infinity dropped and counted, never added. */
 #include <criterion/criterion.h>
 
+#include <limits.h>
 #include <stdlib.h>
 #include <unistd.h>
 
@@ -313,29 +314,108 @@ Test(extremes, strip_cubes_see_no_sky, .timeout = TEST_TIMEOUT_S(240))
     test_remove_dir(dir);
 }
 
+/* The 12-triangle cube, wound outward and inward, turned (rotate=1,2,3,37), scaled by s and moved
+ * by t, the camera inside (its position and target moved with it): every pixel is exactly 0.
+ * The offsets reach 10^5 times the cube's size, where a float holds the cube's corners to a few
+ * parts in 10^3 of its edge: the spawned origins' bounds are relative to the coordinates, not to
+ * the cube, so no unit or position lets sky in. */
+Test(extremes, moved_closed_cube_sees_no_sky, .timeout = TEST_TIMEOUT_S(120))
+{
+    static const double moves[][4] = {
+        /* s, t */
+        {1e-6, 0.3, 0.2, 0.1}, {1e-3, 1.0, 2.0, 3.0},      {1.0, 1000.0, 2000.0, -3000.0},
+        {1.0, 1e5, 0.0, 0.0},  {1e3, 1e6, 2e6, -1e6},       {1e6, 0.0, 0.0, 0.0},
+    };
+    char dir[64], scene_path[300];
+    test_make_dir(dir, sizeof dir, "moved_cube");
+    for (int inward = 0; inward < 2; inward++) {
+        char obj[PATH_MAX];
+        cr_assert_not_null(realpath(inward ? DIR "cube-inward.obj" : DIR "cube-outward.obj", obj));
+        for (size_t k = 0; k < sizeof moves / sizeof moves[0]; k++) {
+            const double *m = moves[k];
+            snprintf(scene_path, sizeof scene_path, "%s/cube-%d-%zu.txt", dir, inward, k);
+            FILE *f = fopen(scene_path, "w");
+            cr_assert_not_null(f);
+            fprintf(f,
+                    "camera eye=%.9g,%.9g,%.9g look-at=%.9g,%.9g,%.9g up=0,1,0 fov=100\n"
+                    "film width=32 height=32\nrender spp=64 sampler=independent\n"
+                    "material name=m type=diffuse albedo=0.5,0.5,0.5\n"
+                    "mesh file=%s material=m rotate=1,2,3,37 scale=%.9g translate=%.9g,%.9g,%.9g\n"
+                    "sky type=constant radiance=1,1,1\n",
+                    m[1] + 0.1 * m[0], m[2] + 0.05 * m[0], m[3] + 0.02 * m[0], m[1] + 0.5 * m[0],
+                    m[2] + 0.3 * m[0], m[3] - m[0], obj, m[0], m[1], m[2], m[3]);
+            fclose(f);
+            assert_black(scene_path);
+        }
+    }
+    test_remove_dir(dir);
+}
+
 /* Issue 12: parallelograms whose edges meet at 10, 3, 1, 0.3 and 0.1 degrees in a general
  * orientation, and the issue's own 1 degree quad, albedo 0.8 under a constant sky of 2: the
  * estimator has zero variance, light sample and BSDF sample each add 0.8 with MIS weight 1/2,
  * so every pixel is 1.6 up to float rounding (1e-5); a spawned ray hitting the quad again
  * takes 0.8 from a sample.  The quad's plane is decided in double (shape.c). */
+static void assert_quad_exact(const char *path)
+{
+    struct film f;
+    struct trace_result r;
+    render_file(path, 1, &f, &r);
+    cr_assert_eq(r.n_nonfinite, 0, "%s", path);
+    for (size_t i = 0; i < (size_t)f.width * (size_t)f.height; i++)
+        for (int c = 0; c < 3; c++) {
+            double m = film_mean(&f.pixels[i], c);
+            cr_assert(fabs(m - 1.6) <= 1e-5, "%s: pixel %zu channel %d: %.9f", path, i, c, m);
+        }
+    film_free(&f);
+}
+
 Test(extremes, sheared_quads_render_exactly, .timeout = TEST_TIMEOUT_S(120))
 {
     const char *paths[] = {DIR "quad-shear-10deg.txt",  DIR "quad-shear-3deg.txt",
                            DIR "quad-shear-1deg.txt",   DIR "quad-shear-0.3deg.txt",
                            DIR "quad-shear-0.1deg.txt", DIR "quad-shear-issue12.txt"};
-    for (int k = 0; k < 6; k++) {
-        struct film f;
-        struct trace_result r;
-        render_file(paths[k], 1, &f, &r);
-        cr_assert_eq(r.n_nonfinite, 0, "%s", paths[k]);
-        for (size_t i = 0; i < (size_t)f.width * (size_t)f.height; i++)
-            for (int c = 0; c < 3; c++) {
-                double m = film_mean(&f.pixels[i], c);
-                cr_assert(fabs(m - 1.6) <= 1e-5, "%s: pixel %zu channel %d: %.9f", paths[k], i, c,
-                          m);
-            }
-        film_free(&f);
+    for (int k = 0; k < 6; k++)
+        assert_quad_exact(paths[k]);
+}
+
+/* The 0.1 degree parallelogram of quad-shear-0.1deg.txt scaled by s (10^-15 ... 10^15) and moved
+ * by t (up to 30 times its size), its camera with it: still exactly 1.6, since every bound on
+ * the quad's point and normal is relative to the numbers involved. */
+Test(extremes, sheared_quad_at_any_scale_and_offset, .timeout = TEST_TIMEOUT_S(120))
+{
+    static const double moves[][4] = {
+        /* s, t */
+        {1e-15, 0.0, 0.0, 0.0}, {1e-6, 0.0, 0.0, 0.0},         {1e6, 0.0, 0.0, 0.0},
+        {1e15, 0.0, 0.0, 0.0},  {1.0, 10.0, -20.0, 30.0},      {1e-3, 0.01, 0.02, -0.03},
+        {1e6, 1e7, -1e7, 3e7},
+    };
+    static const double eye[3] = {0.410325411, 4.49570221, -0.148848386};
+    static const double look_at[3] = {0.41, 4.49, -0.16};
+    char dir[64], scene_path[300];
+    test_make_dir(dir, sizeof dir, "moved_quad");
+    for (size_t k = 0; k < sizeof moves / sizeof moves[0]; k++) {
+        const double *m = moves[k];
+        snprintf(scene_path, sizeof scene_path, "%s/quad-%zu.txt", dir, k);
+        FILE *f = fopen(scene_path, "w");
+        cr_assert_not_null(f);
+        fprintf(f,
+                "camera eye=%.9g,%.9g,%.9g look-at=%.9g,%.9g,%.9g"
+                " up=0.922632196,0.331815474,-0.196591766 fov=0.5\n"
+                "film width=16 height=16\nrender spp=16 sampler=independent\n"
+                "material name=f type=diffuse albedo=0.8,0.8,0.8\n"
+                "quad corner=0.0947684046,5.01757042,-0.747195106"
+                " edge1=0.481626522,-0.807049848,0.898168379"
+                " edge2=0.148836669,-0.248091001,0.276221833 material=f"
+                " scale=%.9g translate=%.9g,%.9g,%.9g\n"
+                "sky type=constant radiance=2,2,2\n",
+                m[0] * eye[0] + m[1], m[0] * eye[1] + m[2], m[0] * eye[2] + m[3],
+                m[0] * look_at[0] + m[1], m[0] * look_at[1] + m[2], m[0] * look_at[2] + m[3], m[0],
+                m[1], m[2], m[3]);
+        fclose(f);
+        assert_quad_exact(scene_path);
     }
+    test_remove_dir(dir);
 }
 
 /* ---- smooth shading normals ---- */
