@@ -244,9 +244,9 @@ Test(bvh_wide, far_from_origin_small_mesh)
 
 /* bvh_wide.c, wide_ray8_fast: on an ordinary scene no operation of the traversal may see a
  * subnormal operand or make a tiny result.  Intel cores finish such an operation in a microcode
- * assist of about 150 cycles; the fused setup once read the root's left_first and n_tris into
- * the unused lane of an FMA (small integers: subnormal floats), which cost every single ray an
- * assist, 30-45% of a primary ray's time on such a core (docs/bvh.md).  The flags are the
+ * assist; the fused setup once read the root's left_first and n_tris into the unused lane of
+ * an FMA (small integers: subnormal floats), which cost every single ray an assist: single
+ * camera rays ran 1.9x faster without it (docs/bvh.md, "Subnormal operands").  The flags are the
  * hardware's own record: cleared before each call, read after.  Unit-scale geometry (an
  * icosphere and a soup), camera, incoherent, shadow and spawned rays (bvh_intersect_from and
  * bvh_occluded_from) and packets of each, some partly active with subnormal bits in their idle
