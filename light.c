@@ -108,10 +108,11 @@ static double scene_radius(const struct scene *scene)
         GROW(scene->spheres[i].center, scene->spheres[i].radius);
     for (uint32_t i = 0; i < scene->n_quads; i++) {
         const struct quad *q = &scene->quads[i];
-        GROW(q->corner, 0.0);
-        GROW(v3_add(q->corner, v3_add(q->e1, q->e2)), 0.0);
-        GROW(v3_add(q->corner, q->e1), 0.0);
-        GROW(v3_add(q->corner, q->e2), 0.0);
+        vec3 c = d3_to_float(q->corner), e1 = d3_to_float(q->e1), e2 = d3_to_float(q->e2);
+        GROW(c, 0.0);
+        GROW(v3_add(c, v3_add(e1, e2)), 0.0);
+        GROW(v3_add(c, e1), 0.0);
+        GROW(v3_add(c, e2), 0.0);
     }
     for (uint32_t i = 0; i < scene->n_lights; i++)
         if (scene->lights[i].kind == LIGHT_POINT)
@@ -139,7 +140,7 @@ static void power_error(const struct scene *scene, const struct light *l, double
         corner = scene->positions[scene->tris[l->prim_idx].v[0]];
     } else {
         mat_idx = scene->quads[l->prim_idx].mat_idx;
-        corner = scene->quads[l->prim_idx].corner;
+        corner = d3_to_float(scene->quads[l->prim_idx].corner);
     }
     char got[64];
     if (!isfinite(area))
@@ -302,7 +303,7 @@ static bool sample_point(const struct light *l, const struct surface *ref, struc
  * triple product of float differences scales as the cube of the scene's unit, which leaves
  * float's range (0 below a scale of about 1e-13, inf above 1e13; tests/extremes, Cornell box
  * from 1e-15 to 1e15). */
-static bool is_behind(const struct material *m, vec3 p0, struct dvec3 n, vec3 p_ref)
+static bool is_behind(const struct material *m, struct dvec3 p0, struct dvec3 n, vec3 p_ref)
 {
     if (m->two_sided_emission)
         return false;
@@ -329,7 +330,7 @@ bool light_sample(const struct light_table *lt, uint32_t light_idx, const struct
     case LIGHT_TRIANGLE: {
         const struct triangle_plane *tp = &lt->planes[light_idx];
         mat_idx = scene->tris[l->prim_idx].mat_idx;
-        if (is_behind(&scene->materials[mat_idx], tp->p0, tp->c, ref->p))
+        if (is_behind(&scene->materials[mat_idx], d3(tp->p0), tp->c, ref->p))
             return false;
         if (lt->by_solid_angle) {
             vec3 p[3];

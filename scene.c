@@ -266,6 +266,7 @@ struct param {
     int key_col;      /* 1-based byte columns */
     int val_col;
     float f[4];        /* the numbers of VAL_NUMBER, VAL_VEC3, VAL_ROTATION, VAL_SCALE */
+    double d[4];       /* the same numbers in double (0 where f underflowed to 0) */
     int n_f;           /* how many numbers were written */
     bool is_underflow; /* a number written nonzero was read as 0 (below 1.4e-45) */
     uint32_t u;        /* VAL_INT, VAL_DEPTH; type index; material index of VAL_MATERIAL */
@@ -478,7 +479,7 @@ static bool starts_with_word(const char *s, size_t len, const char *w)
 /* Reads the decimal number s[0..len): [+-] (digits [. digits] | . digits) [e [+-] digits].
  * NaN, infinities and values beyond float range are NUMBER_NONFINITE; hex floats are syntax
  * errors. */
-static enum number_status parse_number(const char *s, size_t len, float *out)
+static enum number_status parse_number(const char *s, size_t len, float *out, double *out_d)
 {
     size_t i = 0;
     if (i < len && (s[i] == '+' || s[i] == '-'))
@@ -513,6 +514,7 @@ static enum number_status parse_number(const char *s, size_t len, float *out)
     if (!isfinite(f))
         return NUMBER_NONFINITE;
     *out = f;
+    *out_d = f == 0.0f ? 0.0 : strtod(s, &end); /* the same digits, correctly rounded */
     return NUMBER_OK;
 }
 
@@ -642,7 +644,7 @@ static bool parse_numbers(struct parser *ps, const struct param_spec *sp, struct
     for (int i = 0; i < n; i++) {
         const char *end = strchr(s, ',');
         size_t len = end ? (size_t)(end - s) : strlen(s);
-        enum number_status st = parse_number(s, len, &p->f[i]);
+        enum number_status st = parse_number(s, len, &p->f[i], &p->d[i]);
         if (st == NUMBER_OK && p->f[i] == 0.0f) /* a nonzero digit before any exponent? */
             for (size_t k = 0; k < len && s[k] != 'e' && s[k] != 'E'; k++)
                 p->is_underflow |= s[k] >= '1' && s[k] <= '9';
@@ -654,8 +656,10 @@ static bool parse_numbers(struct parser *ps, const struct param_spec *sp, struct
         s += len + 1;
     }
     p->n_f = n;
-    if (sp->kind == VAL_SCALE && n == 1)
+    if (sp->kind == VAL_SCALE && n == 1) {
         p->f[1] = p->f[2] = p->f[0];
+        p->d[1] = p->d[2] = p->d[0];
+    }
     if (sp->kind == VAL_ROTATION && p->f[0] == 0.0f && p->f[1] == 0.0f && p->f[2] == 0.0f)
         return fail(ps, p->val_col, "expected a nonzero axis for '%s', got %s%s", sp->key, v,
                     p->is_underflow ? UNDERFLOW_WHY : "");
@@ -777,8 +781,9 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
         return true;
     case VAL_RR: {
         float prob = 0.0f;
+        double prob_d;
         if (strcmp(p->text, "throughput") != 0 &&
-            (parse_number(p->text, strlen(p->text), &prob) != NUMBER_OK ||
+            (parse_number(p->text, strlen(p->text), &prob, &prob_d) != NUMBER_OK ||
              !(prob > 0.0f && prob <= 1.0f)))
             return fail(ps, p->val_col,
                         "expected 'throughput' or a probability in (0, 1] for "
@@ -969,8 +974,8 @@ static void xform_from(struct xform *xf, const struct stmt *st, int i_translate,
     double R[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
     if (i_rotate >= 0 && st->p[i_rotate].key) {
         /* Rodrigues: R = cos(a) I + sin(a) [k]x + (1 - cos(a)) k k^T, k the unit axis */
-        const float *f = st->p[i_rotate].f;
-        double len = sqrt((double)f[0] * f[0] + (double)f[1] * f[1] + (double)f[2] * f[2]);
+        const double *f = st->p[i_rotate].d;
+        double len = sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
         double k[3] = {f[0] / len, f[1] / len, f[2] / len};
         double s, c;
         sincos_deg(f[3], &s, &c);
@@ -982,22 +987,27 @@ static void xform_from(struct xform *xf, const struct stmt *st, int i_translate,
     double sc[3] = {1, 1, 1};
     if (i_scale >= 0 && st->p[i_scale].key)
         for (int j = 0; j < 3; j++)
-            sc[j] = st->p[i_scale].f[j];
+            sc[j] = st->p[i_scale].d[j];
     for (int i = 0; i < 3; i++) {
         for (int j = 0; j < 3; j++) {
             xf->L[i][j] = R[i][j] * sc[j];
             xf->N[i][j] = R[i][j] / sc[j];
         }
-        xf->t[i] = i_translate >= 0 && st->p[i_translate].key ? st->p[i_translate].f[i] : 0.0;
+        xf->t[i] = i_translate >= 0 && st->p[i_translate].key ? st->p[i_translate].d[i] : 0.0;
     }
     xf->is_mirror = ((sc[0] < 0) ^ (sc[1] < 0) ^ (sc[2] < 0)) != 0; /* det L = sx sy sz */
 }
 
 /* r = M v + t (t may be NULL), in double. */
-static void mat3_apply_d(const double M[3][3], const double *t, vec3 v, double r[3])
+static void mat3_apply_dd(const double M[3][3], const double *t, const double v[3], double r[3])
 {
     for (int i = 0; i < 3; i++)
-        r[i] = M[i][0] * v.x + M[i][1] * v.y + M[i][2] * v.z + (t ? t[i] : 0.0);
+        r[i] = M[i][0] * v[0] + M[i][1] * v[1] + M[i][2] * v[2] + (t ? t[i] : 0.0);
+}
+static void mat3_apply_d(const double M[3][3], const double *t, vec3 v, double r[3])
+{
+    const double vd[3] = {v.x, v.y, v.z};
+    mat3_apply_dd(M, t, vd, r);
 }
 
 /* M v + t rounded once to float; a component beyond float range becomes +-infinity. */
@@ -1012,16 +1022,11 @@ static vec3 mat3_apply(const double M[3][3], const double *t, vec3 v)
 }
 
 static vec3 xform_point(const struct xform *xf, vec3 p) { return mat3_apply(xf->L, xf->t, p); }
-static vec3 xform_vector(const struct xform *xf, vec3 v) { return mat3_apply(xf->L, NULL, v); }
 
-/* xform_point and xform_vector before the rounding to float */
+/* xform_point before the rounding to float */
 static void xform_point_d(const struct xform *xf, vec3 p, double r[3])
 {
     mat3_apply_d(xf->L, xf->t, p, r);
-}
-static void xform_vector_d(const struct xform *xf, vec3 v, double r[3])
-{
-    mat3_apply_d(xf->L, NULL, v, r);
 }
 
 /* Is every |component| of v, in double, at most SCENE_MAX_COORD? */
@@ -1064,6 +1069,14 @@ static vec3 get_vec3(const struct stmt *st, const char *key, vec3 dflt)
 {
     const struct param *p = get(st, key);
     return p->key ? v3(p->f[0], p->f[1], p->f[2]) : dflt;
+}
+
+/* A VAL_VEC3 parameter in double, as written; 0 where absent. */
+static void get_vec3_d(const struct stmt *st, const char *key, double out[3])
+{
+    const struct param *p = get(st, key);
+    for (int i = 0; i < 3; i++)
+        out[i] = p->key ? p->d[i] : 0.0;
 }
 
 static float get_number(const struct stmt *st, const char *key, float dflt)
@@ -1472,32 +1485,29 @@ static bool do_sphere(struct parser *ps, const struct stmt *st)
     return true;
 }
 
-/* quad: edges not parallel, before and after the transform (in float), and all four corners
- * inside [-SCENE_MAX_COORD, SCENE_MAX_COORD] */
+/* quad: edges not parallel, before and after the transform, and all four corners inside
+ * [-SCENE_MAX_COORD, SCENE_MAX_COORD].  Kept in double as written (struct quad): the corners
+ * of quads that close a box agree to double precision, not only to float's. */
 static bool do_quad(struct parser *ps, const struct stmt *st)
 {
     char buf[SHOW_OUT_BYTES];
-    vec3 e1 = get_vec3(st, "edge1", v3_splat(0)), e2 = get_vec3(st, "edge2", v3_splat(0));
+    double corner[3], e1[3], e2[3];
+    get_vec3_d(st, "corner", corner);
+    get_vec3_d(st, "edge1", e1);
+    get_vec3_d(st, "edge2", e2);
     const struct param *edge2 = get(st, "edge2");
-    double e1_d[3] = {e1.x, e1.y, e1.z}, e2_d[3] = {e2.x, e2.y, e2.z};
-    if (is_parallel(e1_d, e2_d))
+    if (is_parallel(e1, e2))
         return fail(ps, edge2->val_col, "expected 'edge2' not parallel to 'edge1', got %s",
                     show(edge2->text, buf));
     struct xform xf;
     xform_from(&xf, st, param_idx(st, "translate"), param_idx(st, "rotate"),
                param_idx(st, "scale"));
-    vec3 corner = get_vec3(st, "corner", v3_splat(0));
     /* a mirroring transform swaps the edges so e1 x e2 stays the transformed front normal */
-    struct quad q = {
-        .corner = xform_point(&xf, corner),
-        .e1 = xform_vector(&xf, xf.is_mirror ? e2 : e1),
-        .e2 = xform_vector(&xf, xf.is_mirror ? e1 : e2),
-        .mat_idx = get(st, "material")->u,
-    };
+    const struct xform *x = &xf;
     double c[3], a[3], b[3];
-    xform_point_d(&xf, corner, c);
-    xform_vector_d(&xf, e1, a);
-    xform_vector_d(&xf, e2, b);
+    mat3_apply_dd(x->L, x->t, corner, c);
+    mat3_apply_dd(x->L, NULL, x->is_mirror ? e2 : e1, a);
+    mat3_apply_dd(x->L, NULL, x->is_mirror ? e1 : e2, b);
     double extent[3];
     for (int i = 0; i < 3; i++)
         extent[i] = fabs(c[i]) + fabs(a[i]) + fabs(b[i]);
@@ -1508,12 +1518,23 @@ static bool do_quad(struct parser *ps, const struct stmt *st)
                     "), got corner %g,%g,%g and edges %g,%g,%g and %g,%g,%g",
                     is_moved ? " after its transform" : "", c[0], c[1], c[2], a[0], a[1], a[2],
                     b[0], b[1], b[2]);
-    double q1[3] = {q.e1.x, q.e1.y, q.e1.z}, q2[3] = {q.e2.x, q.e2.y, q.e2.z};
-    if (is_parallel(q1, q2)) /* only a 'scale' can underflow the edges */
+    /* its area and light sampling are in float: the edges must not be parallel there either.
+     * Rounded through vec3: written as a loop of (float) casts into double arrays, gcc 12.2 -O2
+     * dropped the casts (its SLP vectoriser; -fno-tree-slp-vectorize restores them) */
+    vec3 af = d3_to_float((struct dvec3){a[0], a[1], a[2]});
+    vec3 bf = d3_to_float((struct dvec3){b[0], b[1], b[2]});
+    double a_f[3] = {af.x, af.y, af.z}, b_f[3] = {bf.x, bf.y, bf.z};
+    if (is_parallel(a_f, b_f)) /* only a 'scale' can make them so */
         return fail(ps, get(st, "scale")->val_col,
-                    "expected the quad's edges not parallel after "
-                    "'scale', got %g,%g,%g and %g,%g,%g (rounded to single precision)",
-                    q1[0], q1[1], q1[2], q2[0], q2[1], q2[2]);
+                    "expected the quad's edges not parallel after 'scale', got %g,%g,%g and "
+                    "%g,%g,%g (rounded to single precision)",
+                    a_f[0], a_f[1], a_f[2], b_f[0], b_f[1], b_f[2]);
+    struct quad q = {
+        .corner = {c[0], c[1], c[2]},
+        .e1 = {a[0], a[1], a[2]},
+        .e2 = {b[0], b[1], b[2]},
+        .mat_idx = get(st, "material")->u,
+    };
     struct scene *sc = ps->scene;
     if (!RESERVE(ps, sc->quads, ps->cap_quads, (uint64_t)sc->n_quads + 1))
         return false;

@@ -19,9 +19,9 @@
 /* ---- double precision ----
  * Products of two floats are exact in double and no sum of a few of them overflows or
  * underflows, so these computations are 2^29 times more precise than the float ones and need no
- * absolute error term.  gamma_d(n) = n u / (1 - n u), u = 2^-53 (PBRT 4e, ch. 6, "Managing
- * Rounding Error"). */
-static struct dvec3 d3(vec3 a) { return (struct dvec3){a.x, a.y, a.z}; }
+ * absolute error term.  A quad's corner and edges are doubles (shape.h): their products round
+ * once more, which each bound below allows for (one rounding per product).  gamma_d(n) =
+ * n u / (1 - n u), u = 2^-53 (PBRT 4e, ch. 6, "Managing Rounding Error"). */
 static struct dvec3 d3_add(struct dvec3 a, struct dvec3 b)
 {
     return (struct dvec3){a.x + b.x, a.y + b.y, a.z + b.z};
@@ -54,7 +54,6 @@ static double d3_length(struct dvec3 a) { return sqrt(d3_dot(a, a)); }
 /* the greater of two finite values (a comparison: fmax is a library call) */
 static double max_d(double a, double b) { return a > b ? a : b; }
 static double d3_max(struct dvec3 a) { return max_d(a.x, max_d(a.y, a.z)); }
-static vec3 d3_to_float(struct dvec3 a) { return (vec3){(float)a.x, (float)a.y, (float)a.z}; }
 
 static double gamma_d(int n)
 {
@@ -92,17 +91,18 @@ static ALWAYS_INLINE vec3 round_point(struct dvec3 p_d, struct dvec3 err_d, doub
     return p;
 }
 
-/* The point o + a e1 + b e2 of a plane through float point o, e1 and e2 differences of floats,
- * in double: each term carries at most 2 roundings (e, and the product) and the two sums 2
- * more, so |p_d - exact| <= gamma_d(4) (|o| + |a e1| + |b e2|) = *err; the exact point lies on
- * the plane for any a, b. */
-static ALWAYS_INLINE struct dvec3 plane_point_d(vec3 o, struct dvec3 e1, struct dvec3 e2, double a,
-                                                double b, struct dvec3 *err)
+/* The point o + a e1 + b e2 of the plane through o spanned by e1, e2 (exact doubles: a
+ * triangle's float vertex and differences of floats, a quad's stored corner and edges), in
+ * double: each term carries at most 2 roundings (e, and the product) and the two sums 2 more, so
+ * |p_d - exact| <= gamma_d(4) (|o| + |a e1| + |b e2|) = *err; the exact point lies on the plane
+ * for any a, b. */
+static ALWAYS_INLINE struct dvec3 plane_point_d(struct dvec3 o, struct dvec3 e1, struct dvec3 e2,
+                                                double a, double b, struct dvec3 *err)
 {
     struct dvec3 a_e1 = d3_scale(e1, a);
     struct dvec3 b_e2 = d3_scale(e2, b);
-    *err = d3_scale(d3_add(d3_add(d3_abs(d3(o)), d3_abs(a_e1)), d3_abs(b_e2)), gamma_d(4));
-    return d3_add(d3_add(d3(o), a_e1), b_e2);
+    *err = d3_scale(d3_add(d3_add(d3_abs(o), d3_abs(a_e1)), d3_abs(b_e2)), gamma_d(4));
+    return d3_add(d3_add(o, a_e1), b_e2);
 }
 
 /* An upper bound on the sum of the three error bounds round_point will give p_d. */
@@ -536,6 +536,16 @@ static bool plane_t(struct dvec3 q, struct dvec3 n, struct dvec3 n_abs, const st
     return true;
 }
 
+/* How far inside its edges triangle_point and quad_point place a point, in units of E, the sum
+ * of its error bounds (rounded_error_sum).  The spawned origin moves from the exact point by: the
+ * rounding to float, at most E; offset_ray_origin's push n . p_error <= E along the unit normal,
+ * at most sqrt(3) E summed over the components; and per component the rounding of that addition
+ * and the step to the next float, 1.5 ulp <= 3 p_error_i, at most 3 E summed.  In all less than
+ * (4 + sqrt(3)) E < 6 E, so an origin this far inside stays in front of a neighbouring face at a
+ * right-angled concave edge (a box's; 2 E, the earlier margin, let a rotated box of quads away
+ * from the origin leak, tests/extremes). */
+#define EDGE_MARGIN_E 6.0
+
 /* ---- quad ---- */
 
 /* The quad's planar coordinates of the point o + t d on its plane, in double: pd = o + t d -
@@ -544,9 +554,9 @@ static bool plane_t(struct dvec3 q, struct dvec3 n, struct dvec3 n_abs, const st
 static void quad_coords(const struct quad *q, struct dvec3 n, const struct ray *ray, double t,
                         double *alpha, double *beta)
 {
-    struct dvec3 e1 = d3(q->e1);
-    struct dvec3 e2 = d3(q->e2);
-    struct dvec3 pd = d3_sub(d3_add(d3(ray->o), d3_scale(d3(ray->d), t)), d3(q->corner));
+    struct dvec3 e1 = q->e1;
+    struct dvec3 e2 = q->e2;
+    struct dvec3 pd = d3_sub(d3_add(d3(ray->o), d3_scale(d3(ray->d), t)), q->corner);
     double inv_nn = 1.0 / d3_dot(n, n);
     *alpha = d3_dot(d3_cross(pd, e2), n) * inv_nn;
     *beta = d3_dot(d3_cross(e1, pd), n) * inv_nn;
@@ -556,11 +566,11 @@ bool shape_quad_intersect(const struct quad *q, const struct ray *ray, float *t_
 {
     /* the plane first, then the interval, then the edges: most rays that meet the plane meet
      * it behind the origin or beyond t_max, and need no planar coordinates */
-    struct dvec3 e1 = d3(q->e1);
-    struct dvec3 e2 = d3(q->e2);
+    struct dvec3 e1 = q->e1;
+    struct dvec3 e2 = q->e2;
     struct dvec3 n = d3_cross(e1, e2);
     double t, alpha, beta;
-    if (!plane_t(d3(q->corner), n, d3_cross_abs(e1, e2), ray, &t) || !t_to_float(t, ray, t_hit))
+    if (!plane_t(q->corner, n, d3_cross_abs(e1, e2), ray, &t) || !t_to_float(t, ray, t_hit))
         return false;
     quad_coords(q, n, ray, t, &alpha, &beta);
     return alpha >= 0.0 && alpha <= 1.0 && beta >= 0.0 && beta <= 1.0;
@@ -568,20 +578,21 @@ bool shape_quad_intersect(const struct quad *q, const struct ray *ray, float *t_
 
 /* The quad's point corner + alpha e1 + beta e2 with its error bound and unit normal, pulled
  * inside the quad as triangle_point pulls a triangle's: alpha, beta clamped to
- * [eps, 1 - eps] with eps = 2 E / h, h the quad's width across the edges alpha = 0, 1 (or
- * beta = 0, 1), so quads that close a box keep spawned origins off each other's planes. */
+ * [eps, 1 - eps] with eps = EDGE_MARGIN_E E / h, h the quad's width across the edges
+ * alpha = 0, 1 (or beta = 0, 1), so quads that close a box keep spawned origins off each
+ * other's planes. */
 static vec3 quad_point(const struct quad *q, double alpha, double beta, vec3 *ng, vec3 *p_error)
 {
-    struct dvec3 e1 = d3(q->e1);
-    struct dvec3 e2 = d3(q->e2);
+    struct dvec3 e1 = q->e1;
+    struct dvec3 e2 = q->e2;
     double area, eta;
     *ng = plane_normal(e1, e2, &area, &eta);
     struct dvec3 err;
     struct dvec3 p = plane_point_d(q->corner, e1, e2, alpha, beta, &err);
     double E = rounded_error_sum(p, err, eta);
     /* widths: area / |e2| across the alpha edges, area / |e1| across the beta edges */
-    double eps_alpha = area > 0.0 ? 2.0 * E * d3_length(e2) / area : 0.5;
-    double eps_beta = area > 0.0 ? 2.0 * E * d3_length(e1) / area : 0.5;
+    double eps_alpha = area > 0.0 ? EDGE_MARGIN_E * E * d3_length(e2) / area : 0.5;
+    double eps_beta = area > 0.0 ? EDGE_MARGIN_E * E * d3_length(e1) / area : 0.5;
     if (!(alpha >= eps_alpha && alpha <= 1.0 - eps_alpha && beta >= eps_beta &&
           beta <= 1.0 - eps_beta)) {
         alpha = eps_alpha < 0.5 ? fmin(1.0 - eps_alpha, fmax(eps_alpha, alpha)) : 0.5;
@@ -596,7 +607,7 @@ struct surface shape_quad_surface(const struct quad *q, const struct ray *ray, f
     struct surface sf;
     /* the planar coordinates of o + t_hit d; the point is rebuilt on the plane from them */
     double alpha, beta;
-    quad_coords(q, d3_cross(d3(q->e1), d3(q->e2)), ray, t_hit, &alpha, &beta);
+    quad_coords(q, d3_cross(q->e1, q->e2), ray, t_hit, &alpha, &beta);
     alpha = fmin(1.0, fmax(0.0, alpha));
     beta = fmin(1.0, fmax(0.0, beta));
     sf.p = quad_point(q, alpha, beta, &sf.ng, &sf.p_error);
@@ -606,10 +617,7 @@ struct surface shape_quad_surface(const struct quad *q, const struct ray *ray, f
     return sf;
 }
 
-float shape_quad_area(const struct quad *q)
-{
-    return (float)d3_length(d3_cross(d3(q->e1), d3(q->e2)));
-}
+float shape_quad_area(const struct quad *q) { return (float)d3_length(d3_cross(q->e1, q->e2)); }
 
 bool shape_quad_sample(const struct quad *q, const struct surface *ref, vec2 u,
                        struct shape_sample *ss)
@@ -617,13 +625,13 @@ bool shape_quad_sample(const struct quad *q, const struct surface *ref, vec2 u,
     /* uniform by area: p = corner + u0 e1 + u1 e2, pdf_area = 1 / |e1 x e2| */
     vec3 n, p_error;
     vec3 p = quad_point(q, u.x, u.y, &n, &p_error);
-    return sample_by_area(p, p_error, n, 1.0 / d3_length(d3_cross(d3(q->e1), d3(q->e2))), ref, ss);
+    return sample_by_area(p, p_error, n, 1.0 / d3_length(d3_cross(q->e1, q->e2)), ref, ss);
 }
 
 float shape_quad_pdf(const struct quad *q, const struct surface *ref, const struct surface *on,
                      vec3 wi)
 {
-    return pdf_by_area(1.0 / d3_length(d3_cross(d3(q->e1), d3(q->e2))), ref, on, wi);
+    return pdf_by_area(1.0 / d3_length(d3_cross(q->e1, q->e2)), ref, on, wi);
 }
 
 /* Whether the quad q is sampled by solid angle from ref: a rectangle whose solid angle is at
@@ -633,11 +641,10 @@ float shape_quad_pdf(const struct quad *q, const struct surface *ref, const stru
 static bool quad_by_solid_angle(const struct quad *q, const struct surface *ref,
                                 struct sample_sph_rect *sr, float w[4])
 {
-    if (!sample_sph_rect_init(ref->p, q->corner, q->e1, q->e2, sr) ||
-        !(sr->area >= SPHERICAL_MIN_SR))
+    vec3 corner = d3_to_float(q->corner), e1 = d3_to_float(q->e1), e2 = d3_to_float(q->e2);
+    if (!sample_sph_rect_init(ref->p, corner, e1, e2, sr) || !(sr->area >= SPHERICAL_MIN_SR))
         return false;
-    vec3 c[4] = {q->corner, v3_add(q->corner, q->e1), v3_add(q->corner, q->e2),
-                 v3_add(v3_add(q->corner, q->e1), q->e2)};
+    vec3 c[4] = {corner, v3_add(corner, e1), v3_add(corner, e2), v3_add(v3_add(corner, e1), e2)};
     for (int k = 0; k < 4; k++)
         c[k] = v3_normalize(v3_sub(c[k], ref->p));
     receiver_weights(ref, c[0], c[1], c[2], c[3], w);
@@ -654,9 +661,9 @@ bool shape_quad_sample_solid_angle(const struct quad *q, const struct surface *r
     /* Urena et al. 2013, u first warped by the cosine at the receiver:
      * pdf_sa = pdf_bilinear(u) / S */
     float pdf_u = warp_by_cosine(&u, w);
-    vec3 pr = v3_sub(sample_spherical_rectangle(&sr, u), q->corner);
-    float alpha = min_f(1.0f, max_f(0.0f, v3_dot(pr, q->e1) / v3_dot(q->e1, q->e1)));
-    float beta = min_f(1.0f, max_f(0.0f, v3_dot(pr, q->e2) / v3_dot(q->e2, q->e2)));
+    struct dvec3 pr = d3_sub(d3(sample_spherical_rectangle(&sr, u)), q->corner);
+    double alpha = fmin(1.0, fmax(0.0, d3_dot(pr, q->e1) / d3_dot(q->e1, q->e1)));
+    double beta = fmin(1.0, fmax(0.0, d3_dot(pr, q->e2) / d3_dot(q->e2, q->e2)));
     ss->p = quad_point(q, alpha, beta, &ss->n, &ss->p_error);
     return direction_to(ss, ss->n, ref, pdf_u * pdf_spherical_rectangle(&sr));
 }
@@ -726,11 +733,11 @@ void shape_triangle_plane(const vec3 p[3], struct triangle_plane *tp) { triangle
 
 /* The point p0 + b1 e1 + b2 e2 of triangle tp (triangle_plane) with its error bound
  * (plane_point_d, round_point), pulled inside the triangle: where
- * some b_i is below eps_i = 2 E / h_i, with E the sum of the point's error bounds and h_i the
- * height over edge i, the barycentrics are clamped to the triangle and shrunk towards its centre,
- * b_i' = eps_i + (1 - sum eps) b_i.  So the rounded point lies inside every edge by at least its
- * error, as offset_ray_origin puts it off the plane: at a concave edge a spawned ray then meets
- * the neighbour in front of its origin, not at t = 0.  A point more than eps outside (only from
+ * some b_i is below eps_i = EDGE_MARGIN_E E / h_i, with E the sum of the point's error bounds
+ * and h_i the height over edge i, the barycentrics are clamped to the triangle and shrunk towards
+ * its centre, b_i' = eps_i + (1 - sum eps) b_i.  So the rounded point lies inside every edge by
+ * more than the spawned origin can move: at a concave edge a spawned ray then meets the
+ * neighbour in front of its origin, not at t = 0.  A point more than eps outside (only from
  * the ray's point of a huge triangle, whose float inside test is off by u times its size) is
  * left where it is.  h_i = 2 area / |edge_i| >= 2 area / (sqrt(3) |edge_i|_max). */
 static ALWAYS_INLINE vec3 triangle_point(const struct triangle_plane *tp, double b1, double b2,
@@ -739,9 +746,9 @@ static ALWAYS_INLINE vec3 triangle_point(const struct triangle_plane *tp, double
     struct dvec3 e1 = tp->e1, e2 = tp->e2;
     double area2 = tp->area2, eta = tp->eta;
     struct dvec3 err;
-    struct dvec3 pd = plane_point_d(tp->p0, e1, e2, b1, b2, &err);
+    struct dvec3 pd = plane_point_d(d3(tp->p0), e1, e2, b1, b2, &err);
     if (area2 > 0.0) {
-        double k = 2.0 * 1.7320508075688774 * rounded_error_sum(pd, err, eta) / area2;
+        double k = EDGE_MARGIN_E * 1.7320508075688774 * rounded_error_sum(pd, err, eta) / area2;
         struct dvec3 e3 = d3_abs(d3_sub(e2, e1));
         struct dvec3 a1 = d3_abs(e1);
         struct dvec3 a2 = d3_abs(e2);
@@ -762,7 +769,7 @@ static ALWAYS_INLINE vec3 triangle_point(const struct triangle_plane *tp, double
                 b1 = eps[1] + (1.0 - eps_sum) * b[1] / sum;
                 b2 = eps[2] + (1.0 - eps_sum) * b[2] / sum;
             }
-            pd = plane_point_d(tp->p0, e1, e2, b1, b2, &err);
+            pd = plane_point_d(d3(tp->p0), e1, e2, b1, b2, &err);
         }
     }
     return round_point(pd, err, eta, p_error);

@@ -15,11 +15,15 @@ struct sphere {
     uint32_t mat_idx;
 };
 
-/* Parallelogram p = corner + s e1 + t e2, s, t in [0, 1]; front normal = normalize(e1 x e2). */
+/* Parallelogram p = corner + s e1 + t e2, s, t in [0, 1]; front normal = normalize(e1 x e2).
+ * In double, as the scene file wrote it: quads meet only where their corners and edges agree,
+ * and float would put gaps of half an ulp of the corner between the faces of a box that is
+ * rotated or away from the origin (triangles close by sharing vertices; docs/theory.md,
+ * "Self-intersection"). */
 struct quad {
-    vec3 corner;
-    vec3 e1;
-    vec3 e2;
+    struct dvec3 corner;
+    struct dvec3 e1;
+    struct dvec3 e2;
     uint32_t mat_idx;
 };
 

@@ -117,6 +117,12 @@ struct dvec3 {
     double y;
     double z;
 }; /* 24 bytes */
+static inline struct dvec3 d3(vec3 a) { return (struct dvec3){a.x, a.y, a.z}; }
+/* rounded to float, each component to nearest */
+static inline vec3 d3_to_float(struct dvec3 a)
+{
+    return (vec3){(float)a.x, (float)a.y, (float)a.z};
+}
 
 /* fmaxf and fminf written out: gcc calls libm for them (their NaN rule, a NaN operand gives the
  * other, has no one-instruction form on x86), and they sit in the path loop.  Same results. */

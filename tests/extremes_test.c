@@ -351,6 +351,89 @@ Test(extremes, moved_closed_cube_sees_no_sky, .timeout = TEST_TIMEOUT_S(120))
     test_remove_dir(dir);
 }
 
+/* A box of six quads around (0, 0, 0) with half-size 1, turned about (1, 2, 3) by 37 degrees,
+ * scaled by m[0] and moved by (m[1], m[2], m[3]), with the camera inside, written to path: with
+ * as_params the quads are the axis-aligned faces and the statements' own rotate, scale and
+ * translate move them; otherwise each corner and edge is written out, computed in double and
+ * printed to 17 digits, as a script generating a scene would. */
+static void write_quad_box(const char *path, const double m[4], bool as_params)
+{
+    const double deg = 37.0 * 3.14159265358979323846 / 180.0, c = cos(deg), s = sin(deg);
+    const double k[3] = {1.0 / sqrt(14.0), 2.0 / sqrt(14.0), 3.0 / sqrt(14.0)};
+    double R[3][3]; /* Rodrigues, as scene.c builds rotate= */
+    const double K[3][3] = {{0, -k[2], k[1]}, {k[2], 0, -k[0]}, {-k[1], k[0], 0}};
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            R[i][j] = (i == j ? c : 0.0) + s * K[i][j] + (1.0 - c) * k[i] * k[j];
+    FILE *f = fopen(path, "w");
+    cr_assert_not_null(f);
+    double eye[3] = {0.1, 0.05, 0.02}, at[3] = {0.5, 0.3, -1.0}, eye_w[3], at_w[3];
+    for (int i = 0; i < 3; i++) {
+        eye_w[i] = m[1 + i] + m[0] * (R[i][0] * eye[0] + R[i][1] * eye[1] + R[i][2] * eye[2]);
+        at_w[i] = m[1 + i] + m[0] * (R[i][0] * at[0] + R[i][1] * at[1] + R[i][2] * at[2]);
+    }
+    fprintf(f,
+            "camera eye=%.17g,%.17g,%.17g look-at=%.17g,%.17g,%.17g up=%.17g,%.17g,%.17g "
+            "fov=100\nfilm width=32 height=32\nrender spp=64 sampler=independent\n"
+            "material name=m type=diffuse albedo=0.5,0.5,0.5\n",
+            eye_w[0], eye_w[1], eye_w[2], at_w[0], at_w[1], at_w[2], R[0][1], R[1][1], R[2][1]);
+    for (int axis = 0; axis < 3; axis++)
+        for (int sign = -1; sign <= 1; sign += 2) {
+            int u = (axis + 1) % 3, w = (axis + 2) % 3;
+            double q[3][3] = {{0}}; /* corner, edge1, edge2 in the box's frame */
+            q[0][axis] = sign;
+            q[0][u] = q[0][w] = -1.0;
+            q[1][u] = 2.0;
+            q[2][w] = 2.0;
+            if (as_params) {
+                fprintf(f,
+                        "quad corner=%g,%g,%g edge1=%g,%g,%g edge2=%g,%g,%g material=m "
+                        "rotate=1,2,3,37 scale=%.17g translate=%.17g,%.17g,%.17g\n",
+                        q[0][0], q[0][1], q[0][2], q[1][0], q[1][1], q[1][2], q[2][0], q[2][1],
+                        q[2][2], m[0], m[1], m[2], m[3]);
+                continue;
+            }
+            double qw[3][3];
+            for (int v = 0; v < 3; v++)
+                for (int i = 0; i < 3; i++)
+                    qw[v][i] = (v == 0 ? m[1 + i] : 0.0) +
+                               m[0] * (R[i][0] * q[v][0] + R[i][1] * q[v][1] + R[i][2] * q[v][2]);
+            fprintf(f,
+                    "quad corner=%.17g,%.17g,%.17g edge1=%.17g,%.17g,%.17g "
+                    "edge2=%.17g,%.17g,%.17g material=m\n",
+                    qw[0][0], qw[0][1], qw[0][2], qw[1][0], qw[1][1], qw[1][2], qw[2][0], qw[2][1],
+                    qw[2][2]);
+        }
+    fprintf(f, "sky type=constant radiance=1,1,1\n");
+    fclose(f);
+}
+
+/* A closed box of six quads, turned, scaled and moved as moved_closed_cube_sees_no_sky moves
+ * the mesh (offsets up to 10^5 times its size, 1e-12 at 1e-9): every pixel is exactly 0.  Quads
+ * keep the corners and edges the file wrote in double, so neighbouring faces meet to double
+ * precision (in float they had gaps of half an ulp of the corner, which let sky in from an
+ * offset of 100 sizes on), and a point is pulled EDGE_MARGIN_E times its error inside its quad
+ * (shape.c), beyond what the spawned origin can move (twice its error let a box of size 1e-12
+ * at 1e-9 leak). */
+Test(extremes, moved_quad_box_sees_no_sky, .timeout = TEST_TIMEOUT_S(120))
+{
+    static const double moves[][4] = {
+        /* s, t */
+        {1e-6, 0.3, 0.2, 0.1}, {1.0, 100.0, -30.0, 200.0}, {1.0, 1000.0, 2000.0, -3000.0},
+        {1.0, 1e5, -3e4, 2e5}, {1e3, 1e6, 2e6, -1e6},      {1e-12, 1e-9, 0.0, 0.0},
+        {1e6, 0.0, 0.0, 0.0},
+    };
+    char dir[64], scene_path[300];
+    test_make_dir(dir, sizeof dir, "quad_box");
+    for (int as_params = 0; as_params < 2; as_params++)
+        for (size_t k = 0; k < sizeof moves / sizeof moves[0]; k++) {
+            snprintf(scene_path, sizeof scene_path, "%s/box-%d-%zu.txt", dir, as_params, k);
+            write_quad_box(scene_path, moves[k], as_params);
+            assert_black(scene_path);
+        }
+    test_remove_dir(dir);
+}
+
 /* Issue 12: parallelograms whose edges meet at 10, 3, 1, 0.3 and 0.1 degrees in a general
  * orientation, and the issue's own 1 degree quad, albedo 0.8 under a constant sky of 2: the
  * estimator has zero variance, light sample and BSDF sample each add 0.8 with MIS weight 1/2,

@@ -40,9 +40,9 @@ static struct scene light_scene(void)
                                         .two_sided_emission = true};
     lt_spheres[0] = (struct sphere){.center = v3(0.5f, 0.3f, 2.5f), .radius = 0.7f};
     lt_spheres[1] = (struct sphere){.center = v3(0.1f, -0.2f, 0.2f), .radius = 1.0f, .mat_idx = 1};
-    lt_quads[0] = (struct quad){.corner = v3(-0.5f, -2.0f, 0.3f),
-                                .e1 = v3(1.0f, 0.0f, 0.2f),
-                                .e2 = v3(0.0f, 0.3f, 1.0f)};
+    lt_quads[0] = (struct quad){.corner = d3(v3(-0.5f, -2.0f, 0.3f)),
+                                .e1 = d3(v3(1.0f, 0.0f, 0.2f)),
+                                .e2 = d3(v3(0.0f, 0.3f, 1.0f))};
     lt_lights[0] = (struct light){.kind = LIGHT_TRIANGLE, .prim_idx = 0};
     lt_lights[1] = (struct light){.kind = LIGHT_QUAD, .prim_idx = 0};
     lt_lights[2] = (struct light){.kind = LIGHT_SPHERE, .prim_idx = 0};
@@ -86,9 +86,9 @@ static struct scene light_scene_variant(int variant)
         lt_positions[0] = v3(-50.0f, -50.0f, 0.05f);
         lt_positions[1] = v3(100.0f, -50.0f, 0.05f);
         lt_positions[2] = v3(-50.0f, 100.0f, 0.05f);
-        lt_quads[0].corner = v3(-1.0f, -1.5f, 0.2f); /* a rectangle of about 0.9 sr */
-        lt_quads[0].e1 = v3(2.0f, 0.0f, 0.4f);
-        lt_quads[0].e2 = v3(0.12f, 0.9f, -0.6f); /* orthogonal to e1 */
+        lt_quads[0].corner = d3(v3(-1.0f, -1.5f, 0.2f)); /* a rectangle of about 0.9 sr */
+        lt_quads[0].e1 = d3(v3(2.0f, 0.0f, 0.4f));
+        lt_quads[0].e2 = d3(v3(0.12f, 0.9f, -0.6f)); /* orthogonal to e1 */
     }
     return s;
 }
@@ -275,9 +275,10 @@ Test(light, one_sided_emitter_from_behind)
     struct light_table *lt = build(&s);
     vec3 n_tri = v3_cross(v3_sub(lt_positions[1], lt_positions[0]),
                           v3_sub(lt_positions[2], lt_positions[0]));
-    vec3 n_quad = v3_cross(lt_quads[0].e1, lt_quads[0].e2);
+    vec3 n_quad = v3_cross(d3_to_float(lt_quads[0].e1), d3_to_float(lt_quads[0].e2));
     for (uint32_t k = 0; k < 2; k++) {
-        vec3 n = k == 0 ? n_tri : n_quad, p0 = k == 0 ? lt_positions[0] : lt_quads[0].corner;
+        vec3 n = k == 0 ? n_tri : n_quad,
+             p0 = k == 0 ? lt_positions[0] : d3_to_float(lt_quads[0].corner);
         struct surface front = REF, back = REF;
         front.p = v3_add(p0, v3_normalize(n));
         back.p = v3_sub(p0, v3_normalize(n));
@@ -327,7 +328,8 @@ Test(light, pmf_proportional_to_power)
     double lum0 = v3_luminance(lt_materials[0].Le), lum1 = v3_luminance(lt_materials[1].Le);
     double phi[5] = {
         2.0 * MCPT_PI * 0.5 * v3_length(v3_cross(e1, e2)) * lum0,
-        2.0 * MCPT_PI * v3_length(v3_cross(lt_quads[0].e1, lt_quads[0].e2)) * lum0,
+        2.0 * MCPT_PI *
+            v3_length(v3_cross(d3_to_float(lt_quads[0].e1), d3_to_float(lt_quads[0].e2))) * lum0,
         2.0 * MCPT_PI * 4.0 * MCPT_PI * 0.7 * 0.7 * lum0,
         2.0 * MCPT_PI * 4.0 * MCPT_PI * 1.0 * lum1,
         4.0 * MCPT_PI * v3_luminance(lt_lights[4].intensity),
@@ -373,9 +375,9 @@ Test(light, nonfinite_power_is_bad_input)
 {
     struct scene s = light_scene();
     s.n_lights = 2;
-    lt_quads[0] = (struct quad){.corner = v3(1.0f, 2.0f, 3.0f),
-                                .e1 = v3(2e19f, 0.0f, 0.0f),
-                                .e2 = v3(0.0f, 2e19f, 0.0f)};
+    lt_quads[0] = (struct quad){.corner = d3(v3(1.0f, 2.0f, 3.0f)),
+                                .e1 = d3(v3(2e19f, 0.0f, 0.0f)),
+                                .e2 = d3(v3(0.0f, 2e19f, 0.0f))};
     struct mcpt_error err;
     cr_assert_null(light_table_build(&s, &err));
     cr_assert_eq(err.kind, MCPT_ERROR_INPUT);

@@ -230,14 +230,15 @@ Test(scene, full_scene_values)
 
     /* quads: R_x(180) = diag(1,-1,-1) then translate; the mirrored one swaps its edges */
     cr_assert_eq(sc.n_quads, 2);
-    assert_vec3(sc.quads[0].corner, 0, 2, 0, "quad 0 corner");
-    assert_vec3(sc.quads[0].e1, 1, 0, 0, "quad 0 e1");
-    assert_vec3(sc.quads[0].e2, 0, 0, -1, "quad 0 e2");
+    assert_vec3(d3_to_float(sc.quads[0].corner), 0, 2, 0, "quad 0 corner");
+    assert_vec3(d3_to_float(sc.quads[0].e1), 1, 0, 0, "quad 0 e1");
+    assert_vec3(d3_to_float(sc.quads[0].e2), 0, 0, -1, "quad 0 e2");
     cr_assert_eq(sc.quads[0].mat_idx, 1);
-    assert_vec3(sc.quads[1].corner, -1, 0, 0, "quad 1 corner");
-    assert_vec3(sc.quads[1].e1, 0, 1, 0, "quad 1 e1");
-    assert_vec3(sc.quads[1].e2, -1, 0, 0, "quad 1 e2");
-    assert_vec3(v3_cross(sc.quads[1].e1, sc.quads[1].e2), 0, 0, 1, "quad 1 front normal");
+    assert_vec3(d3_to_float(sc.quads[1].corner), -1, 0, 0, "quad 1 corner");
+    assert_vec3(d3_to_float(sc.quads[1].e1), 0, 1, 0, "quad 1 e1");
+    assert_vec3(d3_to_float(sc.quads[1].e2), -1, 0, 0, "quad 1 e2");
+    assert_vec3(v3_cross(d3_to_float(sc.quads[1].e1), d3_to_float(sc.quads[1].e2)), 0, 0, 1,
+                "quad 1 front normal");
     cr_assert_eq(sc.quads[1].mat_idx, 0);
 
     cr_assert_eq(sc.n_planes, 1);
@@ -329,17 +330,17 @@ Test(scene, rotation_rodrigues)
     struct scene sc;
     load_ok(CAM MAT "quad corner=1,0,0 edge1=0,1,0 edge2=0,0,1 material=red rotate=2,2,2,120\n",
             &sc);
-    assert_vec3_near(sc.quads[0].corner, 0, 1, 0, "corner");
-    assert_vec3_near(sc.quads[0].e1, 0, 0, 1, "e1");
-    assert_vec3_near(sc.quads[0].e2, 1, 0, 0, "e2");
+    assert_vec3_near(d3_to_float(sc.quads[0].corner), 0, 1, 0, "corner");
+    assert_vec3_near(d3_to_float(sc.quads[0].e1), 0, 0, 1, "e1");
+    assert_vec3_near(d3_to_float(sc.quads[0].e2), 1, 0, 0, "e2");
     scene_free(&sc);
     /* -90 about z, written as 270: (1,0,0) -> (0,-1,0) exactly; scale applies before */
     load_ok(CAM MAT "quad corner=1,0,0 edge1=0,1,0 edge2=0,0,1 material=red rotate=0,0,1,270 "
                     "scale=3,1,1 translate=0,0,1\n",
             &sc);
-    assert_vec3(sc.quads[0].corner, 0, -3, 1, "corner");
-    assert_vec3(sc.quads[0].e1, 1, 0, 0, "e1");
-    assert_vec3(sc.quads[0].e2, 0, 0, 1, "e2");
+    assert_vec3(d3_to_float(sc.quads[0].corner), 0, -3, 1, "corner");
+    assert_vec3(d3_to_float(sc.quads[0].e1), 1, 0, 0, "e1");
+    assert_vec3(d3_to_float(sc.quads[0].e2), 0, 0, 1, "e2");
     scene_free(&sc);
 }
 

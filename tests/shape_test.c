@@ -121,7 +121,7 @@ Test(shape, sphere_near_tangent_rays_agree_with_long_double)
 /* Quad hits inside, on an edge (alpha = 0) and at a corner count; just outside does not. */
 Test(shape, quad_edges_and_corners)
 {
-    struct quad q = {.corner = v3(0, 0, 0), .e1 = v3(1, 0, 0), .e2 = v3(0, 1, 0)};
+    struct quad q = {.corner = d3(v3(0, 0, 0)), .e1 = d3(v3(1, 0, 0)), .e2 = d3(v3(0, 1, 0))};
     float t;
     struct ray r = mkray(v3(0.5f, 0.5f, 1), v3(0, 0, -1));
     cr_assert(shape_quad_intersect(&q, &r, &t));
@@ -242,10 +242,12 @@ Test(shape, triangle_surface_interpolates)
 Test(shape, samples_lie_on_the_shape)
 {
     const vec3 tri[3] = {{-1, -1, 2}, {2, -1, 2.5f}, {-1, 2, 2}};
-    struct quad q = {.corner = v3(-0.5f, -2, 0.3f), .e1 = v3(1, 0, 0.2f), .e2 = v3(0, 0.3f, 1)};
-    struct quad rect = {.corner = v3(-1, -1.5f, 0.2f),
-                        .e1 = v3(2, 0, 0.4f),
-                        .e2 = v3(0.12f, 0.9f, -0.6f)};
+    struct quad q = {.corner = d3(v3(-0.5f, -2, 0.3f)),
+                     .e1 = d3(v3(1, 0, 0.2f)),
+                     .e2 = d3(v3(0, 0.3f, 1))};
+    struct quad rect = {.corner = d3(v3(-1, -1.5f, 0.2f)),
+                        .e1 = d3(v3(2, 0, 0.4f)),
+                        .e2 = d3(v3(0.12f, 0.9f, -0.6f))};
     struct sphere far = {.center = v3(0.5f, 0.3f, 2.5f), .radius = 0.7f};
     struct sphere around = {.center = v3(0.1f, -0.2f, 0.2f), .radius = 1.0f};
     struct surface ref = {.p = v3(0, 0, 0), .ng = v3(0, 0, 1), .ns = v3(0, 0, 1)};
@@ -265,7 +267,9 @@ Test(shape, samples_lie_on_the_shape)
             vec3 n_abs = v3(fabsf(s->n.x), fabsf(s->n.y), fabsf(s->n.z));
             double off;
             if (k < 2 || k >= 4) {
-                vec3 p0 = k == 0 || k == 4 ? tri[0] : k == 1 ? q.corner : rect.corner;
+                vec3 p0 = k == 0 || k == 4 ? tri[0]
+                          : k == 1         ? d3_to_float(q.corner)
+                                           : d3_to_float(rect.corner);
                 vec3 d = v3_sub(s->p, p0);
                 off = fabs((double)d.x * s->n.x + (double)d.y * s->n.y + (double)d.z * s->n.z);
                 cr_assert(off <= 1.01 * v3_dot(n_abs, s->p_error) + 1e-7, "shape %d: %g", k, off);
@@ -291,6 +295,129 @@ Test(shape, samples_lie_on_the_shape)
                           s->pdf_sa);
             else
                 cr_assert_eq(pdf, s->pdf_sa, "shape %d", k);
+        }
+    }
+}
+
+/* Spawned origins from n_points points on an edge of quad q (edge 0: alpha = 1, edge 1:
+ * beta = 1) and, for edge 0, of the float triangle corner, corner + e1, corner + e1 + e2 (whose
+ * edge b0 = 0 it is), each in 8 directions: how many lie on or past the plane through that edge
+ * at a right angle to the face, the side decided in long double. */
+static int origins_past_right_angled_neighbour(const struct quad *q, int edge, int n_points)
+{
+    const struct dvec3 *e_along = edge == 0 ? &q->e2 : &q->e1,
+                       *e_across = edge == 0 ? &q->e1 : &q->e2;
+    long double c[3] = {q->corner.x, q->corner.y, q->corner.z},
+                a[3] = {e_across->x, e_across->y, e_across->z},
+                e[3] = {e_along->x, e_along->y, e_along->z};
+    vec3 tri[3];
+    for (int v = 0; v < 3; v++)
+        tri[v] = v3((float)(c[0] + (v > 0) * a[0] + (v > 1) * e[0]),
+                    (float)(c[1] + (v > 0) * a[1] + (v > 1) * e[1]),
+                    (float)(c[2] + (v > 0) * a[2] + (v > 1) * e[2]));
+    /* per face (0 the quad, 1 the triangle): a point on the edge, the face's other side, the
+     * edge's direction, a vector across the face */
+    long double on[2][3], inner[2][3], along[2][3], across[2][3];
+    for (int k = 0; k < 3; k++) {
+        on[0][k] = c[k] + a[k];
+        inner[0][k] = c[k];
+        along[0][k] = e[k];
+        across[0][k] = a[k];
+        on[1][k] = (&tri[1].x)[k];
+        inner[1][k] = (&tri[0].x)[k];
+        along[1][k] = (long double)(&tri[2].x)[k] - (&tri[1].x)[k];
+        across[1][k] = (long double)(&tri[1].x)[k] - (&tri[0].x)[k];
+    }
+    long double nb[2][3]; /* the neighbour's normal, pointing away from the face */
+    for (int f = 0; f < 2; f++) {
+        const long double *u = across[f], *v = along[f];
+        long double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                            u[0] * v[1] - u[1] * v[0]};
+        long double m[3] = {v[1] * n[2] - v[2] * n[1], v[2] * n[0] - v[0] * n[2],
+                            v[0] * n[1] - v[1] * n[0]};
+        long double in = 0.0L;
+        for (int k = 0; k < 3; k++)
+            in += m[k] * (inner[f][k] - on[f][k]);
+        for (int k = 0; k < 3; k++)
+            nb[f][k] = in < 0.0L ? m[k] : -m[k];
+    }
+    struct surface ref = {.p = v3(0, 0, 0), .ng = v3(0, 0, 1), .ns = v3(0, 0, 1)};
+    uint32_t rng = 12345u;
+    int n_out = 0;
+    for (int i = 0; i < n_points; i++) {
+        float t = ((float)i + 0.5f) / (float)n_points;
+        struct shape_sample ss;
+        cr_assert(shape_quad_sample(q, &ref, edge == 0 ? (vec2){1.0f, t} : (vec2){t, 1.0f}, &ss));
+        struct surface faces[2] = {{.p = ss.p, .p_error = ss.p_error, .ng = ss.n},
+                                   shape_triangle_surface(tri, NULL, NULL, NULL, 0.0f, 1.0f - t, t,
+                                                          0)};
+        for (int f = 0; f < (edge == 0 ? 2 : 1); f++)
+            for (int d = 0; d < 8; d++) {
+                vec3 dir;
+                do {
+                    for (int k = 0; k < 3; k++) {
+                        rng = rng * 1664525u + 1013904223u;
+                        (&dir.x)[k] = (float)(rng >> 8) * 0x1p-23f - 1.0f;
+                    }
+                } while (v3_dot(dir, dir) > 1.0f || v3_dot(dir, dir) < 1e-4f);
+                vec3 o = offset_ray_origin(faces[f].p, faces[f].p_error, faces[f].ng,
+                                           v3_normalize(dir));
+                long double side = 0.0L;
+                for (int k = 0; k < 3; k++)
+                    side += nb[f][k] * ((long double)(&o.x)[k] - on[f][k]);
+                n_out += !(side < 0.0L);
+            }
+    }
+    return n_out;
+}
+
+/* A point on the edge of a face, pulled inside by shape.c's margin (EDGE_MARGIN_E times its
+ * error), spawns rays whose origins lie strictly in front of a neighbouring face at a right angle
+ * across that edge, whatever the direction: the push along the face's normal is parallel to the
+ * neighbour, and only roundings move the origin towards it, by less than the margin.  First the
+ * face of a rotated box of quads at size 1e-12 and offset 1e-9 that let sky in (tests/extremes,
+ * moved_quad_box_sees_no_sky): with twice the error as the margin, 4.7% of its origins crossed.
+ * Then quads and triangles of a box turned 16 ways at sizes and offsets where float resolves
+ * the face to 1 part in 10^3 to 10^7. */
+Test(shape, edge_points_spawn_in_front_of_a_right_angled_neighbour)
+{
+    struct quad leaked = {
+        .corner = {9.983635021393847e-10, 5.356659133986832e-13, 1.8691383422365932e-13},
+        .e1 = {9.447165533382443e-13, -1.2729957212306679e-12, 1.2194230306079677e-12},
+        .e2 = {1.6097115153039838e-12, 1.1869138342236594e-12, -8.024190067805304e-15}};
+    int n_out = origins_past_right_angled_neighbour(&leaked, 1, 20000);
+    cr_assert_eq(n_out, 0, "the quad that leaked: %d of 160000 origins past the neighbour", n_out);
+    static const double cases[][2] = {{1e-12, 1e-9}, {1.0, 1e3}, {1.0, 1e5},
+                                      {1e-6, 0.3},   {1e3, 1e6}, {1e6, 0.0}};
+    for (int turn = 0; turn < 16; turn++) {
+        /* turned by 0.4 + 0.37 turn radians about an axis that changes with turn */
+        const double ang = 0.4 + 0.37 * turn, c = cos(ang), s = sin(ang);
+        double ax[3] = {1.0 + turn % 3, 2.0 - turn % 5, 3.0 + (turn % 2 ? -turn : turn)};
+        double len = sqrt(ax[0] * ax[0] + ax[1] * ax[1] + ax[2] * ax[2]);
+        const double k[3] = {ax[0] / len, ax[1] / len, ax[2] / len};
+        const double K[3][3] = {{0, -k[2], k[1]}, {k[2], 0, -k[0]}, {-k[1], k[0], 0}};
+        double R[3][3];
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                R[i][j] = (i == j ? c : 0.0) + s * K[i][j] + (1.0 - c) * k[i] * k[j];
+        for (size_t ci = 0; ci < sizeof cases / sizeof cases[0]; ci++) {
+            double size = cases[ci][0], off = cases[ci][1];
+            /* the face corner (-1, -1, -1), e1 = (2, 0, 0), e2 = (0, 2, 0) in the box's frame */
+            const double local[3][3] = {{-1, -1, -1}, {2, 0, 0}, {0, 2, 0}};
+            double w[3][3];
+            for (int v = 0; v < 3; v++)
+                for (int i = 0; i < 3; i++)
+                    w[v][i] = (v == 0 ? off : 0.0) +
+                              size * (R[i][0] * local[v][0] + R[i][1] * local[v][1] +
+                                      R[i][2] * local[v][2]);
+            struct quad q = {.corner = {w[0][0], w[0][1], w[0][2]},
+                             .e1 = {w[1][0], w[1][1], w[1][2]},
+                             .e2 = {w[2][0], w[2][1], w[2][2]}};
+            for (int edge = 0; edge < 2; edge++) {
+                n_out = origins_past_right_angled_neighbour(&q, edge, 2000);
+                cr_assert_eq(n_out, 0, "turn %d, size %g at %g, edge %d: %d origins past it", turn,
+                             size, off, edge, n_out);
+            }
         }
     }
 }
