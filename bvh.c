@@ -1833,7 +1833,8 @@ bool bvh_tri_hit_double(const struct bvh_tri *tri, const struct ray_pre *rp, con
                      (n_abs[0] * fabs(po[0]) + n_abs[1] * fabs(po[1]) + n_abs[2] * fabs(po[2]));
     double den_err = gamma_double(6) * (n_abs[0] * fabs(rp->d[0]) + n_abs[1] * fabs(rp->d[1]) +
                                         n_abs[2] * fabs(rp->d[2]));
-    if (fabs(num) > num_err && fabs(den) > den_err && (num > 0.0) != (den > 0.0))
+    bool plane_sure = fabs(num) > num_err && fabs(den) > den_err;
+    if (plane_sure && (num > 0.0) != (den > 0.0))
         return false;
     /* the shear of the ray itself, in double: the float constants turn its direction by up to
      * 2^-24, which decides the side of a ray that grazes the plane at a smaller angle (within
@@ -1886,9 +1887,18 @@ bool bvh_tri_hit_double(const struct bvh_tri *tri, const struct ray_pre *rp, con
     double delta_T = 3.0 * (gamma_double(4) * max_e * max_zt + delta_z * max_e + delta_e * max_zt +
                             delta_z * delta_e);
     double delta_det = 3.0 * (gamma_double(3) * max_e + delta_e);
-    if (!(fabs(T) > delta_T && fabs(det) > delta_det))
-        return false; /* undecided even in double: the origin is on the plane */
+    if (!(fabs(det) > delta_det))
+        return false; /* undecided even in double: the ray lies in the plane */
     double t = T / det;
+    if (!(fabs(T) > delta_T)) {
+        /* T's bound grows with the vertices' distance from the origin (a floor of 1e15 seen
+         * from 1 unit above it); the plane's t, n . (p0 - o) / n . d, does not where n's terms
+         * are few (an axis-aligned plane: one).  Used when its sign is certain and its relative
+         * error bound at most 2^-30, else the origin counts as on the plane: no hit. */
+        if (!(plane_sure && num_err / fabs(num) + den_err / fabs(den) <= 0x1p-30))
+            return false;
+        t = num / den;
+    }
     if (!(t > 0.0))
         return false;
     /* t rounded to float (a positive t that underflows becomes the least positive float), then

@@ -112,6 +112,34 @@ static double rounded_error_sum(struct dvec3 p_d, struct dvec3 err_d, double eta
     return e * (1.0 + 12.0 * eta) * (1.0 + 0x1p-20);
 }
 
+/* The ray's point o + t_hit d projected onto the plane through o_pl with normal c (c_abs: the
+ * magnitudes of the terms each component of c was formed from, c within gamma_d(2) of them), in
+ * double, with *err bounding each component's share of its distance from the exact plane: the
+ * projection's s = c . (x - o_pl) is within gamma_d(6) c_abs . |x - o_pl| (as plane_t), c's
+ * direction within 2 gamma_d(2) |c_abs| / |c| (moving the point by that times its distance
+ * |s| / |c|), and the subtraction rounds.  The error does not grow with |o_pl|, only with the
+ * terms of c that are not zero: for a huge axis-aligned floor seen from nearby it is the
+ * rounding of the point itself, where rebuilding the point from o_pl and the barycentrics costs
+ * |o_pl| u (bvh.c: a floor of 1e15 at y = 0 seen from 1 unit above). */
+static struct dvec3 ray_point_on_plane(const struct ray *ray, float t_hit, struct dvec3 o_pl,
+                                       struct dvec3 c, struct dvec3 c_abs, struct dvec3 *err)
+{
+    struct dvec3 x = d3_add(d3(ray->o), d3_scale(d3(ray->d), t_hit));
+    struct dvec3 xo = d3_sub(x, o_pl);
+    double nn = d3_dot(c, c);
+    double len = sqrt(nn);
+    double s = d3_dot(c, xo);
+    double k = s / nn;
+    struct dvec3 p = d3_sub(x, d3_scale(c, k));
+    double dist = gamma_d(6) * d3_dot(c_abs, d3_abs(xo)) / len +
+                  2.0 * gamma_d(2) * d3_length(c_abs) / len * (fabs(s) / len);
+    struct dvec3 kc = d3_abs(d3_scale(c, k));
+    struct dvec3 ax = d3_abs(x);
+    *err = (struct dvec3){dist + gamma_d(3) * (ax.x + kc.x), dist + gamma_d(3) * (ax.y + kc.y),
+                          dist + gamma_d(3) * (ax.z + kc.z)};
+    return p;
+}
+
 /* The unit normal of the plane spanned by e1, e2 (differences of floats) in double, rounded to
  * float, the length of e1 x e2 (*len, twice a triangle's area), and the bound eta on the error of
  * each of the normal's components: the cross product's components are off by
@@ -605,12 +633,41 @@ static vec3 quad_point(const struct quad *q, double alpha, double beta, vec3 *ng
 struct surface shape_quad_surface(const struct quad *q, const struct ray *ray, float t_hit)
 {
     struct surface sf;
-    /* the planar coordinates of o + t_hit d; the point is rebuilt on the plane from them */
+    /* the planar coordinates of o + t_hit d; the point is rebuilt on the plane from them, or,
+     * for a quad 2^8 times larger than t |d| + |o| (a huge floor seen from nearby), taken from
+     * the ray where that is the more precise, as shape_triangle_surface does */
+    struct dvec3 c = d3_cross(q->e1, q->e2);
     double alpha, beta;
-    quad_coords(q, d3_cross(q->e1, q->e2), ray, t_hit, &alpha, &beta);
+    quad_coords(q, c, ray, t_hit, &alpha, &beta);
     alpha = fmin(1.0, fmax(0.0, alpha));
     beta = fmin(1.0, fmax(0.0, beta));
-    sf.p = quad_point(q, alpha, beta, &sf.ng, &sf.p_error);
+    struct dvec3 d = d3(ray->d);
+    double near = 0x1p8 * ((double)t_hit * sqrt(d3_dot(d, d)) + d3_max(d3_abs(d3(ray->o))));
+    double l1 = d3_dot(q->e1, q->e1), l2 = d3_dot(q->e2, q->e2);
+    if (max_d(l1, l2) > near * near) {
+        double area, eta;
+        vec3 ng = plane_normal(q->e1, q->e2, &area, &eta);
+        struct dvec3 err_r, err_b;
+        struct dvec3 pr = ray_point_on_plane(ray, t_hit, q->corner, c, d3_cross_abs(q->e1, q->e2),
+                                             &err_r);
+        struct dvec3 pb = plane_point_d(q->corner, q->e1, q->e2, alpha, beta, &err_b);
+        double E = rounded_error_sum(pr, err_r, eta);
+        double eps_a = EDGE_MARGIN_E * E * sqrt(l2) / area;
+        double eps_b = EDGE_MARGIN_E * E * sqrt(l1) / area;
+        bool inside = alpha >= eps_a && alpha <= 1.0 - eps_a && beta >= eps_b &&
+                      beta <= 1.0 - eps_b;
+        struct dvec3 x = d3_add(d3(ray->o), d3_scale(d, t_hit));
+        double db = gamma_d(8) * d3_length(d3_sub(x, q->corner)) * sqrt(max_d(l1, l2)) / area;
+        bool resolved = db <= fmin(eps_a, eps_b);
+        if (area > 0.0 && E < rounded_error_sum(pb, err_b, eta) && (inside || !resolved)) {
+            sf.p = round_point(pr, err_r, eta, &sf.p_error);
+            sf.ng = ng;
+        } else {
+            sf.p = quad_point(q, alpha, beta, &sf.ng, &sf.p_error);
+        }
+    } else {
+        sf.p = quad_point(q, alpha, beta, &sf.ng, &sf.p_error);
+    }
     sf.ns = sf.ng;
     sf.uv = (vec2){(float)alpha, (float)beta};
     sf.mat_idx = q->mat_idx;
@@ -792,6 +849,8 @@ struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec
     struct dvec3 d = ray ? d3(ray->d) : (struct dvec3){0.0, 0.0, 0.0};
     double o_max = ray ? d3_max(d3_abs(d3(ray->o))) : 0.0;
     double near = 0x1p8 * ((double)t_hit * sqrt(d3_dot(d, d)) + o_max);
+    bool projected = false;
+    struct surface sf;
     if (ray && max_d(d3_dot(e1, e1), d3_dot(e2, e2)) > near * near) {
         struct dvec3 q = d3_sub(d3_add(d3(ray->o), d3_scale(d, t_hit)), d3(p[0]));
         struct dvec3 n = tp.c;
@@ -801,11 +860,36 @@ struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec
             b2_d = d3_dot(d3_cross(e1, q), n) / nn;
             b1 = (float)b1_d;
             b2 = (float)b2_d;
+            /* the point itself from the ray, where that is the more precise and triangle_point
+             * would not move it: inside every edge by its margin, or outside one by more (the
+             * float inside test of a huge triangle errs by u times its size: the hit is the
+             * coplanar neighbour's point), or where the barycentrics' own error (db, from
+             * |q| u) is larger than that margin, so that no computation in double can tell
+             * (a floor of 1e15 seen from 1 unit: its diagonal is a band 0.1 wide, where the
+             * rebuilt point would be pulled inside by 6 errors of 1.8, 10 units) */
+            struct dvec3 err_r, err_b;
+            struct dvec3 pr = ray_point_on_plane(ray, t_hit, d3(p[0]), n, d3_cross_abs(e1, e2),
+                                                 &err_r);
+            struct dvec3 pb = plane_point_d(d3(p[0]), e1, e2, b1_d, b2_d, &err_b);
+            double E = rounded_error_sum(pr, err_r, tp.eta);
+            double k = EDGE_MARGIN_E * 1.7320508075688774 * E / tp.area2;
+            double b[3] = {1.0 - b1_d - b2_d, b1_d, b2_d};
+            double eps[3] = {k * d3_max(d3_abs(d3_sub(e2, e1))), k * d3_max(d3_abs(e2)),
+                             k * d3_max(d3_abs(e1))};
+            bool inside = b[0] >= eps[0] && b[1] >= eps[1] && b[2] >= eps[2];
+            bool near_edge = !inside && b[0] >= -eps[0] && b[1] >= -eps[1] && b[2] >= -eps[2];
+            double db = gamma_d(8) * d3_length(q) * sqrt(max_d(d3_dot(e1, e1), d3_dot(e2, e2))) /
+                        sqrt(nn);
+            bool resolved = db <= fmin(eps[0], fmin(eps[1], eps[2]));
+            if (E < rounded_error_sum(pb, err_b, tp.eta) && !(near_edge && resolved)) {
+                sf.p = round_point(pr, err_r, tp.eta, &sf.p_error);
+                projected = true;
+            }
         }
     }
     float b0 = 1.0f - b1 - b2;
-    struct surface sf;
-    sf.p = triangle_point(&tp, b1_d, b2_d, &sf.p_error);
+    if (!projected)
+        sf.p = triangle_point(&tp, b1_d, b2_d, &sf.p_error);
     sf.ng = tp.ng;
     sf.ns = sf.ng;
     if (ns) {
