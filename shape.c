@@ -604,6 +604,15 @@ bool shape_quad_intersect(const struct quad *q, const struct ray *ray, float *t_
     return alpha >= 0.0 && alpha <= 1.0 && beta >= 0.0 && beta <= 1.0;
 }
 
+/* quad_point's margins for a point whose error bounds sum to E: eps = EDGE_MARGIN_E E / h in
+ * alpha (h = area / |e2|, the width across the edges alpha = 0, 1) and in beta (area / |e1|). */
+static void quad_margins(const struct quad *q, double area, double E, double *eps_alpha,
+                         double *eps_beta)
+{
+    *eps_alpha = EDGE_MARGIN_E * E * d3_length(q->e2) / area;
+    *eps_beta = EDGE_MARGIN_E * E * d3_length(q->e1) / area;
+}
+
 /* The quad's point corner + alpha e1 + beta e2 with its error bound and unit normal, pulled
  * inside the quad as triangle_point pulls a triangle's: alpha, beta clamped to
  * [eps, 1 - eps] with eps = EDGE_MARGIN_E E / h, h the quad's width across the edges
@@ -619,8 +628,9 @@ static vec3 quad_point(const struct quad *q, double alpha, double beta, vec3 *ng
     struct dvec3 p = plane_point_d(q->corner, e1, e2, alpha, beta, &err);
     double E = rounded_error_sum(p, err, eta);
     /* widths: area / |e2| across the alpha edges, area / |e1| across the beta edges */
-    double eps_alpha = area > 0.0 ? EDGE_MARGIN_E * E * d3_length(e2) / area : 0.5;
-    double eps_beta = area > 0.0 ? EDGE_MARGIN_E * E * d3_length(e1) / area : 0.5;
+    double eps_alpha = 0.5, eps_beta = 0.5;
+    if (area > 0.0)
+        quad_margins(q, area, E, &eps_alpha, &eps_beta);
     if (!(alpha >= eps_alpha && alpha <= 1.0 - eps_alpha && beta >= eps_beta &&
           beta <= 1.0 - eps_beta)) {
         alpha = eps_alpha < 0.5 ? fmin(1.0 - eps_alpha, fmax(eps_alpha, alpha)) : 0.5;
@@ -652,12 +662,11 @@ struct surface shape_quad_surface(const struct quad *q, const struct ray *ray, f
                                              &err_r);
         struct dvec3 pb = plane_point_d(q->corner, q->e1, q->e2, alpha, beta, &err_b);
         double E = rounded_error_sum(pr, err_r, eta);
-        double eps_a = EDGE_MARGIN_E * E * sqrt(l2) / area;
-        double eps_b = EDGE_MARGIN_E * E * sqrt(l1) / area;
+        double eps_a, eps_b;
+        quad_margins(q, area, E, &eps_a, &eps_b);
         bool inside = alpha >= eps_a && alpha <= 1.0 - eps_a && beta >= eps_b &&
                       beta <= 1.0 - eps_b;
-        struct dvec3 x = d3_add(d3(ray->o), d3_scale(d, t_hit));
-        double db = gamma_d(8) * d3_length(d3_sub(x, q->corner)) * sqrt(max_d(l1, l2)) / area;
+        double db = gamma_d(8) * d3_length(d3_sub(pr, q->corner)) * sqrt(max_d(l1, l2)) / area;
         bool resolved = db <= fmin(eps_a, eps_b);
         if (area > 0.0 && E < rounded_error_sum(pb, err_b, eta) && (inside || !resolved)) {
             sf.p = round_point(pr, err_r, eta, &sf.p_error);
@@ -788,6 +797,16 @@ static ALWAYS_INLINE void triangle_plane(const vec3 p[3], struct triangle_plane 
 
 void shape_triangle_plane(const vec3 p[3], struct triangle_plane *tp) { triangle_plane(p, tp); }
 
+/* triangle_point's margins: eps_i = EDGE_MARGIN_E E / h_i for barycentric b_i (b0 = 1 - b1 - b2),
+ * with h_i >= 2 area / (sqrt(3) |edge_i|_max), for a point whose error bounds sum to E. */
+static void triangle_margins(const struct triangle_plane *tp, double E, double eps[3])
+{
+    double k = EDGE_MARGIN_E * 1.7320508075688774 * E / tp->area2;
+    eps[0] = k * d3_max(d3_abs(d3_sub(tp->e2, tp->e1)));
+    eps[1] = k * d3_max(d3_abs(tp->e2));
+    eps[2] = k * d3_max(d3_abs(tp->e1));
+}
+
 /* The point p0 + b1 e1 + b2 e2 of triangle tp (triangle_plane) with its error bound
  * (plane_point_d, round_point), pulled inside the triangle: where
  * some b_i is below eps_i = EDGE_MARGIN_E E / h_i, with E the sum of the point's error bounds
@@ -805,11 +824,8 @@ static ALWAYS_INLINE vec3 triangle_point(const struct triangle_plane *tp, double
     struct dvec3 err;
     struct dvec3 pd = plane_point_d(d3(tp->p0), e1, e2, b1, b2, &err);
     if (area2 > 0.0) {
-        double k = EDGE_MARGIN_E * 1.7320508075688774 * rounded_error_sum(pd, err, eta) / area2;
-        struct dvec3 e3 = d3_abs(d3_sub(e2, e1));
-        struct dvec3 a1 = d3_abs(e1);
-        struct dvec3 a2 = d3_abs(e2);
-        double eps[3] = {k * d3_max(e3), k * d3_max(a2), k * d3_max(a1)};
+        double eps[3];
+        triangle_margins(tp, rounded_error_sum(pd, err, eta), eps);
         double b[3] = {1.0 - b1 - b2, b1, b2};
         bool inside = b[0] >= eps[0] && b[1] >= eps[1] && b[2] >= eps[2];
         bool near = b[0] >= -eps[0] && b[1] >= -eps[1] && b[2] >= -eps[2];
@@ -872,10 +888,9 @@ struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec
                                                  &err_r);
             struct dvec3 pb = plane_point_d(d3(p[0]), e1, e2, b1_d, b2_d, &err_b);
             double E = rounded_error_sum(pr, err_r, tp.eta);
-            double k = EDGE_MARGIN_E * 1.7320508075688774 * E / tp.area2;
             double b[3] = {1.0 - b1_d - b2_d, b1_d, b2_d};
-            double eps[3] = {k * d3_max(d3_abs(d3_sub(e2, e1))), k * d3_max(d3_abs(e2)),
-                             k * d3_max(d3_abs(e1))};
+            double eps[3];
+            triangle_margins(&tp, E, eps);
             bool inside = b[0] >= eps[0] && b[1] >= eps[1] && b[2] >= eps[2];
             bool near_edge = !inside && b[0] >= -eps[0] && b[1] >= -eps[1] && b[2] >= -eps[2];
             double db = gamma_d(8) * d3_length(q) * sqrt(max_d(d3_dot(e1, e1), d3_dot(e2, e2))) /
