@@ -999,14 +999,18 @@ static COLD void woop8_fallback(uint32_t lanes, struct f8 Ax, struct f8 Ay, stru
     *W = f8_loadu(w);
 }
 
-/* Returns the lanes certainly hit in (t_min, t_max); out->undecided gets the inside lanes whose
- * side of the origin the float bounds leave open, for the caller to decide with
- * bvh_tri_hit_double (it has the stored vertices, woop8 only their translated copies). */
-static ALWAYS_INLINE uint32_t woop8(const struct woop8_in *in, uint32_t valid,
-                                    struct woop8_out *out)
+/* woop8's first half: the sheared vertices and the edge functions. */
+struct woop8_edges {
+    struct f8 Ax, Ay, Bx, By, Cx, Cy;
+    struct f8 U, V, W;
+};
+
+/* The lanes of `valid` whose line passes inside the triangle (edge functions that agree in
+ * sign), with what woop8_finish needs in *e. */
+static ALWAYS_INLINE uint32_t woop8_inside(const struct woop8_in *in, uint32_t valid,
+                                           struct woop8_edges *e)
 {
     const struct f8 zero = f8_set1(0.0f);
-    out->undecided = 0;
     /* shear so each lane's ray direction becomes (0, 0, 1) */
     struct f8 Ax = f8_sub(in->a[0], f8_mul(in->sx, in->a[2]));
     struct f8 Ay = f8_sub(in->a[1], f8_mul(in->sy, in->a[2]));
@@ -1024,9 +1028,21 @@ static ALWAYS_INLINE uint32_t woop8(const struct woop8_in *in, uint32_t valid,
     /* outside when the edge functions disagree in sign */
     struct m8 any_neg = m8_or(m8_or(f8_lt(U, zero), f8_lt(V, zero)), f8_lt(W, zero));
     struct m8 any_pos = m8_or(m8_or(f8_gt(U, zero), f8_gt(V, zero)), f8_gt(W, zero));
-    uint32_t inside = valid & ~m8_bits(m8_and(any_neg, any_pos));
-    if (!inside)
-        return 0;
+    *e = (struct woop8_edges){Ax, Ay, Bx, By, Cx, Cy, U, V, W};
+    return valid & ~m8_bits(m8_and(any_neg, any_pos));
+}
+
+/* woop8's second half, for the lanes `inside` that woop8_inside found: returns the lanes
+ * certainly hit in (t_min, t_max); out->undecided gets the inside lanes whose side of the origin
+ * the float bounds leave open, for the caller to decide with bvh_tri_hit_double (it has the
+ * stored vertices, woop8 only their translated copies). */
+static ALWAYS_INLINE uint32_t woop8_finish(const struct woop8_in *in, uint32_t inside,
+                                           const struct woop8_edges *e, struct woop8_out *out)
+{
+    const struct f8 zero = f8_set1(0.0f);
+    struct f8 Ax = e->Ax, Ay = e->Ay, Bx = e->Bx, By = e->By, Cx = e->Cx, Cy = e->Cy;
+    struct f8 U = e->U, V = e->V, W = e->W;
+    out->undecided = 0;
     struct f8 det = f8_add(f8_add(U, V), W);
     inside &= ~m8_bits(f8_eq(det, zero));
     if (!inside)
@@ -1090,6 +1106,16 @@ static ALWAYS_INLINE uint32_t woop8(const struct woop8_in *in, uint32_t valid,
     out->u = f8_mul(V, inv_det);
     out->v = f8_mul(W, inv_det);
     return hit;
+}
+
+/* Both halves: the lanes of `valid` certainly hit, as woop8_finish. */
+static ALWAYS_INLINE uint32_t woop8(const struct woop8_in *in, uint32_t valid,
+                                    struct woop8_out *out)
+{
+    struct woop8_edges e;
+    out->undecided = 0;
+    uint32_t inside = woop8_inside(in, valid, &e);
+    return inside ? woop8_finish(in, inside, &e, out) : 0;
 }
 
 /* ---- Wide traversal, one ray --------------------------------------------------------------------
@@ -1302,8 +1328,8 @@ static COLD uint32_t leaf_undecided(const struct bvh *bvh, uint32_t first, uint3
 }
 
 /* Of the lanes of the leaf at wide triangle `first`, those holding triangle `from` (the one a
- * spawned ray leaves: bvh_intersect_from).  Only lanes woop8 found hit or left undecided are
- * looked at, so the lookup costs nothing on the leaves a ray merely passes. */
+ * spawned ray leaves: bvh_intersect_from).  Only the lanes whose line passes inside
+ * (woop8_inside) are looked at, so the lookup costs nothing on the leaves a ray merely passes. */
 static inline uint32_t leaf_own(const struct bvh *bvh, uint32_t first, uint32_t lanes,
                                 uint32_t from)
 {
@@ -1336,15 +1362,19 @@ static ALWAYS_INLINE uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t firs
     in.o_scale = v->o_scale;
     in.t_min = v->t_min;
     in.t_max = f8_set1(t_max);
-    uint32_t hits = woop8(&in, (1u << n) - 1u, out);
-    if (out->undecided) {
-        if (v->from != BVH_NO_PRIM)
-            out->undecided &= ~leaf_own(bvh, first, out->undecided, v->from);
-        if (out->undecided)
-            hits |= leaf_undecided(bvh, first, n, v->rp, v->rp_t_min, t_max, out->undecided, out);
-    }
-    if (hits && v->from != BVH_NO_PRIM)
-        hits &= ~leaf_own(bvh, first, hits, v->from);
+    struct woop8_edges e;
+    out->undecided = 0;
+    uint32_t inside = woop8_inside(&in, (1u << n) - 1u, &e);
+    /* the ray's own triangle leaves before its error bounds are computed: the line of a ray
+     * spawned on it passes inside it (at t ~ 0), so without this every spawned ray would pay
+     * woop8_finish at its own leaf */
+    if (inside && v->from != BVH_NO_PRIM)
+        inside &= ~leaf_own(bvh, first, inside, v->from);
+    if (!inside)
+        return 0;
+    uint32_t hits = woop8_finish(&in, inside, &e, out);
+    if (out->undecided)
+        hits |= leaf_undecided(bvh, first, n, v->rp, v->rp_t_min, t_max, out->undecided, out);
     return hits;
 }
 
