@@ -133,6 +133,7 @@ static uint32_t cmj_columns(uint32_t n_samples)
 
 static void sobol_pixel_seeds(struct sampler *s);
 static void sobol_joint_point(struct sampler *s);
+static void pad_block(struct sampler *s, uint32_t dim);
 
 void sample_start_pixel(struct sampler *s, enum sampler_kind kind, uint64_t seed,
                         uint32_t pixel_idx, uint32_t set_spp)
@@ -160,8 +161,11 @@ void sample_start_index(struct sampler *s, uint32_t sample_idx)
                                    sample_hash64(((uint64_t)s->pixel_idx << 32) | sample_idx));
         sample_pcg32_seed(&s->rng, h, sample_hash64(h));
     } else if (s->kind == SAMPLER_SOBOL) {
-        s->pad_dim0 = SAMPLE_PAD_NONE;
         sobol_joint_point(s);
+        /* the first fill now, not at the first bounce's request: its hashes are a chain of
+         * dependent multiplies that the camera ray's traversal then hides, where on demand
+         * the path waited for them (nearly every path reaches its first bounce) */
+        pad_block(s, SAMPLE_DIM_BOUNCE0 + SAMPLE_BOUNCE_BSDF_LOBE);
     }
 }
 
