@@ -136,8 +136,9 @@ _Static_assert(__builtin_popcount(SAMPLE_BLOCK_REQUESTS) == SAMPLE_REQUESTS_PER_
  * Sobol': stateless hashes of (seed, pixel_idx, sample_idx, dim, set_spp).  What the samples of
  * one pixel share (the hashes of the pixel's seeds) is computed once by sample_start_pixel; each
  * sample then starts with sample_start_index, which for Sobol' also computes the whole joint
- * point at once (a lane per dimension), so that reading a joint dimension is a load.  A sampler
- * holds no pointer: copying one copies the sample. */
+ * point at once (a lane per dimension) and the first padding fill (the first three bounces'
+ * requests), so that reading those dimensions is a load.  A sampler holds no pointer: copying
+ * one copies the sample. */
 struct sampler {
     enum sampler_kind kind;
     uint64_t seed;
