@@ -470,6 +470,9 @@ static void sobol_pixel_seeds(struct sampler *s)
     s->shuffle_seed = dim_seed(s, UINT32_MAX, 0);
     for (uint32_t d = 0; d < SAMPLE_SOBOL_JOINT_LANES; d++)
         s->joint_seed[d] = dim_seed(s, d, 1);
+    s->path_shuffle_seed = dim_seed(s, UINT32_MAX, 3);
+    for (uint32_t d = 0; d < SAMPLE_PAD_LANES; d++)
+        s->path_seed[d] = dim_seed(s, d, 4);
     pad_seeds(s, SAMPLE_DIM_BOUNCE0 + PAD_FIRST_KEPT * SAMPLE_DIMS_PER_BOUNCE, s->pad_seed_index,
               s->pad_seed_x, s->pad_seed_y, SAMPLE_PAD_KEPT_REQUESTS);
 }
@@ -502,6 +505,65 @@ static void sobol_joint_point(struct sampler *s)
         nested_uniform_scramble_x8(&u, &seed);
         fraction_to_float_x8(&u, s->joint_u + l);
     }
+}
+
+/* The path point (sample.h, SAMPLE_SOBOL_PATH_DIRS): the BSDF directions of the first bounces
+ * as one Sobol' point, computed as the joint point is, with its own index shuffle and scrambles.
+ * path_dir_slot gives the slot j of a padded direction's dimension (its values are the point's
+ * dimensions PATH_DIMS[j]), or -1 for every other dimension. */
+_Static_assert(SAMPLE_SOBOL_PATH_DIRS <= 3 && SAMPLE_SOBOL_PATH_DIRS <= SAMPLE_PAD_BLOCKS,
+               "the path point is one vector, its directions within the first fill");
+
+/* The path point's dimension pairs, from its first eight: (0, 1) a (0,2)-sequence, (2, 3) and
+ * (4, 6) (t, 2)-sequences with t = 2 ((4, 5) has t = 3: every (t, m, 2)-net property checked
+ * to 2^12 points), and the six top digits independent, so that any aligned 64 samples put one
+ * point in each of the 64 cells that halving every coordinate makes. */
+static const uint8_t PATH_DIMS[3][2] = {{0, 1}, {2, 3}, {4, 6}};
+
+static int path_dir_slot(uint32_t dim)
+{
+    int j = 0;
+    for (uint32_t b = 0; b < SAMPLE_SOBOL_PATH_DIRS; b++) {
+        uint32_t d = SAMPLE_DIM_BOUNCE0 + b * SAMPLE_DIMS_PER_BOUNCE + SAMPLE_BOUNCE_BSDF_DIR;
+        if (d < SAMPLE_SOBOL_JOINT_DIMS)
+            continue; /* a direction in the joint point */
+        if (d == dim)
+            return j;
+        j++;
+    }
+    return -1;
+}
+
+/* The path point's SAMPLE_PAD_LANES dimensions (those past 2 SAMPLE_SOBOL_PATH_DIRS unread). */
+static void sobol_path_point(const struct sampler *s, float u[SAMPLE_PAD_LANES])
+{
+    uint32_t index = reverse_bits32(
+        laine_karras_permutation(s->sample_idx_rev, s->path_shuffle_seed));
+    uint32_t x[SAMPLE_PAD_LANES] = {0};
+    for (int p = 0; p < 8; p++) {
+        const uint32_t *row = SOBOL_NIBBLES[p][index >> 4 * p & 15u];
+        for (int d = 0; d < SAMPLE_PAD_LANES; d++)
+            x[d] ^= row[d];
+    }
+    u32x8 v, seed;
+    memcpy(&v, x, sizeof v);
+    memcpy(&seed, s->path_seed, sizeof seed);
+    nested_uniform_scramble_x8(&v, &seed);
+    fraction_to_float_x8(&v, u);
+}
+
+/* The path point's slot j alone, to the bit what sobol_path_point gives there. */
+static vec2 sobol_path_dir(const struct sampler *s, int j)
+{
+    uint32_t index = reverse_bits32(
+        laine_karras_permutation(s->sample_idx_rev, s->path_shuffle_seed));
+    float u[2];
+    for (int c = 0; c < 2; c++) {
+        uint32_t d = PATH_DIMS[j][c];
+        uint32_t x = reverse_bits32(sample_sobol_u32(index, d));
+        u[c] = fraction_to_float(reverse_bits32(laine_karras_permutation(x, s->path_seed[d])));
+    }
+    return (vec2){u[0], u[1]};
 }
 
 /* Padding (Burley 2020): a request at dimension dim >= the joint ones reads Sobol' dimensions
@@ -628,6 +690,20 @@ static void pad_block(struct sampler *s, uint32_t dim)
     pad_spread(&x_lo, &x_hi, s->pad_x);
     pad_spread(&y_lo, &y_hi, s->pad_y);
     s->pad_dim0 = dim0;
+    /* the BSDF directions of the path point, where the fill holds them (the first fill always:
+     * sample_start_index makes it) */
+    if (SAMPLE_SOBOL_PATH_DIRS > 0 && block < SAMPLE_SOBOL_PATH_DIRS) {
+        float u[SAMPLE_PAD_LANES];
+        sobol_path_point(s, u);
+        for (uint32_t b = block; b < SAMPLE_SOBOL_PATH_DIRS; b++) {
+            uint32_t d = SAMPLE_DIM_BOUNCE0 + b * SAMPLE_DIMS_PER_BOUNCE + SAMPLE_BOUNCE_BSDF_DIR;
+            int j = path_dir_slot(d);
+            if (j >= 0) {
+                s->pad_x[d - dim0] = u[PATH_DIMS[j][0]];
+                s->pad_y[d - dim0] = u[PATH_DIMS[j][1]];
+            }
+        }
+    }
 }
 
 /* The Sobol' request at dimension dim >= SAMPLE_SOBOL_JOINT_DIMS: x, and y for a 2D request. */
@@ -644,6 +720,9 @@ static vec2 sobol_pad(struct sampler *s, uint32_t dim)
 
 vec2 sample_sobol_request(const struct sampler *s, uint32_t dim)
 {
+    int slot = path_dir_slot(dim);
+    if (slot >= 0)
+        return sobol_path_dir(s, slot);
     uint32_t seed_index, seed_x, seed_y;
     request_seeds(s, dim, &seed_index, &seed_x, &seed_y);
     return pad_request(s->sample_idx_rev, seed_index, seed_x, seed_y);

@@ -84,6 +84,15 @@ enum {
 #define SAMPLE_SOBOL_JOINT_DIMS (SAMPLE_DIM_BOUNCE0 + SAMPLE_BOUNCE_BSDF_LOBE)
 #endif
 #define SAMPLE_SOBOL_MAX_DIMS 16 /* dimensions in the generator-matrix table */
+/* The BSDF directions of the first SAMPLE_SOBOL_PATH_DIRS bounces (those the first padding fill
+ * holds) that are padded come from a second Sobol' point, shuffled and scrambled apart from the
+ * joint one (sample.c, PATH_DIMS: a pair of its dimensions each).  A path's successive directions
+ * are then stratified together instead of paired at random (docs/sampling.md; the Cornell box's
+ * off-lamp MSE at 256 spp falls 13%, docs/performance.md, "QMC dimension allocation").  0
+ * pads them like every other request. */
+#ifndef SAMPLE_SOBOL_PATH_DIRS
+#define SAMPLE_SOBOL_PATH_DIRS 3
+#endif
 /* Lanes of the joint point's loops (sample.c): the joint dimensions rounded up to a vector of 8
  * or 16 (the lanes past the joint dimensions are computed and never read). */
 #define SAMPLE_SOBOL_JOINT_LANES (SAMPLE_SOBOL_JOINT_DIMS <= 8 ? 8 : SAMPLE_SOBOL_MAX_DIMS)
@@ -137,7 +146,8 @@ _Static_assert(__builtin_popcount(SAMPLE_BLOCK_REQUESTS) == SAMPLE_REQUESTS_PER_
  * one pixel share (the hashes of the pixel's seeds) is computed once by sample_start_pixel; each
  * sample then starts with sample_start_index, which for Sobol' also computes the whole joint
  * point at once (a lane per dimension) and the first padding fill (the first three bounces'
- * requests), so that reading those dimensions is a load.  A sampler holds no pointer: copying
+ * requests, their BSDF directions from the path point), so that reading those dimensions is a
+ * load.  A sampler holds no pointer: copying
  * one copies the sample. */
 struct sampler {
     enum sampler_kind kind;
@@ -152,6 +162,9 @@ struct sampler {
     /* Sobol', per pixel */
     uint32_t shuffle_seed;                         /* seed of the joint point's index shuffle */
     uint32_t joint_seed[SAMPLE_SOBOL_JOINT_LANES]; /* scramble seed of each joint dimension */
+    /* the path point's index shuffle and the scramble seed of each of its dimensions */
+    uint32_t path_shuffle_seed;
+    uint32_t path_seed[SAMPLE_PAD_LANES];
     /* the seeds of the padding requests from the first padded block's start, request k at a
      * time (sample.c, pad_request_dim): the shuffle of the sample index, the scrambles of the
      * first and the second coordinate */
@@ -164,7 +177,7 @@ struct sampler {
     uint32_t pad_dim0;                       /* first dimension held, or SAMPLE_PAD_NONE */
     float pad_x[SAMPLE_PAD_SPAN_STORED];     /* the padding request at pad_dim0 + k, where */
     float pad_y[SAMPLE_PAD_SPAN_STORED];     /* sample_pad_holds: x, and y of a 2D request */
-};                                           /* 704 bytes */
+};                                           /* 740 bytes */
 
 /* Starts the sample sample_idx of pixel pixel_idx at dimension 0, with set_spp = 0: the
  * stratified sampler then has no strata to fill and gives independent hashed uniforms. */
@@ -190,9 +203,9 @@ void sample_set_dim(struct sampler *s, uint32_t dim);
  * the sampler holds. */
 float sample_1d_compute(struct sampler *s, uint32_t dim);
 vec2 sample_2d_compute(struct sampler *s, uint32_t dim);
-/* The Sobol' sampler's padded request at dimension dim >= SAMPLE_SOBOL_JOINT_DIMS of its current
- * sample, computed alone (sample.c, "Padding"): what sample_2d (and, for x, sample_1d) return
- * there, however the sampler computed them. */
+/* The Sobol' sampler's request at dimension dim >= SAMPLE_SOBOL_JOINT_DIMS of its current sample
+ * (a padded one, or a BSDF direction of the path point), computed alone (sample.c, "Padding"):
+ * what sample_2d (and, for x, sample_1d) return there, however the sampler computed them. */
 vec2 sample_sobol_request(const struct sampler *s, uint32_t dim);
 
 /* Whether dimension dim is a request the Sobol' sampler holds from its last fill. */

@@ -350,6 +350,38 @@ Test(sample, sobol_2d_requests_are_02_nets)
         }
 }
 
+/* The path point (sample.h, SAMPLE_SOBOL_PATH_DIRS) stratifies a path's first BSDF directions
+ * together: over any aligned block of 4^k samples of a pixel, the k directions' 2k coordinates
+ * fall one point in each of the 4^k cells that halving every coordinate makes (the top digits
+ * of Sobol' dimensions 0 .. 2k - 1 are independent; shuffle and scrambles map aligned blocks and
+ * halves onto aligned blocks and halves).  Independently padded directions would do so with
+ * probability (4^k)! / (4^k)^(4^k), 1e-26 for k = 3. */
+Test(sample, sobol_path_directions_stratified_together)
+{
+    const uint32_t k = SAMPLE_SOBOL_PATH_DIRS;
+    const uint32_t dir0 = SAMPLE_DIM_BOUNCE0 + SAMPLE_BOUNCE_BSDF_DIR;
+    cr_assert(k >= 2 && SAMPLE_SOBOL_JOINT_DIMS <= dir0, "the directions are padded");
+    const uint32_t n = 1u << 2 * k;
+    static const uint32_t pixels[] = {0, 77, 123456};
+    for (size_t p = 0; p < 3; p++)
+        for (uint32_t block = 0; block < 6; block += 5) {
+            bool cell[1u << 2 * SAMPLE_SOBOL_PATH_DIRS] = {false};
+            for (uint32_t i = 0; i < n; i++) {
+                struct sampler s;
+                sample_start(&s, SAMPLER_SOBOL, 5u, pixels[p], block * n + i);
+                uint32_t c = 0;
+                for (uint32_t b = 0; b < k; b++) {
+                    sample_set_dim(&s, dir0 + b * SAMPLE_DIMS_PER_BOUNCE);
+                    vec2 u = sample_2d(&s);
+                    c |= (uint32_t)(u.x >= 0.5f) << 2 * b | (uint32_t)(u.y >= 0.5f) << (2 * b + 1);
+                }
+                cr_assert(!cell[c], "pixel %u block %u: two samples in cell %u", pixels[p], block,
+                          c);
+                cell[c] = true;
+            }
+        }
+}
+
 /* The stratified sampler's sets of N = set_spp samples (Kensler 2013, correlated
  * multi-jittered): in 1D every 1/N interval holds one point of a set; in 2D every 1/N interval
  * of x and of y, and every cell of the m x n grid, holds one point when N = m n; for N = 7 (a
