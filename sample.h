@@ -34,8 +34,9 @@ enum sampler_kind {
     SAMPLER_STRATIFIED,  /* correlated multi-jittered strata over the pixel's spp (Kensler 2013),
                             dimensions decorrelated by per-pixel hashed permutations */
     SAMPLER_SOBOL,       /* Owen-scrambled Sobol' with a per-pixel shuffled index (Burley 2020):
-                            joint over the first SAMPLE_SOBOL_JOINT_DIMS dimensions, padded
-                            beyond by independently scrambled 2D (0,2)-sequences */
+                            joint over the first SAMPLE_SOBOL_JOINT_DIMS dimensions, the first
+                            bounces' BSDF directions from a second point, padded beyond by
+                            independently scrambled 2D (0,2)-sequences */
 };
 #define SAMPLER_COUNT 3
 /* The sampler of a scene and command line that name none: the best of the three in the
@@ -77,7 +78,8 @@ enum {
 /* Dimensions the Sobol' sampler draws from one Sobol' point: pixel, lens and the first
  * bounce's light sample (choice and position: the direct light at the first hit, whose shadow
  * edges couple it with the pixel position), 7 dimensions; every later 1D or 2D request (the
- * first bounce's BSDF sample on) is a separately shuffled and scrambled (0,2)-sequence.
+ * first bounce's BSDF sample on) is a separately shuffled and scrambled (0,2)-sequence, but for
+ * the BSDF directions of the path point below.
  * docs/sampling.md measures this against the whole first bounce joint (11) and pixel and lens
  * only (4, Burley 2020's choice); -DSAMPLE_SOBOL_JOINT_DIMS=N builds the others. */
 #ifndef SAMPLE_SOBOL_JOINT_DIMS
