@@ -179,7 +179,7 @@ struct sampler {
     uint32_t pad_dim0;                       /* first dimension held, or SAMPLE_PAD_NONE */
     float pad_x[SAMPLE_PAD_SPAN_STORED];     /* the padding request at pad_dim0 + k, where */
     float pad_y[SAMPLE_PAD_SPAN_STORED];     /* sample_pad_holds: x, and y of a 2D request */
-};                                           /* 740 bytes */
+};                                           /* 744 bytes */
 
 /* Starts the sample sample_idx of pixel pixel_idx at dimension 0, with set_spp = 0: the
  * stratified sampler then has no strata to fill and gives independent hashed uniforms. */
