@@ -1363,7 +1363,6 @@ static ALWAYS_INLINE uint32_t wide_leaf_hit(const struct bvh *bvh, uint32_t firs
     in.t_min = v->t_min;
     in.t_max = f8_set1(t_max);
     struct woop8_edges e;
-    out->undecided = 0;
     uint32_t inside = woop8_inside(&in, (1u << n) - 1u, &e);
     /* the ray's own triangle leaves before its error bounds are computed: the line of a ray
      * spawned on it passes inside it (at t ~ 0), so without this every spawned ray would pay

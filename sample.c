@@ -477,34 +477,42 @@ static void sobol_pixel_seeds(struct sampler *s)
               s->pad_seed_x, s->pad_seed_y, SAMPLE_PAD_KEPT_REQUESTS);
 }
 
-/* The joint point of the sample, every dimension at once (Burley 2020: shuffled_scrambled_sobol4d
- * for SAMPLE_SOBOL_JOINT_DIMS dimensions):
+/* A shuffled, scrambled Sobol' point of the sample, n_lanes (a multiple of 8) dimensions at once
+ * (Burley 2020: shuffled_scrambled_sobol4d for n_lanes dimensions):
  *   index = nested_uniform_scramble(sample_idx, shuffle_seed)   (the per-pixel shuffle: power-
  *           of-two prefixes of a pixel's samples map to aligned blocks of the sequence, which
  *           are (t, m, s)-nets)
  *   x_d = C_d * bits(index) over GF(2), as the XOR of one table row per 4-bit digit of index
- *   u_d = nested_uniform_scramble(x_d, joint_seed_d),
+ *   u_d = nested_uniform_scramble(x_d, seed_d),
  * nested_uniform_scramble(x, seed) being Burley's reverse_bits32(laine_karras_permutation(
  * reverse_bits32(x), seed)), computed a vector of lanes at a time (nested_uniform_scramble_x8).
  * The loops over d run a lane per dimension with no branch; u_d is the scramble of
  * sample_sobol_u32(index, d) to the bit. */
+static ALWAYS_INLINE void sobol_point(uint32_t sample_idx_rev, uint32_t shuffle_seed,
+                                      const uint32_t *seed, int n_lanes, float *u)
+{
+    uint32_t index = reverse_bits32(laine_karras_permutation(sample_idx_rev, shuffle_seed));
+    uint32_t x[SAMPLE_SOBOL_MAX_DIMS] = {0};
+    for (int p = 0; p < 8; p++) {
+        const uint32_t *row = SOBOL_NIBBLES[p][index >> 4 * p & 15u];
+        for (int d = 0; d < n_lanes; d++)
+            x[d] ^= row[d];
+    }
+    for (int l = 0; l < n_lanes; l += SAMPLE_PAD_LANES) {
+        u32x8 v, sd;
+        memcpy(&v, x + l, sizeof v);
+        memcpy(&sd, seed + l, sizeof sd);
+        nested_uniform_scramble_x8(&v, &sd);
+        fraction_to_float_x8(&v, u + l);
+    }
+}
+
+/* The joint point: SAMPLE_SOBOL_JOINT_DIMS dimensions (rounded up to whole vectors). */
 static void sobol_joint_point(struct sampler *s)
 {
     s->sample_idx_rev = reverse_bits32(s->sample_idx);
-    uint32_t index = reverse_bits32(laine_karras_permutation(s->sample_idx_rev, s->shuffle_seed));
-    uint32_t x[SAMPLE_SOBOL_JOINT_LANES] = {0};
-    for (int p = 0; p < 8; p++) {
-        const uint32_t *row = SOBOL_NIBBLES[p][index >> 4 * p & 15u];
-        for (int d = 0; d < SAMPLE_SOBOL_JOINT_LANES; d++)
-            x[d] ^= row[d];
-    }
-    for (int l = 0; l < SAMPLE_SOBOL_JOINT_LANES; l += SAMPLE_PAD_LANES) {
-        u32x8 u, seed;
-        memcpy(&u, x + l, sizeof u);
-        memcpy(&seed, s->joint_seed + l, sizeof seed);
-        nested_uniform_scramble_x8(&u, &seed);
-        fraction_to_float_x8(&u, s->joint_u + l);
-    }
+    sobol_point(s->sample_idx_rev, s->shuffle_seed, s->joint_seed, SAMPLE_SOBOL_JOINT_LANES,
+                s->joint_u);
 }
 
 /* The path point (sample.h, SAMPLE_SOBOL_PATH_DIRS): the BSDF directions of the first bounces
@@ -537,19 +545,7 @@ static int path_dir_slot(uint32_t dim)
 /* The path point's SAMPLE_PAD_LANES dimensions (those past 2 SAMPLE_SOBOL_PATH_DIRS unread). */
 static void sobol_path_point(const struct sampler *s, float u[SAMPLE_PAD_LANES])
 {
-    uint32_t index = reverse_bits32(
-        laine_karras_permutation(s->sample_idx_rev, s->path_shuffle_seed));
-    uint32_t x[SAMPLE_PAD_LANES] = {0};
-    for (int p = 0; p < 8; p++) {
-        const uint32_t *row = SOBOL_NIBBLES[p][index >> 4 * p & 15u];
-        for (int d = 0; d < SAMPLE_PAD_LANES; d++)
-            x[d] ^= row[d];
-    }
-    u32x8 v, seed;
-    memcpy(&v, x, sizeof v);
-    memcpy(&seed, s->path_seed, sizeof seed);
-    nested_uniform_scramble_x8(&v, &seed);
-    fraction_to_float_x8(&v, u);
+    sobol_point(s->sample_idx_rev, s->path_shuffle_seed, s->path_seed, SAMPLE_PAD_LANES, u);
 }
 
 /* The path point's slot j alone, to the bit what sobol_path_point gives there. */
