@@ -271,8 +271,9 @@ $(BUILD)/bench-base/%/mcpt:
 	$(MAKE) -C $(BUILD)/bench-base/$* mcpt
 
 # `make bench-cycles` (scripts/bench_cycles.py): the equal-error time ratio mcpt/Cycles on the
-# Cornell box at 256x256, both renderers in the same run.  Only where Blender is installed;
-# nothing depends on it.  CYCLES_REF: the 16384-spp Cycles reference, made on first use.
+# Cornell box at 256x256, both renderers in the same run, mcpt uniform and with the adaptive
+# budget rule.  Only where Blender is installed; nothing depends on it.  CYCLES_REF: the
+# 16384-spp Cycles reference, made on first use.
 BLENDER ?= blender
 CYCLES_REF ?= bench/ref/cornell256-cycles16384.exr
 BENCH_CYCLES_RUNS ?= 3

@@ -66,17 +66,23 @@ static const char USAGE[] =
     "      --adaptive         adaptive sampling: each pixel gets the samples that bring the\n"
     "                         95% interval of its mean luminance, 1.96 sigma/sqrt(n), to\n"
     "                         T max(mean, floor) (docs/sampling.md)\n"
-    "      --adaptive-rule R  pilot (default: sigma from a discarded pilot; unbiased) or stop\n"
-    "                         (stop when the pixel's own interval is narrow; biased low)\n"
+    "      --adaptive-rule R  pilot (default: sigma from a discarded pilot; unbiased), stop\n"
+    "                         (stop when the pixel's own interval is narrow; biased low) or\n"
+    "                         budget (--spp is a mean: every pixel's discarded pilot sets its\n"
+    "                         count, a power of two, where it lowers the MSE most; unbiased)\n"
     "      --tolerance T      adaptive: relative tolerance (default 0.1)\n"
     "      --adaptive-floor F adaptive: luminance below which T applies absolutely\n"
     "                         (default 0.01)\n"
-    "      --pilot-spp P      adaptive pilot: samples of the pilot (default 16, >= 2)\n"
+    "      --pilot-spp P      adaptive pilot: samples of the pilot (default 16, >= 2; budget 8)\n"
     "      --batch B          adaptive: samples between tests, or pilot counts rounded up to\n"
     "                         whole batches (default 32)\n"
     "      --min-spp N        adaptive: samples before the first test, or the least a pixel\n"
-    "                         gets by the pilot (default 64, >= 2)\n"
-    "      --max-spp N        adaptive: most samples per pixel (default: the spp)\n"
+    "                         gets by the pilot (default 64, >= 2; budget: the largest\n"
+    "                         power of two <= spp / 4)\n"
+    "      --max-spp N        adaptive: most samples per pixel (default: the spp; budget:\n"
+    "                         8 spp)\n";
+/* the help is two strings: C11 compilers need only accept 4095 bytes in one */
+static const char USAGE_MORE[] =
     "      --heatmap PNG      write a false-colour map of the samples per pixel with a legend\n"
     "                         (adaptive default: OUT.samples.png)\n"
     "      --width W          film width in pixels (default: the scene's film); alone, the\n"
@@ -86,9 +92,7 @@ static const char USAGE[] =
     "      --exposure E       PNG exposure in stops (default 0)\n"
     "      --tonemap T        PNG tone curve: clamp (default), reinhard or aces\n"
     "      --no-preview       no PNG beside OUT.exr\n"
-    "      --quiet            print errors only\n";
-/* the help is two strings: C11 compilers need only accept 4095 bytes in one */
-static const char USAGE_MORE[] =
+    "      --quiet            print errors only\n"
     "      --checkpoint CKPT  where an interrupted render saves its state (default OUT.exr.ckpt)\n"
     "      --checkpoint-every S  save the checkpoint every S seconds while rendering too, so\n"
     "                         that kill -9 or a power cut loses at most S s (default 60; 0: only\n"
@@ -473,7 +477,8 @@ static bool apply_option(struct options *o, int c, const char *name, struct mcpt
     case OPT_ADAPTIVE_RULE:
         o->has_adaptive_rule = true;
         return scene_adaptive_rule_parse(optarg, &o->adaptive_rule) ||
-               cmd_usage_error(err, "expected --adaptive-rule to be pilot or stop, got '%s'",
+               cmd_usage_error(err,
+                               "expected --adaptive-rule to be pilot, stop or budget, got '%s'",
                                optarg);
     case OPT_TOLERANCE:
         return (cmd_parse_float(optarg, 0.0f, SCENE_MAX_TOLERANCE, &o->tolerance) &&
@@ -863,6 +868,53 @@ static bool build(struct run *run, struct mcpt_error *err)
 
 /* ---- render: the settings ---- */
 
+/* The budget rule's fields of topt (sampling_options): topt->spp, the budget, becomes
+ * budget_spp, and the maximum max-spp, else TRACE_BUDGET_MAX_FACTOR times the budget; min-spp
+ * defaults to the largest power of two at most a quarter of the budget.  The pilot and the
+ * least count must leave room in the budget. */
+static bool budget_options(const struct options *o, const struct render_settings *r,
+                           struct trace_options *topt, struct mcpt_error *err)
+{
+    if (o->tolerance || o->adaptive_floor >= 0.0f || o->batch)
+        return cmd_usage_error(err, "expected no --tolerance, --adaptive-floor or --batch with "
+                                    "--adaptive-rule budget (it spends --spp, a mean), got one");
+    uint32_t budget = topt->spp;
+    topt->budget_spp = budget;
+    topt->pilot_spp = o->pilot_spp   ? o->pilot_spp
+                      : r->pilot_spp ? r->pilot_spp
+                                     : TRACE_BUDGET_PILOT_SPP;
+    uint64_t max_default = (uint64_t)TRACE_BUDGET_MAX_FACTOR * budget;
+    topt->spp = o->max_spp   ? o->max_spp
+                : r->max_spp ? r->max_spp
+                             : (uint32_t)(max_default < UINT32_MAX ? max_default : UINT32_MAX);
+    uint32_t min_default = 1;
+    while (min_default <= budget / 8)
+        min_default *= 2;
+    topt->min_spp = o->min_spp ? o->min_spp : r->min_spp ? r->min_spp : min_default;
+    topt->max_spp = topt->spp;
+    topt->batch = 1;
+    const char *problem = NULL;
+    char text[200];
+    if (topt->spp < budget || topt->min_spp > budget) {
+        snprintf(text, sizeof text, "min-spp (%u) <= spp (%u, the budget) <= max-spp (%u)",
+                 topt->min_spp, budget, topt->spp);
+        problem = text;
+    } else if ((uint64_t)topt->pilot_spp + topt->min_spp > budget) {
+        snprintf(text, sizeof text, "spp (%u, the budget) >= the pilot (%u) plus min-spp (%u)",
+                 budget, topt->pilot_spp, topt->min_spp);
+        problem = text;
+    }
+    if (!problem)
+        return true;
+    /* settings from the scene alone: its adaptive-rule=budget is where the error is */
+    if (!o->has_adaptive_rule && !o->spp && !o->min_spp && !o->max_spp && !o->pilot_spp) {
+        mcpt_error_set(err, o->scene_path, r->adaptive_rule_line, r->adaptive_rule_col,
+                       "expected %s with 'adaptive-rule' budget", problem);
+        return false;
+    }
+    return cmd_usage_error(err, "expected %s with --adaptive-rule budget", problem);
+}
+
 /* Fills topt's adaptive-sampling fields from the command line, else the scene's render
  * statement, else the defaults; with adaptive sampling topt->spp becomes the maximum. */
 static bool sampling_options(const struct options *o, const struct render_settings *r,
@@ -881,9 +933,11 @@ static bool sampling_options(const struct options *o, const struct render_settin
     topt->adaptive_rule = o->has_adaptive_rule   ? o->adaptive_rule
                           : r->has_adaptive_rule ? r->adaptive_rule
                                                  : RENDER_ADAPTIVE_PILOT;
-    if (topt->adaptive_rule != RENDER_ADAPTIVE_PILOT && o->pilot_spp)
-        return cmd_usage_error(err, "expected --adaptive-rule pilot with --pilot-spp, got %s",
-                               scene_adaptive_rule_name(topt->adaptive_rule));
+    if (topt->adaptive_rule == RENDER_ADAPTIVE_STOP && o->pilot_spp)
+        return cmd_usage_error(err, "expected --adaptive-rule pilot or budget with --pilot-spp, "
+                                    "got stop");
+    if (topt->adaptive_rule == RENDER_ADAPTIVE_BUDGET)
+        return budget_options(o, r, topt, err);
     topt->pilot_spp = o->pilot_spp   ? o->pilot_spp
                       : r->pilot_spp ? r->pilot_spp
                                      : TRACE_ADAPTIVE_PILOT_SPP;
@@ -1057,6 +1111,7 @@ static bool resume_estimator_matches(const struct run *run, struct mcpt_error *e
         DIFFER_NAMED("--adaptive-rule", was.adaptive_rule, now->adaptive_rule,
                      scene_adaptive_rule_name);
         DIFFER("--pilot-spp", was.pilot_spp, now->pilot_spp);
+        DIFFER("--spp (the budget)", was.budget_spp, now->budget_spp);
         DIFFER_F("--tolerance", was.tolerance, now->tolerance);
         DIFFER_F("--adaptive-floor", was.adaptive_floor, now->adaptive_floor);
         DIFFER("--batch", was.batch, now->batch);
@@ -1142,7 +1197,7 @@ static bool render_options(struct run *run, struct mcpt_error *err)
     const struct options *o = &run->o;
     if (!estimator_settings(o, &run->scene.render, &run->topt, err))
         return false;
-    if (run->topt.adaptive && run->topt.adaptive_rule == RENDER_ADAPTIVE_PILOT) {
+    if (run->topt.adaptive && run->topt.adaptive_rule != RENDER_ADAPTIVE_STOP) {
         /* the pilot's counts, kept between passes (render_seed clears them for each seed) */
         run->pilot_target = calloc((size_t)run->film.width * (size_t)run->film.height,
                                    sizeof *run->pilot_target);
@@ -1807,7 +1862,13 @@ static void report_adaptive(const struct run *run)
 {
     const struct trace_options *topt = &run->topt;
     struct spp_spread sp = spp_spread_of(&run->film, topt->spp);
-    if (topt->adaptive_rule == RENDER_ADAPTIVE_PILOT)
+    if (topt->adaptive_rule == RENDER_ADAPTIVE_BUDGET)
+        printf("mcpt: adaptive, budget rule (%u spp a pixel on average, pilot %u spp included; "
+               "%u..%u spp): %.1f spp a pixel in the image, %.1f%% of pixels at the maximum; "
+               "sample map %s\n",
+               topt->budget_spp, topt->pilot_spp, topt->min_spp, topt->spp, sp.mean,
+               100.0 * sp.share_at_max, run->out.heatmap);
+    else if (topt->adaptive_rule == RENDER_ADAPTIVE_PILOT)
         printf("mcpt: adaptive, pilot rule (T %g, floor %g, pilot %u spp, batch %u, %u..%u "
                "spp): %.1f%% of pixels at the maximum; %.1f pilot samples a pixel, not in the "
                "image; sample map %s\n",

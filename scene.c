@@ -67,7 +67,7 @@ enum value_kind {
     VAL_SAMPLER,        /* a sampler name: independent, stratified, sobol */
     VAL_DIRECT,         /* a direct-lighting estimator: mis, light, bsdf, cosine, hemisphere */
     VAL_SPLIT,          /* full, direct or indirect */
-    VAL_ADAPTIVE_RULE,  /* pilot or stop */
+    VAL_ADAPTIVE_RULE,  /* pilot, stop or budget */
     VAL_LIGHT_SAMPLING, /* area or solid-angle */
     VAL_NORMALS,        /* a mesh's shading normals: file or smooth */
     VAL_RR,             /* 'throughput' (stored as 0) or a probability in (0, 1] */
@@ -754,7 +754,8 @@ static bool parse_value(struct parser *ps, const struct param_spec *sp, struct p
     case VAL_ADAPTIVE_RULE: {
         enum render_adaptive_rule rule;
         if (!scene_adaptive_rule_parse(p->text, &rule))
-            return fail(ps, p->val_col, "expected pilot or stop for '%s', got '%s'", sp->key, v);
+            return fail(ps, p->val_col, "expected pilot, stop or budget for '%s', got '%s'",
+                        sp->key, v);
         p->u = (uint32_t)rule;
         return true;
     }
@@ -1660,7 +1661,8 @@ static bool do_material(struct parser *ps, const struct stmt *st)
 static const char *const DIRECT_NAMES[RENDER_DIRECT_COUNT] = {"mis", "light", "bsdf", "cosine",
                                                               "hemisphere"};
 static const char *const SPLIT_NAMES[RENDER_SPLIT_COUNT] = {"full", "direct", "indirect"};
-static const char *const ADAPTIVE_RULE_NAMES[RENDER_ADAPTIVE_RULE_COUNT] = {"pilot", "stop"};
+static const char *const ADAPTIVE_RULE_NAMES[RENDER_ADAPTIVE_RULE_COUNT] = {"pilot", "stop",
+                                                                            "budget"};
 static const char *const LIGHT_SAMPLING_NAMES[RENDER_LIGHT_SAMPLING_COUNT] = {"area",
                                                                               "solid-angle"};
 
@@ -1748,6 +1750,8 @@ static bool do_render(struct parser *ps, const struct stmt *st)
     if ((p = get(st, "adaptive-rule"))->key) {
         r->has_adaptive_rule = true;
         r->adaptive_rule = (enum render_adaptive_rule)p->u;
+        r->adaptive_rule_line = ps->line;
+        r->adaptive_rule_col = p->val_col;
     }
     if ((p = get(st, "pilot-spp"))->key)
         r->pilot_spp = p->u; /* >= 2 (RANGE_SPREAD) */

@@ -80,13 +80,18 @@ bool scene_light_sampling_parse(const char *name, enum render_light_sampling *mo
 
 /* Adaptive sampling's rule (trace.c; docs/sampling.md, "Adaptive sampling"). */
 enum render_adaptive_rule {
-    RENDER_ADAPTIVE_PILOT, /* a pilot of independent samples, discarded, sets each pixel's
-                              count: unbiased (Kirk & Arvo 1991) */
-    RENDER_ADAPTIVE_STOP,  /* stop when the pixel's own 95% interval is narrow: biased low */
+    /* a pilot of independent samples, discarded, sets each pixel's count: unbiased (Kirk &
+     * Arvo 1991) */
+    RENDER_ADAPTIVE_PILOT,
+    /* stop when the pixel's own 95% interval is narrow: biased low */
+    RENDER_ADAPTIVE_STOP,
+    /* a discarded pilot of every pixel shares a mean spp out where it lowers the image's MSE
+     * most: unbiased */
+    RENDER_ADAPTIVE_BUDGET,
 };
-#define RENDER_ADAPTIVE_RULE_COUNT 2
+#define RENDER_ADAPTIVE_RULE_COUNT 3
 
-/* "pilot", "stop"; "?" outside the enum. */
+/* "pilot", "stop", "budget"; "?" outside the enum. */
 const char *scene_adaptive_rule_name(enum render_adaptive_rule rule);
 bool scene_adaptive_rule_parse(const char *name, enum render_adaptive_rule *rule);
 
@@ -110,7 +115,9 @@ struct render_settings {
     enum sampler_kind sampler;               /* SAMPLER_* */
     bool adaptive;                           /* adaptive sampling on */
     bool has_adaptive_rule;                  /* adaptive-rule given */
-    enum render_adaptive_rule adaptive_rule; /* adaptive: pilot (default) or stop */
+    enum render_adaptive_rule adaptive_rule; /* adaptive: pilot (default), stop or budget */
+    int adaptive_rule_line;                  /* where adaptive-rule was written (1-based), */
+    int adaptive_rule_col;                   /* for main.c's checks of the budget rule */
     float tolerance;                         /* adaptive: relative 95% half-width T */
     float adaptive_floor; /* adaptive: absolute luminance floor; < 0: not given */
     uint32_t batch;       /* adaptive: samples between tests, or the pilot's unit */

@@ -20,6 +20,7 @@
  * unit area; pmf - discrete probability of picking a light; N - light samples per vertex. */
 #include "trace.h"
 
+#include <math.h>
 #include <pthread.h>
 #include <stdlib.h>
 #include <time.h>
@@ -248,6 +249,10 @@ struct render_job {
     atomic_uint next_tile;
     atomic_uint_fast64_t samples_done; /* for progress: taken, plus the budget of stopped pixels */
     atomic_int n_running;
+    bool is_budget_pilot;   /* this round of the workers runs the budget rule's pilots */
+    double *budget_log2w;   /* budget rule: each pixel's log2 weight, filled by its pilot */
+    double *budget_cost;    /* budget rule: each pixel's rays per pilot sample */
+    const uint32_t *budget; /* budget rule: each pixel's sample count */
 };
 
 struct worker {
@@ -306,6 +311,52 @@ static bool adaptive_converged(const struct trace_options *opt, const struct fil
 /* The tag hashed into the seed of the pilots' stream ("pilot" in ASCII). */
 static const uint64_t PILOT_SEED_TAG = 0x70696c6f74ull;
 
+/* The sums of a pilot's n finite samples, per channel R, G, B and luminance (index 3). */
+struct pilot_sums {
+    double s1[4], s2[4];
+    uint64_t n;
+    uint32_t n_taken; /* samples traced, the non-finite ones included */
+};
+
+/* The pilot of pixel (x, y): n_pilot samples from a stream of its own (the seed hashed with
+ * PILOT_SEED_TAG, so its scrambles and its values are independent of the image's), summed into
+ * *ps.  Returns false when the render is cancelled during it. */
+static bool pilot_run(const struct render_job *job, struct worker *w, uint32_t x, uint32_t y,
+                      uint32_t n_pilot, uint64_t *n_rays, struct pilot_sums *ps)
+{
+    const struct trace_options *opt = job->opt;
+    uint32_t pixel_idx = y * (uint32_t)job->film->width + x;
+    struct sampler sampler;
+    sample_start_pixel(&sampler, opt->sampler, sample_hash64(opt->seed ^ PILOT_SEED_TAG), pixel_idx,
+                       job->set_spp);
+    *ps = (struct pilot_sums){0};
+    for (uint32_t i = 0; i < n_pilot; i++) {
+        /* a signal stops a long pilot too; its count is not kept, so the pilot is redone whole
+         * (the same samples) when the render resumes */
+        if (opt->cancel && atomic_load_explicit(opt->cancel, memory_order_relaxed)) {
+            w->result.cancelled = true;
+            return false;
+        }
+        sample_start_index(&sampler, i);
+        vec2 u_pixel = sample_2d(&sampler);
+        vec2 u_lens = sample_2d(&sampler);
+        struct ray ray = camera_ray(&job->ts->camera, (float)x + u_pixel.x, (float)y + u_pixel.y,
+                                    u_lens);
+        vec3 L = trace_radiance(job->ts, opt, ray, &sampler, n_rays);
+        w->result.n_pilot++;
+        ps->n_taken++;
+        if (!v3_is_finite(L))
+            continue; /* as in the film: not counted */
+        const double x4[4] = {L.x, L.y, L.z, 0.2126 * L.x + 0.7152 * L.y + 0.0722 * L.z};
+        for (int c = 0; c < 4; c++) {
+            ps->s1[c] += x4[c];
+            ps->s2[c] += x4[c] * x4[c];
+        }
+        ps->n++;
+    }
+    return true;
+}
+
 /* Adaptive sampling, the pilot rule (two-stage sampling, Kirk & Arvo 1991, "Unbiased Sampling
  * Techniques for Image Synthesis", SIGGRAPH 91): the samples pixel (x, y) gets.  A pilot of
  * pilot_spp samples from a stream of its own (the seed hashed with PILOT_SEED_TAG, so its
@@ -325,40 +376,73 @@ static bool pilot_target(const struct render_job *job, struct worker *w, uint32_
         *target_out = opt->pilot_target[pixel_idx];
         return true;
     }
-    struct sampler sampler;
-    sample_start_pixel(&sampler, opt->sampler, sample_hash64(opt->seed ^ PILOT_SEED_TAG), pixel_idx,
-                       job->set_spp);
-    double s1 = 0.0, s2 = 0.0;
-    uint64_t n = 0;
-    uint32_t n_pilot = opt->pilot_spp ? opt->pilot_spp : TRACE_ADAPTIVE_PILOT_SPP;
-    for (uint32_t i = 0; i < n_pilot; i++) {
-        /* a signal stops a long pilot too; its count is not kept, so the pilot is redone whole
-         * (the same samples) when the render resumes */
-        if (opt->cancel && atomic_load_explicit(opt->cancel, memory_order_relaxed)) {
-            w->result.cancelled = true;
-            return false;
-        }
-        sample_start_index(&sampler, i);
-        vec2 u_pixel = sample_2d(&sampler);
-        vec2 u_lens = sample_2d(&sampler);
-        struct ray ray = camera_ray(&job->ts->camera, (float)x + u_pixel.x, (float)y + u_pixel.y,
-                                    u_lens);
-        vec3 L = trace_radiance(job->ts, opt, ray, &sampler, n_rays);
-        w->result.n_pilot++;
-        if (!v3_is_finite(L))
-            continue; /* as in the film: not counted */
-        double lum = 0.2126 * L.x + 0.7152 * L.y + 0.0722 * L.z;
-        s1 += lum;
-        s2 += lum * lum;
-        n++;
-    }
+    struct pilot_sums ps;
+    if (!pilot_run(job, w, x, y, opt->pilot_spp ? opt->pilot_spp : TRACE_ADAPTIVE_PILOT_SPP, n_rays,
+                   &ps))
+        return false;
     uint32_t max_spp = opt->max_spp ? opt->max_spp : opt->spp;
-    uint32_t target = trace_pilot_spp(s1, s2, n, opt->tolerance, opt->adaptive_floor, opt->min_spp,
-                                      max_spp, opt->batch);
+    uint32_t target = trace_pilot_spp(ps.s1[3], ps.s2[3], ps.n, opt->tolerance, opt->adaptive_floor,
+                                      opt->min_spp, max_spp, opt->batch);
     if (opt->pilot_target)
         opt->pilot_target[pixel_idx] = target;
     *target_out = target;
     return true;
+}
+
+/* Adaptive sampling, the budget rule: the pilot of pixel (x, y), pilot_spp samples as the pilot
+ * rule's, gives the pixel's cost t, its rays per sample, and its weight (sigma / sqrt(t))^p,
+ * p = TRACE_BUDGET_POWER, sigma^2 the mean over R, G, B of the samples' variance (the image's
+ * MSE is that mean).  Like the pilot rule's, the pilot is then discarded, so the counts
+ * trace_budget_counts makes of all the weights are independent of the image's samples and the
+ * estimate stays unbiased. */
+static void budget_pilot(const struct render_job *job, struct worker *w, uint32_t x, uint32_t y)
+{
+    const struct trace_options *opt = job->opt;
+    struct pilot_sums ps;
+    uint64_t n_rays = 0;
+    bool done = pilot_run(job, w, x, y, opt->pilot_spp ? opt->pilot_spp : TRACE_BUDGET_PILOT_SPP,
+                          &n_rays, &ps);
+    w->result.n_rays += n_rays;
+    if (!done)
+        return; /* cancelled (w->result says so): the render stops before its image pass */
+    uint32_t pixel_idx = y * (uint32_t)job->film->width + x;
+    double cost = ps.n_taken ? (double)n_rays / (double)ps.n_taken : 1.0;
+    job->budget_cost[pixel_idx] = cost;
+    double var = 0.0, n = (double)ps.n; /* mean over R, G, B of the sample variances */
+    if (ps.n >= 2)
+        for (int c = 0; c < 3; c++)
+            var += fmax(0.0, (ps.s2[c] - ps.s1[c] * ps.s1[c] / n) / (n - 1.0)) / 3.0;
+    /* log2 of the weight (sigma^2 / t)^(p/2), -inf for a pixel whose pilot saw no variance */
+    job->budget_log2w[pixel_idx] = var > 0.0 ? 0.5 * TRACE_BUDGET_POWER * log2(var / cost)
+                                             : -INFINITY;
+}
+
+/* The budget rule's count of a pixel of weight 2^log2w at scale 2^s. */
+static uint32_t budget_count(double log2w, double s, uint32_t min_spp, uint32_t max_spp)
+{
+    double e = floor(s + log2w + 0.5); /* -inf, or NaN, for a weight of 0: the least count */
+    uint32_t c = !(e >= 0.0) ? 1u : e >= 31.0 ? 1u << 31 : 1u << (int)e;
+    return c < min_spp ? min_spp : c > max_spp ? max_spp : c;
+}
+
+void trace_budget_counts(const double *log2w, const double *cost, size_t n, double total,
+                         uint32_t min_spp, uint32_t max_spp, uint32_t *count)
+{
+    /* count_i(s) = clamp(2^floor(s + log2 w_i + 1/2)) grows with s = log2 k: bisect for the
+     * largest s whose sum fits; [-2100, 2100] spans every double's log2 */
+    double lo = -2100.0, hi = 2100.0;
+    for (int it = 0; it < 200 && hi - lo > 1e-9; it++) {
+        double s = 0.5 * (lo + hi);
+        double sum = 0.0;
+        for (size_t i = 0; i < n && sum <= total; i++)
+            sum += budget_count(log2w[i], s, min_spp, max_spp) * (cost ? cost[i] : 1.0);
+        if (sum <= total)
+            lo = s;
+        else
+            hi = s;
+    }
+    for (size_t i = 0; i < n; i++)
+        count[i] = budget_count(log2w[i], lo, min_spp, max_spp);
 }
 
 /* How many samples the pixel may take, from `taken`, before its next adaptive test point
@@ -387,10 +471,12 @@ static void render_pixel(struct render_job *job, struct worker *w, uint32_t x, u
     uint64_t skipped = 0; /* samples adaptive sampling saved, counted as progress */
     uint64_t n_rays = 0;  /* kept here, added to the worker's count once per pixel */
     uint32_t spp = opt->spp;
-    if (opt->adaptive && opt->adaptive_rule == RENDER_ADAPTIVE_PILOT &&
+    if (opt->adaptive && opt->adaptive_rule != RENDER_ADAPTIVE_STOP &&
         px->n + px->n_dropped < opt->spp) {
-        uint32_t target;
-        if (!pilot_target(job, w, x, y, &n_rays, &target)) {
+        uint32_t target = 0;
+        if (opt->adaptive_rule == RENDER_ADAPTIVE_BUDGET) {
+            target = job->budget[pixel_idx];
+        } else if (!pilot_target(job, w, x, y, &n_rays, &target)) {
             w->result.n_rays += n_rays;
             return; /* cancelled: the pixel keeps what it has */
         }
@@ -468,7 +554,10 @@ static void *render_worker(void *arg)
             y1 = (uint32_t)job->film->height;
         for (uint32_t y = y0; y < y1; y++)
             for (uint32_t x = x0; x < x1; x++)
-                render_pixel(job, w, x, y);
+                if (job->is_budget_pilot)
+                    budget_pilot(job, w, x, y);
+                else
+                    render_pixel(job, w, x, y);
         if (w->result.cancelled)
             break;
     }
@@ -488,6 +577,88 @@ void trace_result_add(struct trace_result *sum, const struct trace_result *r)
     sum->n_rays += r->n_rays;
     sum->n_nonfinite += r->n_nonfinite;
     sum->cancelled |= r->cancelled;
+}
+
+/* Runs job's round (its tiles from next_tile) on n_threads workers, adding their counts to
+ * *result; the calling thread reports progress towards total until they are done. */
+static bool run_workers(struct render_job *job, int n_threads, uint64_t total,
+                        struct trace_result *result, struct mcpt_error *err)
+{
+    const struct trace_options *opt = job->opt;
+    atomic_store(&job->next_tile, 0);
+    atomic_store(&job->n_running, n_threads);
+    struct worker *workers = calloc((size_t)n_threads, sizeof *workers);
+    if (!workers) {
+        mcpt_error_runtime(err, NULL, "out of memory starting %d threads", n_threads);
+        return false;
+    }
+    int started = 0;
+    for (; started < n_threads; started++) {
+        workers[started].job = job;
+        if (pthread_create(&workers[started].thread, NULL, render_worker, &workers[started]))
+            break;
+    }
+    if (started < n_threads)
+        atomic_fetch_sub(&job->n_running, n_threads - started);
+    if (started == 0) {
+        free(workers);
+        mcpt_error_runtime(err, NULL, "cannot start render threads");
+        return false;
+    }
+    const struct timespec tick = {0, 20 * 1000 * 1000}; /* 20 ms poll */
+    int ticks = 0;
+    while (atomic_load(&job->n_running) > 0) {
+        nanosleep(&tick, NULL);
+        if (opt->progress && ++ticks % 5 == 0)
+            opt->progress(opt->progress_user, atomic_load(&job->samples_done), total);
+    }
+    for (int i = 0; i < started; i++) {
+        pthread_join(workers[i].thread, NULL);
+        trace_result_add(result, &workers[i].result);
+    }
+    free(workers);
+    return true;
+}
+
+/* The budget rule's counts into job->budget (count, or opt->pilot_target when that already
+ * holds them): every pixel's pilot on the workers, then trace_budget_counts.  False on a
+ * runtime error (err filled); result->cancelled when a signal stopped the pilots. */
+static bool budget_counts(struct render_job *job, int n_threads, uint32_t *count,
+                          struct trace_result *result, struct mcpt_error *err)
+{
+    const struct trace_options *opt = job->opt;
+    size_t n_pixels = (size_t)job->film->width * (size_t)job->film->height;
+    if (opt->pilot_target && n_pixels > 0 && opt->pilot_target[0]) {
+        job->budget = opt->pilot_target; /* this render's earlier call made them */
+        return true;
+    }
+    job->budget_log2w = malloc(n_pixels * sizeof *job->budget_log2w);
+    job->budget_cost = malloc(n_pixels * sizeof *job->budget_cost);
+    if (!job->budget_log2w || !job->budget_cost) {
+        free(job->budget_log2w);
+        free(job->budget_cost);
+        mcpt_error_runtime(err, NULL, "out of memory for the adaptive budget's pilot");
+        return false;
+    }
+    job->is_budget_pilot = true;
+    bool ok = run_workers(job, n_threads, 0, result, err);
+    job->is_budget_pilot = false;
+    if (ok && !result->cancelled) {
+        uint32_t pilot = opt->pilot_spp ? opt->pilot_spp : TRACE_BUDGET_PILOT_SPP;
+        double per_pixel = opt->budget_spp > pilot ? (double)(opt->budget_spp - pilot) : 0.0;
+        double cost = 0.0; /* of the uniform render's samples after the pilot */
+        for (size_t i = 0; i < n_pixels; i++)
+            cost += job->budget_cost[i];
+        uint32_t *out = opt->pilot_target ? opt->pilot_target : count;
+        trace_budget_counts(job->budget_log2w, job->budget_cost, n_pixels, per_pixel * cost,
+                            opt->min_spp, opt->max_spp ? opt->max_spp : opt->spp, out);
+        job->budget = out;
+    }
+    free(job->budget_log2w);
+    free(job->budget_cost);
+    job->budget_log2w = NULL;
+    job->budget_cost = NULL;
+    return ok;
 }
 
 bool trace_render(const struct trace_scene *ts, const struct trace_options *opt, struct film *film,
@@ -516,40 +687,23 @@ bool trace_render(const struct trace_scene *ts, const struct trace_options *opt,
         total += taken < opt->spp ? opt->spp - taken : 0;
     }
 
-    struct worker *workers = calloc((size_t)n_threads, sizeof *workers);
-    if (!workers) {
-        mcpt_error_runtime(err, NULL, "out of memory starting %d threads", n_threads);
-        return false;
+    uint32_t *count = NULL; /* the budget rule's counts when opt->pilot_target cannot keep them */
+    if (opt->adaptive && opt->adaptive_rule == RENDER_ADAPTIVE_BUDGET && total > 0) {
+        if (!opt->pilot_target && !(count = malloc(n_pixels * sizeof *count))) {
+            mcpt_error_runtime(err, NULL, "out of memory for the adaptive budget's counts");
+            return false;
+        }
+        bool ok = budget_counts(&job, n_threads, count, result, err);
+        if (!ok || result->cancelled) {
+            free(count);
+            return ok;
+        }
     }
-    int started = 0;
-    for (; started < n_threads; started++) {
-        workers[started].job = &job;
-        if (pthread_create(&workers[started].thread, NULL, render_worker, &workers[started]))
-            break;
-    }
-    if (started < n_threads)
-        atomic_fetch_sub(&job.n_running, n_threads - started);
-    if (started == 0) {
-        free(workers);
-        mcpt_error_runtime(err, NULL, "cannot start render threads");
-        return false;
-    }
-    /* the calling thread reports progress until the workers are done */
-    const struct timespec tick = {0, 20 * 1000 * 1000}; /* 20 ms poll */
-    int ticks = 0;
-    while (atomic_load(&job.n_running) > 0) {
-        nanosleep(&tick, NULL);
-        if (opt->progress && ++ticks % 5 == 0)
-            opt->progress(opt->progress_user, atomic_load(&job.samples_done), total);
-    }
-    for (int i = 0; i < started; i++) {
-        pthread_join(workers[i].thread, NULL);
-        trace_result_add(result, &workers[i].result);
-    }
-    if (opt->progress)
+    bool ok = run_workers(&job, n_threads, total, result, err);
+    if (ok && opt->progress)
         opt->progress(opt->progress_user, atomic_load(&job.samples_done), total);
-    free(workers);
-    return true;
+    free(count);
+    return ok;
 }
 
 /* ---- preparation ---- */

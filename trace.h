@@ -41,7 +41,9 @@ struct trace_options {
                               adaptive.  Progressive renders pass their final spp here so that
                               the last image equals a one-call render. */
     bool adaptive;        /* adaptive sampling (docs/sampling.md); spp is then the maximum */
-    enum render_adaptive_rule adaptive_rule; /* pilot (unbiased) or stop (the teaching rule) */
+    enum render_adaptive_rule adaptive_rule; /* pilot or budget (unbiased), or stop (the
+                                                teaching rule) */
+    uint32_t budget_spp;    /* adaptive budget: the mean samples per pixel, its pilot included */
     float tolerance;        /* adaptive: T, relative half-width of the 95% interval */
     float adaptive_floor;   /* adaptive: luminance below which T applies absolutely */
     uint32_t min_spp;       /* adaptive: stop, samples before the first test; pilot, the least
@@ -50,9 +52,10 @@ struct trace_options {
     uint32_t pilot_spp;     /* adaptive pilot: samples of the pilot (>= 2); 0 means the default */
     uint32_t max_spp;       /* adaptive pilot: most samples a pixel gets; 0 = spp.  A render in
                              passes (spp growing to max_spp) must give the final maximum. */
-    uint32_t *pilot_target; /* adaptive pilot: per pixel, its sample count once computed (0
-                               before), kept between the calls of a render in passes; NULL:
-                               recomputed by every call (the same numbers, more work) */
+    uint32_t *pilot_target; /* adaptive pilot and budget: per pixel, its sample count once
+                               computed (0 before), kept between the calls of a render in
+                               passes; NULL: recomputed by every call (the same numbers, more
+                               work) */
     /* light transport (trace_radiance) */
     enum render_direct direct; /* direct-lighting estimator; 0 is RENDER_DIRECT_MIS */
     uint32_t light_samples;    /* light samples (shadow rays) per path vertex; 0 means 1 */
@@ -86,6 +89,12 @@ struct trace_options {
 #define TRACE_ADAPTIVE_BATCH 32u      /* default batch */
 #define TRACE_ADAPTIVE_MIN_SPP 64u    /* default minimum spp */
 #define TRACE_ADAPTIVE_PILOT_SPP 16u  /* default pilot samples */
+#define TRACE_BUDGET_PILOT_SPP 8u     /* default pilot samples of the budget rule */
+#define TRACE_BUDGET_MAX_FACTOR 8u    /* budget rule: default max-spp, this times the budget */
+/* budget rule: p, a pixel's count grows as (sigma / sqrt(t))^p for its pilot's sigma and rays
+ * per sample t (trace_budget_counts; docs/performance.md, "Adaptive sampling": measured on the
+ * Cornell box, where 0.35-0.5 did best; plain Monte Carlo's optimum is 1) */
+#define TRACE_BUDGET_POWER 0.4
 
 /* The adaptive stopping rule on one pixel's n samples of luminance x, s1 = sum x and
  * s2 = sum x^2: mu = s1 / n, sigma^2 = s2 / n - mu^2, I = 1.96 sigma / sqrt(n) (the half-width
@@ -101,6 +110,19 @@ bool trace_adaptive_stop(double s1, double s2, uint64_t n, double tolerance, dou
  * rounded up to whole batches and clamped to [min_spp, max_spp].  Pure, like the stop rule. */
 uint32_t trace_pilot_spp(double s1, double s2, uint64_t n, double tolerance, double floor_lum,
                          uint32_t min_spp, uint32_t max_spp, uint32_t batch);
+
+/* The budget rule's sample counts: count[i] = clamp(2^round(log2(k w[i])), min_spp, max_spp) for
+ * the n pixels' weights w[i] >= 0, given as log2w[i] = log2 w[i] (-inf for w = 0, which gets
+ * min_spp), with the largest scale k at which sum_i count[i] cost[i] <= total (cost NULL: 1
+ * each).  Powers of two keep each pixel's Sobol' prefix a whole (0, m, 2)-net.  Minimising
+ * sum_i sigma_i^2 / n_i subject to sum_i n_i t_i = T gives n_i proportional to
+ * sigma_i / sqrt(t_i) (the Lagrange condition sigma_i^2 / n_i^2 = lambda t_i: Neyman's 1934
+ * optimal allocation over strata, with costs as in Cochran's "Sampling Techniques", sec. 5.5);
+ * the caller passes w = (sigma / sqrt(t))^TRACE_BUDGET_POWER, a power below 1 because a Sobol'
+ * pixel's error falls faster than 1 / n.  Every count is min_spp when even those exceed total.
+ * Pure: the same weights give the same counts. */
+void trace_budget_counts(const double *log2w, const double *cost, size_t n, double total,
+                         uint32_t min_spp, uint32_t max_spp, uint32_t *count);
 
 struct trace_result {
     uint64_t n_samples;   /* camera samples added to the film by this call */

@@ -8,11 +8,13 @@ same run, interleaved over R rounds (default 3):
     CYCLES_SPP = 256 spp, seed 100 + round: its render time t_C (Blender's own timing of the
     render call, scene building and start-up left out) and its RMSE e_C;
   - mcpt (default Sobol' sampler) at MCPT_SPP = 128, 256, 512 and 1024 spp, seed round: the
-    render time mcpt prints (loading, BVH build and writing left out) and RMSE.
+    render time mcpt prints (loading, BVH build and writing left out) and RMSE; then again with
+    the budget rule of adaptive sampling (`--adaptive --adaptive-rule budget`: the same spp as
+    a mean, every pixel's count set by a discarded pilot; unbiased), unless --no-budget.
 RMSE is sqrt of the noise-corrected MSE against REF (`mcpt compare`), a Cycles render of
 16 x 1024 spp whose own variance is subtracted.  Equal error: per round, a least-squares line
 log RMSE = a + b log t through mcpt's four points, solved for t* at RMSE = e_C; the ratio is
-t* / t_C, its median over the rounds is the figure (goal <= 0.2).  On a loaded machine the
+t* / t_C, its median over the rounds is the figure (goal <= 0.2), for each of mcpt's series.  On a loaded machine the
 times scatter more than the errors, so a second figure fits log RMSE = a + b log spp instead
 (the errors alone), solves it for spp* at e_C, and prices spp* at the round's seconds per spp
 (the four renders' time over their spp): ratio spp* s/spp / t_C.  Also printed: the smallest
@@ -24,7 +26,7 @@ about 15 minutes on 2 cores), averaged by scripts/exr_average.py into the mean a
 of the mean.  Pass --ref to use an existing one.
 
 usage: scripts/bench_cycles.py [--mcpt ./mcpt] [--blender blender] [--ref REF.exr]
-                               [--runs R] [--threads T] [--json OUT.json]
+                               [--runs R] [--threads T] [--no-budget] [--json OUT.json]
 Python standard library only.
 """
 
@@ -88,9 +90,12 @@ def rmse(mcpt, image, ref):
     return math.sqrt(mse) if mse > 0 else float("nan")
 
 
-def mcpt_render(mcpt, spp, seed, threads, out):
+BUDGET_ARGS = ["--adaptive", "--adaptive-rule", "budget"]
+
+
+def mcpt_render(mcpt, spp, seed, threads, out, extra=()):
     cmd = [mcpt, SCENE, "--width", str(SIZE), "--height", str(SIZE), "--spp", str(spp),
-           "--seed", str(seed), "--threads", str(threads), "-o", out]
+           "--seed", str(seed), "--threads", str(threads), "-o", out] + list(extra)
     p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     m = SUMMARY.search(p.stdout)
     if p.returncode != 0 or not m:
@@ -109,6 +114,19 @@ def fit_time_at(points, target):
     return math.exp((math.log(target) - a) / b), b
 
 
+def equal_error(points, t_c, e_c):
+    """One round's figures for mcpt's points (spp, seconds, RMSE) against Cycles' t_c, e_c."""
+    t_star, slope = fit_time_at([(t, e) for _, t, e in points], e_c)
+    spp_star, spp_slope = fit_time_at([(spp, e) for spp, _, e in points], e_c)
+    per_spp = sum(t for _, t, _ in points) / sum(spp for spp, _, _ in points)
+    first = next(((spp, t) for spp, t, e in points if e <= e_c), None)
+    return {"cycles_s": t_c, "cycles_rmse": e_c, "mcpt": points, "slope": slope,
+            "t_equal": t_star, "ratio": t_star / t_c, "spp_slope": spp_slope,
+            "spp_equal": spp_star, "s_per_spp": per_spp, "ratio_by_spp": spp_star * per_spp / t_c,
+            "first_spp_at_or_below": first[0] if first else None,
+            "first_ratio": first[1] / t_c if first else None}
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--mcpt", default="./mcpt")
@@ -116,6 +134,8 @@ def main():
     ap.add_argument("--ref", default=REF_DEFAULT)
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--no-budget", action="store_true",
+                    help="leave out the series with the adaptive budget rule")
     ap.add_argument("--json", help="write the figures here as JSON")
     args = ap.parse_args()
     if not os.path.exists(args.ref):
@@ -125,42 +145,43 @@ def main():
     print("bench_cycles: %d rounds, %d threads, %dx%d, load average %.2f on %d CPUs; "
           "reference %s" % (args.runs, args.threads, SIZE, SIZE, load, os.cpu_count(), args.ref),
           flush=True)
-    rounds = []
+    series = [("uniform", [])] + ([] if args.no_budget else [("budget", BUDGET_ARGS)])
+    rounds = {name: [] for name, _ in series}
     for k in range(1, args.runs + 1):
         (c_path, t_c), = cycles(args.blender, CYCLES_SPP, 1, 100 + k, args.threads, tmp)
         e_c = rmse(args.mcpt, c_path, args.ref)
-        points = []
-        for spp in MCPT_SPP:
-            out = os.path.join(tmp, "mcpt-%d.exr" % spp)
-            t = mcpt_render(args.mcpt, spp, k, args.threads, out)
-            points.append((spp, t, rmse(args.mcpt, out, args.ref)))
-        t_star, slope = fit_time_at([(t, e) for _, t, e in points], e_c)
-        spp_star, spp_slope = fit_time_at([(spp, e) for spp, _, e in points], e_c)
-        per_spp = sum(t for _, t, _ in points) / sum(spp for spp, _, _ in points)
-        first = next(((spp, t) for spp, t, e in points if e <= e_c), None)
-        r = {"cycles_s": t_c, "cycles_rmse": e_c, "mcpt": points, "slope": slope,
-             "t_equal": t_star, "ratio": t_star / t_c, "spp_slope": spp_slope,
-             "spp_equal": spp_star, "s_per_spp": per_spp, "ratio_by_spp": spp_star * per_spp / t_c,
-             "first_spp_at_or_below": first[0] if first else None,
-             "first_ratio": first[1] / t_c if first else None}
-        rounds.append(r)
-        print("round %d: Cycles %d spp %.2f s RMSE %.3e; mcpt %s; fit slope %.3f: equal error "
-              "at %.2f s, ratio mcpt/Cycles %.3f; by spp: slope %.3f, equal error at %.0f spp x "
-              "%.4f s, ratio %.3f%s"
-              % (k, CYCLES_SPP, t_c, e_c,
-                 ", ".join("%d spp %.2f s %.3e" % p for p in points), slope, t_star,
-                 t_star / t_c, spp_slope, spp_star, per_spp, r["ratio_by_spp"],
-                 "; first spp at or below Cycles' RMSE: %d (%.3f)" % (first[0], first[1] / t_c)
-                 if first else ""), flush=True)
-    ratio = statistics.median(r["ratio"] for r in rounds)
-    print("bench_cycles: equal-error time ratio mcpt/Cycles = %.3f by the time fit, %.3f by the "
-          "spp fit (medians of %d rounds; Cycles %d spp: %.2f s, RMSE %.3e)"
-          % (ratio, statistics.median(r["ratio_by_spp"] for r in rounds), len(rounds),
-             CYCLES_SPP, statistics.median(r["cycles_s"] for r in rounds),
-             statistics.median(r["cycles_rmse"] for r in rounds)))
+        for name, extra in series:
+            points = []
+            for spp in MCPT_SPP:
+                out = os.path.join(tmp, "mcpt-%s-%d.exr" % (name, spp))
+                t = mcpt_render(args.mcpt, spp, k, args.threads, out, extra)
+                points.append((spp, t, rmse(args.mcpt, out, args.ref)))
+            r = equal_error(points, t_c, e_c)
+            rounds[name].append(r)
+            print("round %d, mcpt %s: Cycles %d spp %.2f s RMSE %.3e; mcpt %s; fit slope %.3f: "
+                  "equal error at %.2f s, ratio mcpt/Cycles %.3f; by spp: slope %.3f, equal "
+                  "error at %.0f spp x %.4f s, ratio %.3f%s"
+                  % (k, name, CYCLES_SPP, t_c, e_c,
+                     ", ".join("%d spp %.2f s %.3e" % p for p in points), r["slope"],
+                     r["t_equal"], r["ratio"], r["spp_slope"], r["spp_equal"], r["s_per_spp"],
+                     r["ratio_by_spp"],
+                     "; first spp at or below Cycles' RMSE: %d (%.3f)"
+                     % (r["first_spp_at_or_below"], r["first_ratio"])
+                     if r["first_ratio"] is not None else ""), flush=True)
+    figures = {}
+    for name, _ in series:
+        rs = rounds[name]
+        figures[name] = statistics.median(r["ratio"] for r in rs)
+        print("bench_cycles: equal-error time ratio mcpt (%s)/Cycles = %.3f by the time fit, "
+              "%.3f by the spp fit (medians of %d rounds; Cycles %d spp: %.2f s, RMSE %.3e)"
+              % (name, figures[name], statistics.median(r["ratio_by_spp"] for r in rs), len(rs),
+                 CYCLES_SPP, statistics.median(r["cycles_s"] for r in rs),
+                 statistics.median(r["cycles_rmse"] for r in rs)))
+    ratio = figures["uniform"]
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"load_avg": load, "ratio": ratio, "rounds": rounds}, f, indent=1)
+            json.dump({"load_avg": load, "ratio": ratio, "ratios": figures, "rounds": rounds}, f,
+                      indent=1)
     return 0
 
 

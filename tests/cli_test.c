@@ -35,7 +35,7 @@ static int count_lines(const char *s)
 /* Bad usage: exit 2, exactly one line "mcpt: error: expected ...". */
 Test(cli, bad_usage, .init = setup, .fini = teardown)
 {
-    const char *cases[][7] = {
+    const char *cases[][8] = {
         {NULL},
         {"tests/data/cli/tiny.txt", "--spp", "0", NULL},
         {"tests/data/cli/tiny.txt", "--spp", "-3", NULL},
@@ -52,6 +52,12 @@ Test(cli, bad_usage, .init = setup, .fini = teardown)
         {"tests/data/cli/tiny.txt", "--adaptive", "--pilot-spp", "1", NULL},
         {"tests/data/cli/tiny.txt", "--adaptive-rule", "pilot", NULL}, /* without --adaptive */
         {"tests/data/cli/tiny.txt", "--adaptive", "--adaptive-rule", "stop", "--pilot-spp", "8"},
+        /* the budget rule: a budget that leaves no room past the pilot and the least count, a
+         * tolerance it does not use, a maximum below the budget */
+        {"tests/data/cli/tiny.txt", "--spp", "8", "--adaptive", "--adaptive-rule", "budget"},
+        {"tests/data/cli/tiny.txt", "--adaptive", "--adaptive-rule", "budget", "--tolerance",
+         "0.1"},
+        {"tests/data/cli/tiny.txt", "--adaptive", "--adaptive-rule", "budget", "--max-spp", "2"},
         {"tests/data/cli/tiny.txt", "--light-sampling", "sphere", NULL},
         {"tests/data/cli/tiny.txt", "--rr-threshold", "0", NULL},
         {"", NULL},                                             /* an empty scene name */
@@ -90,6 +96,24 @@ Test(cli, bad_scene_writes_nothing, .init = setup, .fini = teardown)
     const char *missing[] = {"tests/data/cli/no-such-scene.txt", "-o", out, NULL};
     cr_assert_eq(run_mcpt(missing, err, sizeof err), 2);
     cr_assert(strstr(err, "tests/data/cli/no-such-scene.txt") == err, "%s", err);
+}
+
+/* The budget rule's settings from the scene alone are checked as the scene's: exit 2, one line
+ * at its adaptive-rule, nothing written; --spp on the command line makes them the options'. */
+Test(cli, budget_rule_settings_from_the_scene, .init = setup, .fini = teardown)
+{
+    char out[300], err[4096];
+    snprintf(out, sizeof out, "%s/out.exr", tmpdir);
+    const char *args[] = {"tests/data/cli/budget-too-small.txt", "-o", out, NULL};
+    cr_assert_eq(run_mcpt(args, err, sizeof err), 2, "%s", err);
+    cr_assert_str_eq(err,
+                     "tests/data/cli/budget-too-small.txt:5:42: error: expected spp (8, the "
+                     "budget) >= the pilot (8) plus min-spp (2) with 'adaptive-rule' budget\n");
+    cr_assert_not(test_exists(out));
+    const char *fixed[] = {
+        "tests/data/cli/budget-too-small.txt", "--spp", "32", "--quiet", "-o", out, NULL};
+    cr_assert_eq(run_mcpt(fixed, err, sizeof err), 0, "%s", err);
+    cr_assert(test_exists(out));
 }
 
 /* A scene read from standard input that is a folder is bad input like a folder named as the

@@ -1047,6 +1047,57 @@ Test(adaptive, pilot_count_on_exact_moments)
     cr_assert_eq(trace_pilot_spp(0.0, 0.0, 0, 0.05, 0.01, 64, 4096, 32), 4096u, "no pilot");
 }
 
+static bool is_pow2(uint32_t n) { return n && !(n & (n - 1)); }
+
+/* The budget rule's counts (trace_budget_counts): powers of two between the bounds that spend
+ * at most the budget and less than double it would; a larger weight never gets fewer samples,
+ * a costlier pixel of the same weight never more; weights four times larger get four times the
+ * samples; a zero weight gets the least; a budget below the least counts gives the least. */
+Test(adaptive, budget_counts)
+{
+    enum { N = 1000 };
+    static double log2w[N], cost[N];
+    static uint32_t count[N];
+    uint64_t rng = 7;
+    for (int i = 0; i < N; i++) {
+        rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+        log2w[i] = (double)(rng >> 40) / (double)(1u << 24) * 12.0 - 6.0; /* w in 1/64..64 */
+        cost[i] = 1.0 + (double)(rng >> 60);                              /* 1..16 rays */
+    }
+    log2w[0] = -INFINITY;
+    double costs = 0.0;
+    for (int i = 0; i < N; i++)
+        costs += cost[i];
+    for (double spp = 16.0; spp <= 1024.0; spp *= 4.0) {
+        trace_budget_counts(log2w, cost, N, spp * costs, 4, 8192, count);
+        double spent = 0.0;
+        for (int i = 0; i < N; i++) {
+            cr_assert(is_pow2(count[i]) && count[i] >= 4 && count[i] <= 8192,
+                      "spp %g: pixel %d count %u", spp, i, count[i]);
+            spent += count[i] * cost[i];
+        }
+        cr_assert_eq(count[0], 4u, "a zero weight gets the least");
+        cr_assert(spent <= spp * costs, "spp %g: spent %g of %g", spp, spent, spp * costs);
+        cr_assert(spent > 0.5 * spp * costs, "spp %g: spent only %g of %g", spp, spent,
+                  spp * costs);
+        for (int i = 1; i < N; i++)
+            for (int j = 1; j < N; j++)
+                if (cost[i] == cost[j] && log2w[i] > log2w[j])
+                    cr_assert(count[i] >= count[j], "spp %g: weights 2^%g > 2^%g, counts %u < %u",
+                              spp, log2w[i], log2w[j], count[i], count[j]);
+                else if (log2w[i] == log2w[j] && cost[i] > cost[j])
+                    cr_assert(count[i] <= count[j]);
+    }
+    /* equal costs: weights 1, 4, 16 of four pixels each and a total of 4 (1 + 4 + 16) 16 */
+    const double lw[12] = {0, 0, 0, 0, 2, 2, 2, 2, 4, 4, 4, 4};
+    trace_budget_counts(lw, NULL, 12, 4.0 * 21.0 * 16.0, 1, 1u << 20, count);
+    for (int i = 0; i < 12; i++)
+        cr_assert_eq(count[i], 16u << (int)lw[i], "pixel %d: %u", i, count[i]);
+    trace_budget_counts(lw, NULL, 12, 11.0, 1, 1u << 20, count);
+    for (int i = 0; i < 12; i++)
+        cr_assert_eq(count[i], 1u, "too small a budget: the least, got %u", count[i]);
+}
+
 /* A pixel with a rare bright path: x = 0.5, or 50 with probability 1/100 (mean 0.995).  Over
  * 20000 pixels: the stop rule (its own samples decide and estimate) returns a mean far below
  * the truth (a pixel that has not met the bright path shows a mean of 0.5 and no spread, and
@@ -1125,6 +1176,20 @@ static void render_film(const struct trace_scene *ts, const struct trace_options
     cr_assert_eq(res.n_nonfinite, 0u);
 }
 
+/* New films a and b of width x height rendered with opt on 1 and on 3 threads. */
+static void render_1_and_3_threads(const struct trace_scene *ts, const struct trace_options *opt,
+                                   int width, int height, struct film *a, struct film *b)
+{
+    struct mcpt_error err;
+    cr_assert(film_init(a, width, height, &err));
+    cr_assert(film_init(b, width, height, &err));
+    struct trace_options o = *opt;
+    o.n_threads = 1;
+    render_film(ts, &o, a);
+    o.n_threads = 3;
+    render_film(ts, &o, b);
+}
+
 /* Every sampler, and adaptive sampling by either rule, renders bit-identical films with 1 and
  * 3 threads; an adaptive render split into two calls (maximum 16, then 48) equals one call; and
  * adaptive sampling does stop some pixels early and run others on. */
@@ -1151,13 +1216,8 @@ Test(sampling, deterministic_for_any_thread_count, .timeout = TEST_TIMEOUT_S(120
                                         .pilot_spp = 8,
                                         .max_spp = 48};
             struct film a, b, c;
-            cr_assert(film_init(&a, s.width, s.height, &err));
-            cr_assert(film_init(&b, s.width, s.height, &err));
             cr_assert(film_init(&c, s.width, s.height, &err));
-            opt.n_threads = 1;
-            render_film(ts, &opt, &a);
-            opt.n_threads = 3;
-            render_film(ts, &opt, &b);
+            render_1_and_3_threads(ts, &opt, s.width, s.height, &a, &b);
             cr_assert(memcmp(a.pixels, b.pixels, bytes) == 0, "%s%s: 1 vs 3 threads",
                       sample_sampler_name(KINDS[k]), adaptive ? " adaptive" : "");
             if (adaptive) {
@@ -1180,6 +1240,72 @@ Test(sampling, deterministic_for_any_thread_count, .timeout = TEST_TIMEOUT_S(120
             film_free(&b);
             film_free(&c);
         }
+    trace_free(ts);
+    scene_free(&s);
+}
+
+/* The budget rule renders bit-identical films with 1 and 3 threads and in two calls (maximum 64,
+ * then 256); its counts are powers of two from min-spp to max-spp, at least three of them; and
+ * a pixel's estimate is the one a uniform render of its count gives it (its Sobol' prefix). */
+Test(sampling, budget_rule_deterministic_and_prefix, .timeout = TEST_TIMEOUT_S(120))
+{
+    struct scene s;
+    struct trace_scene *ts = load_scene("scenes/cornell-box.txt", 24, 20, &s);
+    size_t n_pixels = (size_t)s.width * (size_t)s.height;
+    size_t bytes = sizeof(struct film_pixel) * n_pixels;
+    struct mcpt_error err;
+    struct trace_options opt = {.spp = 256,
+                                .max_depth = 5,
+                                .seed = 42,
+                                .sampler = SAMPLER_SOBOL,
+                                .adaptive = true,
+                                .adaptive_rule = RENDER_ADAPTIVE_BUDGET,
+                                .budget_spp = 32,
+                                .min_spp = 4,
+                                .batch = 1,
+                                .pilot_spp = 8,
+                                .max_spp = 256};
+    struct film a, b, c;
+    cr_assert(film_init(&c, s.width, s.height, &err));
+    render_1_and_3_threads(ts, &opt, s.width, s.height, &a, &b);
+    cr_assert(memcmp(a.pixels, b.pixels, bytes) == 0, "1 vs 3 threads");
+    static uint32_t kept[24 * 20];
+    opt.pilot_target = kept; /* as main.c keeps them between the calls of one render */
+    opt.spp = 64;
+    render_film(ts, &opt, &c);
+    opt.spp = 256;
+    render_film(ts, &opt, &c);
+    cr_assert(memcmp(a.pixels, c.pixels, bytes) == 0, "split render");
+    bool has[9] = {false};
+    for (size_t i = 0; i < n_pixels; i++) {
+        uint32_t n = a.pixels[i].n;
+        cr_assert(is_pow2(n) && n >= 4 && n <= 256, "pixel %zu: %u samples", i, n);
+        has[__builtin_ctz(n)] = true;
+    }
+    int n_counts = 0;
+    for (int e = 0; e <= 8; e++)
+        n_counts += has[e];
+    cr_assert(n_counts >= 3, "the counts adapt: %d distinct", n_counts);
+    for (int e = 2; e <= 8; e++) {
+        if (!has[e])
+            continue;
+        struct film u;
+        cr_assert(film_init(&u, s.width, s.height, &err));
+        struct trace_options uo = {.spp = 1u << e,
+                                   .max_depth = 5,
+                                   .seed = 42,
+                                   .sampler = SAMPLER_SOBOL,
+                                   .n_threads = 2};
+        render_film(ts, &uo, &u);
+        for (size_t i = 0; i < n_pixels; i++)
+            if (a.pixels[i].n == 1u << e)
+                cr_assert(memcmp(&a.pixels[i], &u.pixels[i], sizeof u.pixels[i]) == 0,
+                          "pixel %zu: %u samples differ from the uniform render's", i, 1u << e);
+        film_free(&u);
+    }
+    film_free(&a);
+    film_free(&b);
+    film_free(&c);
     trace_free(ts);
     scene_free(&s);
 }
@@ -1208,7 +1334,8 @@ static void glass_image_mean(const struct trace_scene *ts, const struct trace_op
  * stop rule misses (docs/sampling.md): over 24 seeds, the image mean of adaptive renders (T
  * 0.2, pilot 8, 8..256 spp) minus that of uniform 64-spp renders of other seeds is within 4
  * standard errors of 0 (the seeds' scatter) in each channel, while the stop rule with the same
- * T, min-spp and batch is below by more than 4. */
+ * T, min-spp and batch is below by more than 4.  So is the budget rule's (a budget of 64 spp,
+ * pilot 8, 16..512 spp), within 4. */
 Test(sampling, adaptive_pilot_unbiased_on_glass, .timeout = TEST_TIMEOUT_S(240))
 {
     enum { W = 32, H = 32, SEEDS = 24 };
@@ -1222,10 +1349,10 @@ Test(sampling, adaptive_pilot_unbiased_on_glass, .timeout = TEST_TIMEOUT_S(240))
                                  .min_spp = 8,
                                  .batch = 8,
                                  .pilot_spp = 8};
-    double sum[2][3] = {{0}}, sum_sq[2][3] = {{0}};
+    double sum[3][3] = {{0}}, sum_sq[3][3] = {{0}};
     uint64_t n_adaptive = 0;
     for (uint64_t k = 0; k < SEEDS; k++) {
-        double uniform[3], pilot[3], stop[3];
+        double uniform[3], pilot[3], stop[3], budget[3];
         uint64_t n;
         struct trace_options opt = base;
         opt.seed = 1000 + k;
@@ -1239,25 +1366,32 @@ Test(sampling, adaptive_pilot_unbiased_on_glass, .timeout = TEST_TIMEOUT_S(240))
         n_adaptive += n;
         opt.adaptive_rule = RENDER_ADAPTIVE_STOP;
         glass_image_mean(ts, &opt, W, H, stop, &n);
+        opt.adaptive_rule = RENDER_ADAPTIVE_BUDGET;
+        opt.seed = 3000 + k;
+        opt.budget_spp = 64;
+        opt.spp = opt.max_spp = 512;
+        opt.min_spp = 16;
+        glass_image_mean(ts, &opt, W, H, budget, &n);
         for (int c = 0; c < 3; c++) {
-            double d[2] = {pilot[c] - uniform[c], stop[c] - uniform[c]};
-            for (int r = 0; r < 2; r++) {
+            double d[3] = {pilot[c] - uniform[c], stop[c] - uniform[c], budget[c] - uniform[c]};
+            for (int r = 0; r < 3; r++) {
                 sum[r][c] += d[r];
                 sum_sq[r][c] += d[r] * d[r];
             }
         }
     }
     for (int c = 0; c < 3; c++) {
-        double z[2];
-        for (int r = 0; r < 2; r++) {
+        double z[3];
+        for (int r = 0; r < 3; r++) {
             double m = sum[r][c] / SEEDS;
             double se = sqrt((sum_sq[r][c] / SEEDS - m * m) / (SEEDS - 1));
             z[r] = m / se;
         }
-        cr_log_info("channel %d: pilot - uniform %.2f SE, stop - uniform %.2f SE (pilot %.1f spp "
-                    "a pixel with its pilot)",
-                    c, z[0], z[1], (double)n_adaptive / SEEDS / (W * H));
+        cr_log_info("channel %d: pilot - uniform %.2f SE, stop - uniform %.2f SE, budget - "
+                    "uniform %.2f SE (pilot %.1f spp a pixel with its pilot)",
+                    c, z[0], z[1], z[2], (double)n_adaptive / SEEDS / (W * H));
         cr_assert(fabs(z[0]) < 4.0, "channel %d: pilot rule off by %.2f SE", c, z[0]);
+        cr_assert(fabs(z[2]) < 4.0, "channel %d: budget rule off by %.2f SE", c, z[2]);
         cr_assert(z[1] < -4.0, "channel %d: the stop rule's bias, %.2f SE, not seen", c, z[1]);
     }
     trace_free(ts);
@@ -1406,8 +1540,7 @@ Test(sampling, render_statement_errors)
         {"render batch=0\n", 14, "expected 'batch' in 1..4294967295, got 0"},
         {"render adaptive=yes\n", 17, "expected true or false for 'adaptive', got 'yes'"},
         {"render adaptive-rule=early\n", 22,
-         "expected pilot or stop for 'adaptive-rule', got "
-         "'early'"},
+         "expected pilot, stop or budget for 'adaptive-rule', got 'early'"},
         {"render pilot-spp=1\n", 18, "expected 'pilot-spp' in 2..4294967295, got 1"},
         {"render pilot-spp=0\n", 18, "expected 'pilot-spp' in 2..4294967295, got 0"},
         {"render light-sampling=sphere\n", 23,
