@@ -17,7 +17,10 @@
 #include "trace.h"
 
 #define SCENE "tests/data/resume/small.txt"
-#define SIGNAL_SPP "4096" /* long enough (most of a second on 2 threads) to interrupt twice */
+/* long enough to interrupt twice: 0.9 s on 2 threads of a 2-vCPU Xeon (at 4096 spp the resumed
+ * run of sigint_then_sigterm_then_bit_identical could end before its signal there) */
+#define SIGNAL_SPP "8192"
+#define SIGNAL_SPP_F 8192.0f
 #define ALARM_S 60u       /* a hung run ends instead of hanging the suite */
 
 static char tmpdir[256];
@@ -367,6 +370,28 @@ Test(resume, changed_sample_range_or_whole_spp_refused, .init = setup, .fini = t
 
 /* ---- signals ---- */
 
+/* Starts mcpt with args and sends it sig at its first progress line; a render that ends first
+ * (exit 0: a loaded machine) must have written the image of full and left no checkpoint ckpt,
+ * and is started again, up to three times.  Returns the last exit status, its stderr in err
+ * and in *stop_s the seconds from the signal to the end. */
+static int interrupt_mid_render(const char *const *args, const char *err_path, int sig,
+                                const char *full, const char *out, const char *ckpt, double *stop_s,
+                                char *err, size_t err_bytes)
+{
+    int rc = 0;
+    for (int attempt = 1; attempt <= 3 && rc == 0; attempt++) {
+        pid_t pid = test_start_mcpt(args, NULL, err_path, ALARM_S);
+        rc = signal_mid_render(pid, err_path, sig, stop_s);
+        test_read_file(err_path, err, err_bytes);
+        if (rc == 0) { /* the render ended first */
+            cr_log_info("attempt %d: the render ended before the signal", attempt);
+            assert_same_exr(full, out);
+            cr_assert_not(test_exists(ckpt), "a finished render left a checkpoint");
+        }
+    }
+    return rc;
+}
+
 /* SIGINT mid-render: exit 130 within a second or so, a valid partial EXR (its samples channel
  * short of spp somewhere) and a checkpoint.  The resumed run is interrupted again with SIGTERM
  * (exit 143), then resumed without naming the scene; the final EXR has the same bytes as an
@@ -392,18 +417,9 @@ Test(interrupt, sigint_then_sigterm_then_bit_identical, .init = setup, .fini = t
     /* first interruption: SIGINT */
     snprintf(err_path, sizeof err_path, "%s/stderr1.txt", tmpdir);
     const char *a_int[] = {SCENE, "--spp", SIGNAL_SPP, "--threads", "2", "-o", part, NULL};
-    int rc = 0;
     double stop_s = 0.0;
-    for (int attempt = 1; attempt <= 3 && rc == 0; attempt++) {
-        pid_t pid = test_start_mcpt(a_int, NULL, err_path, ALARM_S);
-        rc = signal_mid_render(pid, err_path, SIGINT, &stop_s);
-        test_read_file(err_path, err, sizeof err);
-        if (rc == 0) { /* the render ended first */
-            cr_log_info("attempt %d: the render ended before SIGINT", attempt);
-            assert_same_exr(full, part);
-            cr_assert_not(test_exists(ckpt), "a finished render left a checkpoint");
-        }
-    }
+    int rc = interrupt_mid_render(a_int, err_path, SIGINT, full, part, ckpt, &stop_s, err,
+                                  sizeof err);
     cr_assert_eq(rc, 130, "exit %d: %s", rc, err);
     cr_assert_lt(stop_s, 2.0, "took %.2f s to stop", stop_s);
     cr_log_info("SIGINT to exit: %.3f s", stop_s);
@@ -412,7 +428,7 @@ Test(interrupt, sigint_then_sigterm_then_bit_identical, .init = setup, .fini = t
     snprintf(hint, sizeof hint, "continue with: %s %s --resume %s\n",
              getenv("MCPT") ? getenv("MCPT") : "./mcpt", SCENE, ckpt);
     cr_assert(strstr(err, hint), "want '%s' in: %s", hint, err);
-    assert_partial(part, 4096.0f);
+    assert_partial(part, SIGNAL_SPP_F);
     cr_assert(test_exists(ckpt));
 
     /* second interruption, of the resumed run: SIGTERM */
@@ -436,7 +452,7 @@ Test(interrupt, sigint_then_sigterm_then_bit_identical, .init = setup, .fini = t
     }
     cr_assert_eq(rc, 143, "exit %d: %s", rc, err);
     cr_assert(strstr(err, "mcpt: interrupted by SIGTERM"), "%s", err);
-    assert_partial(part, 4096.0f); /* the stored -o: the same partial image, further on */
+    assert_partial(part, SIGNAL_SPP_F); /* the stored -o: the same partial image, further on */
     cr_assert(test_exists(ckpt));
 
     /* the last resume names no scene and writes elsewhere */
@@ -445,6 +461,37 @@ Test(interrupt, sigint_then_sigterm_then_bit_identical, .init = setup, .fini = t
     test_read_file(err_path, err, sizeof err);
     cr_assert_eq(rc, 0, "exit %d: %s", rc, err);
     assert_same_exr(full, final);
+    cr_assert_not(test_exists(ckpt));
+}
+
+/* The adaptive budget rule, interrupted by SIGINT and resumed, gives the image of an
+ * uninterrupted run to the bit: the resumed run renders every pixel's pilot again and gets the
+ * same counts.  As above, a render that ends before the signal is tried again. */
+Test(interrupt, budget_rule_resumes_bit_identical, .init = setup, .fini = teardown,
+     .timeout = TEST_TIMEOUT_S(240))
+{
+    char full[300], part[300], ckpt[300], err_path[300], err[4096];
+    snprintf(full, sizeof full, "%s/full.exr", tmpdir);
+    snprintf(part, sizeof part, "%s/part.exr", tmpdir);
+    snprintf(ckpt, sizeof ckpt, "%s/part.exr.ckpt", tmpdir);
+    snprintf(err_path, sizeof err_path, "%s/stderr.txt", tmpdir);
+    const char *a_full[] = {SCENE,    "--spp",     SIGNAL_SPP, "--adaptive", "--adaptive-rule",
+                            "budget", "--threads", "1",        "--quiet",    "-o",
+                            full,     NULL};
+    cr_assert_eq(test_run_mcpt(a_full, NULL, err_path, ALARM_S), 0);
+    const char *a_int[] = {SCENE,    "--spp",     SIGNAL_SPP, "--adaptive", "--adaptive-rule",
+                           "budget", "--threads", "2",        "-o",         part,
+                           NULL};
+    double stop_s = 0.0;
+    int rc = interrupt_mid_render(a_int, err_path, SIGINT, full, part, ckpt, &stop_s, err,
+                                  sizeof err);
+    cr_assert_eq(rc, 130, "exit %d: %s", rc, err);
+    cr_assert(test_exists(ckpt));
+    const char *a_res[] = {"--resume", ckpt, "--threads", "2", "--quiet", NULL};
+    rc = test_run_mcpt(a_res, NULL, err_path, ALARM_S);
+    test_read_file(err_path, err, sizeof err);
+    cr_assert_eq(rc, 0, "exit %d: %s", rc, err);
+    assert_same_exr(full, part);
     cr_assert_not(test_exists(ckpt));
 }
 
@@ -629,7 +676,7 @@ Test(interrupt, checkpoint_unwritable_still_writes_the_image, .init = setup, .fi
         if (rc == 0) { /* the render ended first */
             cr_log_info("attempt %d: the render ended before SIGINT", attempt);
             cr_assert_not(strstr(err, "error"), "%s", err);
-            assert_whole(out, 4096.0f);
+            assert_whole(out, SIGNAL_SPP_F);
         }
     }
     cr_assert_eq(rc, 1, "exit %d: %s", rc, err);
@@ -639,7 +686,7 @@ Test(interrupt, checkpoint_unwritable_still_writes_the_image, .init = setup, .fi
              "written, but the render cannot be resumed\n",
              ckpt, out);
     cr_assert(strstr(err, want), "want '%s' in: %s", want, err);
-    assert_partial(out, 4096.0f);
+    assert_partial(out, SIGNAL_SPP_F);
 }
 
 /* A render stopped (SIGSTOP) for 1.5 s and continued (SIGCONT) reports its wall time, which
