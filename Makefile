@@ -90,8 +90,8 @@ check-sanitize:
 	    LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp \
 	    MCPT=./build-san/mcpt ./build-san/tests/run_tests $(TEST_ARGS)
 
-# valgrind (memcheck) on two small end-to-end renders (analytic shapes and sky; the OBJ/MTL
-# Cornell box): any error or leak fails.  Built without
+# valgrind (memcheck) on three small end-to-end renders (analytic shapes and sky; the OBJ/MTL
+# Cornell box; the Cornell box by the adaptive budget rule): any error or leak fails.  Built without
 # -march=native into build-vg/, since valgrind does not decode every AVX-512 instruction.
 check-valgrind:
 	$(MAKE) BUILD=build-vg OPT_FLAGS="-O2" build-vg/mcpt
@@ -100,6 +100,9 @@ check-valgrind:
 	        --errors-for-leak-kinds=definite,indirect ./build-vg/mcpt $$s --spp 4 --width 32 \
 	        --height 24 --threads 2 --quiet -o build-vg/valgrind.exr || exit 1; \
 	done
+	valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite,indirect \
+	    ./build-vg/mcpt scenes/cornell-box.txt --spp 16 --adaptive --adaptive-rule budget \
+	    --width 32 --height 24 --threads 2 --quiet -o build-vg/valgrind.exr
 	@echo "valgrind: no errors, no leaks"
 
 # Fuzzing with libFuzzer (clang): `make fuzz FUZZ_SECONDS=N` runs each harness in fuzz/ for N
