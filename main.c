@@ -68,8 +68,9 @@ static const char USAGE[] =
     "                         T max(mean, floor) (docs/sampling.md)\n"
     "      --adaptive-rule R  pilot (default: sigma from a discarded pilot; unbiased), stop\n"
     "                         (stop when the pixel's own interval is narrow; biased low) or\n"
-    "                         budget (--spp is a mean: every pixel's discarded pilot sets its\n"
-    "                         count, a power of two, where it lowers the MSE most; unbiased)\n"
+    "                         budget (--spp is a budget, the rays of that many uniform spp:\n"
+    "                         every pixel's discarded pilot sets its count, a power of two,\n"
+    "                         where it lowers the MSE most; unbiased)\n"
     "      --tolerance T      adaptive: relative tolerance (default 0.1)\n"
     "      --adaptive-floor F adaptive: luminance below which T applies absolutely\n"
     "                         (default 0.01)\n"
@@ -870,14 +871,15 @@ static bool build(struct run *run, struct mcpt_error *err)
 
 /* The budget rule's fields of topt (sampling_options): topt->spp, the budget, becomes
  * budget_spp, and the maximum max-spp, else TRACE_BUDGET_MAX_FACTOR times the budget; min-spp
- * defaults to the largest power of two at most a quarter of the budget.  The pilot and the
- * least count must leave room in the budget. */
+ * defaults to the largest power of two at most a quarter of the budget; batch is set for the
+ * stratified sampler's sets.  The pilot and the least count must leave room in the budget. */
 static bool budget_options(const struct options *o, const struct render_settings *r,
                            struct trace_options *topt, struct mcpt_error *err)
 {
     if (o->tolerance || o->adaptive_floor >= 0.0f || o->batch)
-        return cmd_usage_error(err, "expected no --tolerance, --adaptive-floor or --batch with "
-                                    "--adaptive-rule budget (it spends --spp, a mean), got one");
+        return cmd_usage_error(err,
+                               "expected no --tolerance, --adaptive-floor or --batch with "
+                               "--adaptive-rule budget (it spends --spp as a budget), got one");
     uint32_t budget = topt->spp;
     topt->budget_spp = budget;
     topt->pilot_spp = o->pilot_spp   ? o->pilot_spp
@@ -892,7 +894,11 @@ static bool budget_options(const struct options *o, const struct render_settings
         min_default *= 2;
     topt->min_spp = o->min_spp ? o->min_spp : r->min_spp ? r->min_spp : min_default;
     topt->max_spp = topt->spp;
+    /* the stratified sampler's sets (trace_render): the largest power of two <= min-spp, so
+     * that the counts, powers of two from min-spp on, hold whole sets */
     topt->batch = 1;
+    while (topt->batch <= topt->min_spp / 2)
+        topt->batch *= 2;
     const char *problem = NULL;
     char text[200];
     if (topt->spp < budget || topt->min_spp > budget) {
@@ -1863,8 +1869,9 @@ static void report_adaptive(const struct run *run)
     const struct trace_options *topt = &run->topt;
     struct spp_spread sp = spp_spread_of(&run->film, topt->spp);
     if (topt->adaptive_rule == RENDER_ADAPTIVE_BUDGET)
-        printf("mcpt: adaptive, budget rule (%u spp a pixel on average, pilot %u spp included; "
-               "%u..%u spp): %.1f spp a pixel in the image, %.1f%% of pixels at the maximum; "
+        printf("mcpt: adaptive, budget rule (the rays of %u uniform spp, a pilot of %u spp "
+               "included; %u..%u spp): %.1f spp a pixel in the image, %.1f%% of pixels at the "
+               "maximum; "
                "sample map %s\n",
                topt->budget_spp, topt->pilot_spp, topt->min_spp, topt->spp, sp.mean,
                100.0 * sp.share_at_max, run->out.heatmap);

@@ -85,8 +85,8 @@ enum render_adaptive_rule {
     RENDER_ADAPTIVE_PILOT,
     /* stop when the pixel's own 95% interval is narrow: biased low */
     RENDER_ADAPTIVE_STOP,
-    /* a discarded pilot of every pixel shares a mean spp out where it lowers the image's MSE
-     * most: unbiased */
+    /* a discarded pilot of every pixel shares the rays of spp uniform samples out where they
+     * lower the image's MSE most: unbiased */
     RENDER_ADAPTIVE_BUDGET,
 };
 #define RENDER_ADAPTIVE_RULE_COUNT 3

@@ -9,8 +9,8 @@ same run, interleaved over R rounds (default 3):
     render call, scene building and start-up left out) and its RMSE e_C;
   - mcpt (default Sobol' sampler) at MCPT_SPP = 128, 256, 512 and 1024 spp, seed round: the
     render time mcpt prints (loading, BVH build and writing left out) and RMSE; then again with
-    the budget rule of adaptive sampling (`--adaptive --adaptive-rule budget`: the same spp as
-    a mean, every pixel's count set by a discarded pilot; unbiased), unless --no-budget.
+    the budget rule of adaptive sampling (`--adaptive --adaptive-rule budget`: the rays of the
+    same spp, every pixel's count set by a discarded pilot; unbiased), unless --no-budget.
 RMSE is sqrt of the noise-corrected MSE against REF (`mcpt compare`), a Cycles render of
 16 x 1024 spp whose own variance is subtracted.  Equal error: per round, a least-squares line
 log RMSE = a + b log t through mcpt's four points, solved for t* at RMSE = e_C; the ratio is
