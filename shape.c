@@ -112,6 +112,17 @@ static double rounded_error_sum(struct dvec3 p_d, struct dvec3 err_d, double eta
     return e * (1.0 + 12.0 * eta) * (1.0 + 0x1p-20);
 }
 
+/* An upper bound on each component of the error round_point will give p_d, the spread included
+ * (4 eta times the sum, as round_point adds it), so that a margin may project it on a direction:
+ * the sum of its components is at most rounded_error_sum's. */
+static struct dvec3 rounded_error_vec(struct dvec3 p_d, struct dvec3 err_d, double eta)
+{
+    struct dvec3 e = d3_add(err_d, d3_add(d3_scale(d3_abs(p_d), 0x1p-24),
+                                          (struct dvec3){0x1p-149, 0x1p-149, 0x1p-149}));
+    double spread = 4.0 * eta * d3_sum(e);
+    return d3_scale(d3_add(e, (struct dvec3){spread, spread, spread}), 1.0 + 0x1p-20);
+}
+
 /* The ray's point o + t_hit d projected onto the plane through o_pl with normal c (c_abs: the
  * magnitudes of the terms each component of c was formed from, c within gamma_d(2) of them), in
  * double, with *err bounding each component's share of its distance from the exact plane: the
@@ -564,15 +575,35 @@ static bool plane_t(struct dvec3 q, struct dvec3 n, struct dvec3 n_abs, const st
     return true;
 }
 
-/* How far inside its edges triangle_point and quad_point place a point, in units of E, the sum
- * of its error bounds (rounded_error_sum).  The spawned origin moves from the exact point by: the
- * rounding to float, at most E; offset_ray_origin's push n . p_error <= E along the unit normal,
- * at most sqrt(3) E summed over the components; and per component the rounding of that addition
- * and the step to the next float, 1.5 ulp <= 3 p_error_i, at most 3 E summed.  In all less than
- * (4 + sqrt(3)) E < 6 E, so an origin this far inside stays in front of a neighbouring face at a
- * right-angled concave edge (a box's; 2 E, the earlier margin, let a rotated box of quads away
- * from the origin leak, tests/extremes). */
+/* How far inside its edges triangle_point and quad_point place a point, per edge: a distance
+ *   M = EDGE_MARGIN_E (m . e) + EDGE_MARGIN_N (n . e),
+ * with e the point's per-component error bounds (rounded_error_vec), m the unit normal of the
+ * edge within the plane, n the plane's unit normal, and a . e meaning sum |a_k| e_k.  The
+ * spawned origin moves from the exact point by, per component: the rounding to float (e_k), the
+ * step of offset_ray_origin's addition to the next float (1.5 ulp <= 3 e_k), and along n the
+ * push n . p_error (about n . e).  At a right-angled concave edge (a box's) the neighbouring
+ * face's normal is m, so the origin moves towards it by at most 4 (m . e): the first term,
+ * 6 (m . e), keeps it in front of that face, never on its plane or past it.  A face at angle
+ * theta has normal m sin(theta) - n cos(theta), towards which the origin moves by at most
+ * 4 (m . e) sin + (4 (n . e) + push) |cos|; the second term covers that while
+ * tan(theta) > 5 / 2, i.e. from 68 to 112 degrees, and from 51 to 129 where m . e ~ n . e.
+ * Projecting on m, not summing every component's error, leaves out what cannot cross the
+ * neighbour: a wall at x = 10^6 has an error of 0.03 in x (its coordinate) but ~10^-7 in y, z,
+ * so its points are pulled ~10^-6 from its edges, not 0.2 (the whole of a wall of size 2: each
+ * triangle then rendered as its centre, tests/extremes, the Cornell box moved). */
 #define EDGE_MARGIN_E 6.0
+#define EDGE_MARGIN_N 1.0
+
+/* The margin M / h of the edge of direction v of a plane with normal c = e1 x e2 (cc = c . c),
+ * h = |c| / |v| the height over that edge: the distance M in units of the coordinate that is 0
+ * on the edge and 1 at the height h, (M |v| / |c|).  |c x v| = |c| |v| since v lies in the
+ * plane, so m = (c x v) / (|c| |v|). */
+static double edge_margin(struct dvec3 c, double cc, struct dvec3 v, struct dvec3 e)
+{
+    double in_plane = d3_dot(d3_abs(d3_cross(c, v)), e) / cc;
+    double normal = d3_dot(d3_abs(c), e) * sqrt(d3_dot(v, v)) / cc;
+    return (EDGE_MARGIN_E * in_plane + EDGE_MARGIN_N * normal) * (1.0 + 0x1p-20);
+}
 
 /* ---- quad ---- */
 
@@ -604,20 +635,20 @@ bool shape_quad_intersect(const struct quad *q, const struct ray *ray, float *t_
     return alpha >= 0.0 && alpha <= 1.0 && beta >= 0.0 && beta <= 1.0;
 }
 
-/* quad_point's margins for a point whose error bounds sum to E: eps = EDGE_MARGIN_E E / h in
- * alpha (h = area / |e2|, the width across the edges alpha = 0, 1) and in beta (area / |e1|). */
-static void quad_margins(const struct quad *q, double area, double E, double *eps_alpha,
-                         double *eps_beta)
+/* quad_point's margins for a point with per-component error bounds e (edge_margin): in alpha,
+ * across the edges alpha = 0, 1 (direction e2), and in beta (direction e1). */
+static void quad_margins(const struct quad *q, struct dvec3 e, double *eps_alpha, double *eps_beta)
 {
-    *eps_alpha = EDGE_MARGIN_E * E * d3_length(q->e2) / area;
-    *eps_beta = EDGE_MARGIN_E * E * d3_length(q->e1) / area;
+    struct dvec3 c = d3_cross(q->e1, q->e2);
+    double cc = d3_dot(c, c);
+    *eps_alpha = edge_margin(c, cc, q->e2, e);
+    *eps_beta = edge_margin(c, cc, q->e1, e);
 }
 
 /* The quad's point corner + alpha e1 + beta e2 with its error bound and unit normal, pulled
  * inside the quad as triangle_point pulls a triangle's: alpha, beta clamped to
- * [eps, 1 - eps] with eps = EDGE_MARGIN_E E / h, h the quad's width across the edges
- * alpha = 0, 1 (or beta = 0, 1), so quads that close a box keep spawned origins off each
- * other's planes. */
+ * [eps, 1 - eps] with the margins of quad_margins (EDGE_MARGIN_E), so quads that close a box
+ * keep spawned origins off each other's planes. */
 static vec3 quad_point(const struct quad *q, double alpha, double beta, vec3 *ng, vec3 *p_error)
 {
     struct dvec3 e1 = q->e1;
@@ -626,11 +657,18 @@ static vec3 quad_point(const struct quad *q, double alpha, double beta, vec3 *ng
     *ng = plane_normal(e1, e2, &area, &eta);
     struct dvec3 err;
     struct dvec3 p = plane_point_d(q->corner, e1, e2, alpha, beta, &err);
-    double E = rounded_error_sum(p, err, eta);
-    /* widths: area / |e2| across the alpha edges, area / |e1| across the beta edges */
     double eps_alpha = 0.5, eps_beta = 0.5;
-    if (area > 0.0)
-        quad_margins(q, area, E, &eps_alpha, &eps_beta);
+    if (area > 0.0) {
+        /* bounds first (edge_margin's terms are at most E = sum e_k each): most points are far
+         * from every edge */
+        double k = (EDGE_MARGIN_E + EDGE_MARGIN_N) * rounded_error_sum(p, err, eta) / area *
+                   (1.0 + 0x1p-18);
+        eps_alpha = k * d3_length(e2);
+        eps_beta = k * d3_length(e1);
+        if (!(alpha >= eps_alpha && alpha <= 1.0 - eps_alpha && beta >= eps_beta &&
+              beta <= 1.0 - eps_beta))
+            quad_margins(q, rounded_error_vec(p, err, eta), &eps_alpha, &eps_beta);
+    }
     if (!(alpha >= eps_alpha && alpha <= 1.0 - eps_alpha && beta >= eps_beta &&
           beta <= 1.0 - eps_beta)) {
         alpha = eps_alpha < 0.5 ? fmin(1.0 - eps_alpha, fmax(eps_alpha, alpha)) : 0.5;
@@ -663,7 +701,7 @@ struct surface shape_quad_surface(const struct quad *q, const struct ray *ray, f
         struct dvec3 pb = plane_point_d(q->corner, q->e1, q->e2, alpha, beta, &err_b);
         double E = rounded_error_sum(pr, err_r, eta);
         double eps_a, eps_b;
-        quad_margins(q, area, E, &eps_a, &eps_b);
+        quad_margins(q, rounded_error_vec(pr, err_r, eta), &eps_a, &eps_b);
         bool inside = alpha >= eps_a && alpha <= 1.0 - eps_a && beta >= eps_b &&
                       beta <= 1.0 - eps_b;
         double db = gamma_d(8) * d3_length(d3_sub(pr, q->corner)) * sqrt(max_d(l1, l2)) / area;
@@ -797,25 +835,54 @@ static ALWAYS_INLINE void triangle_plane(const vec3 p[3], struct triangle_plane 
 
 void shape_triangle_plane(const vec3 p[3], struct triangle_plane *tp) { triangle_plane(p, tp); }
 
-/* triangle_point's margins: eps_i = EDGE_MARGIN_E E / h_i for barycentric b_i (b0 = 1 - b1 - b2),
- * with h_i >= 2 area / (sqrt(3) |edge_i|_max), for a point whose error bounds sum to E. */
-static void triangle_margins(const struct triangle_plane *tp, double E, double eps[3])
+/* triangle_point's margins for a point with per-component error bounds e (edge_margin): eps_i
+ * for barycentric b_i (b0 = 1 - b1 - b2), 0 on the edge opposite corner i: p2 - p1, e2, e1. */
+static void triangle_margins(const struct triangle_plane *tp, struct dvec3 e, double eps[3])
 {
-    double k = EDGE_MARGIN_E * 1.7320508075688774 * E / tp->area2;
-    eps[0] = k * d3_max(d3_abs(d3_sub(tp->e2, tp->e1)));
-    eps[1] = k * d3_max(d3_abs(tp->e2));
-    eps[2] = k * d3_max(d3_abs(tp->e1));
+    double cc = d3_dot(tp->c, tp->c);
+    eps[0] = edge_margin(tp->c, cc, d3_sub(tp->e2, tp->e1), e);
+    eps[1] = edge_margin(tp->c, cc, tp->e2, e);
+    eps[2] = edge_margin(tp->c, cc, tp->e1, e);
+}
+
+/* b_i >= eps_i for every i, decided from bounds alone (most points are far from every edge):
+ * m . e and n . e are at most E = sum e_k (rounded_error_sum), and |v| <= sqrt(3) max |v_k|, so
+ * eps_i <= 7 sqrt(3) E max |v_i,k| / |c|.  False says only that triangle_margins must decide. */
+static bool surely_inside(const struct triangle_plane *tp, double E, const double b[3])
+{
+    double k = (EDGE_MARGIN_E + EDGE_MARGIN_N) * 1.7320508075688774 * E / tp->area2 *
+               (1.0 + 0x1p-18);
+    return b[0] >= k * d3_max(d3_abs(d3_sub(tp->e2, tp->e1))) &&
+           b[1] >= k * d3_max(d3_abs(tp->e2)) && b[2] >= k * d3_max(d3_abs(tp->e1));
+}
+
+/* Barycentrics b moved the least way into b_i >= eps_i (sum eps < 1): each b_i below its margin
+ * raised to it, the others lowered in proportion to what they hold above theirs, which keeps
+ * them above it (what they give, sum of the shortfalls, is less than what they hold, since the
+ * two differ by 1 - sum eps). */
+static void pull_inside(double b[3], const double eps[3])
+{
+    double shortfall = 0.0, slack = 0.0;
+    for (int i = 0; i < 3; i++) {
+        if (b[i] < eps[i])
+            shortfall += eps[i] - b[i];
+        else
+            slack += b[i] - eps[i];
+    }
+    for (int i = 0; i < 3; i++)
+        b[i] = b[i] < eps[i] ? eps[i] : b[i] - (b[i] - eps[i]) * (shortfall / slack);
 }
 
 /* The point p0 + b1 e1 + b2 e2 of triangle tp (triangle_plane) with its error bound
- * (plane_point_d, round_point), pulled inside the triangle: where
- * some b_i is below eps_i = EDGE_MARGIN_E E / h_i, with E the sum of the point's error bounds
- * and h_i the height over edge i, the barycentrics are clamped to the triangle and shrunk towards
- * its centre, b_i' = eps_i + (1 - sum eps) b_i.  So the rounded point lies inside every edge by
- * more than the spawned origin can move: at a concave edge a spawned ray then meets the
- * neighbour in front of its origin, not at t = 0.  A point more than eps outside (only from
- * the ray's point of a huge triangle, whose float inside test is off by u times its size) is
- * left where it is.  h_i = 2 area / |edge_i| >= 2 area / (sqrt(3) |edge_i|_max). */
+ * (plane_point_d, round_point), pulled inside the triangle: where some b_i is below its margin
+ * eps_i (triangle_margins, EDGE_MARGIN_E), the barycentrics move the least way into the inset
+ * triangle b_i >= eps_i (pull_inside).  So the rounded point lies inside every edge by more than
+ * the spawned origin can move: at a concave edge a spawned ray then meets the neighbour in front
+ * of its origin, not at t = 0.  Only points within the margin move, by at most the margin (an
+ * affine shrink towards the centre, before, moved every point near an edge by up to sum eps of
+ * the triangle).  A triangle narrower than its margins (sum eps >= 1) has no inset: its point
+ * is the centre.  A point more than eps outside (only from the ray's point of a huge triangle,
+ * whose float inside test is off by u times its size) is left where it is. */
 static ALWAYS_INLINE vec3 triangle_point(const struct triangle_plane *tp, double b1, double b2,
                                          vec3 *p_error)
 {
@@ -823,10 +890,10 @@ static ALWAYS_INLINE vec3 triangle_point(const struct triangle_plane *tp, double
     double area2 = tp->area2, eta = tp->eta;
     struct dvec3 err;
     struct dvec3 pd = plane_point_d(d3(tp->p0), e1, e2, b1, b2, &err);
-    if (area2 > 0.0) {
+    double b[3] = {1.0 - b1 - b2, b1, b2};
+    if (area2 > 0.0 && !surely_inside(tp, rounded_error_sum(pd, err, eta), b)) {
         double eps[3];
-        triangle_margins(tp, rounded_error_sum(pd, err, eta), eps);
-        double b[3] = {1.0 - b1 - b2, b1, b2};
+        triangle_margins(tp, rounded_error_vec(pd, err, eta), eps);
         bool inside = b[0] >= eps[0] && b[1] >= eps[1] && b[2] >= eps[2];
         bool near = b[0] >= -eps[0] && b[1] >= -eps[1] && b[2] >= -eps[2];
         if (!inside && near) {
@@ -834,13 +901,9 @@ static ALWAYS_INLINE vec3 triangle_point(const struct triangle_plane *tp, double
             if (!(eps_sum < 1.0)) {
                 b1 = b2 = 1.0 / 3.0; /* smaller than its error: the centre */
             } else {
-                double sum = 0.0;
-                for (int i = 0; i < 3; i++) {
-                    b[i] = max_d(0.0, b[i]);
-                    sum += b[i];
-                }
-                b1 = eps[1] + (1.0 - eps_sum) * b[1] / sum;
-                b2 = eps[2] + (1.0 - eps_sum) * b[2] / sum;
+                pull_inside(b, eps);
+                b1 = b[1];
+                b2 = b[2];
             }
             pd = plane_point_d(d3(tp->p0), e1, e2, b1, b2, &err);
         }
@@ -890,7 +953,7 @@ struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec
             double E = rounded_error_sum(pr, err_r, tp.eta);
             double b[3] = {1.0 - b1_d - b2_d, b1_d, b2_d};
             double eps[3];
-            triangle_margins(&tp, E, eps);
+            triangle_margins(&tp, rounded_error_vec(pr, err_r, tp.eta), eps);
             bool inside = b[0] >= eps[0] && b[1] >= eps[1] && b[2] >= eps[2];
             bool near_edge = !inside && b[0] >= -eps[0] && b[1] >= -eps[1] && b[2] >= -eps[2];
             double db = gamma_d(8) * d3_length(q) * sqrt(max_d(d3_dot(e1, e1), d3_dot(e2, e2))) /

@@ -154,3 +154,31 @@ with open(f'{D}/depth-cap.obj', 'w') as f:
     f.write('# three chains of 126 triangles at 2^-k along x, y, z: the BVH reaches its depth cap\n')
     f.write(''.join('v %r %r %r\n' % v for v in dv))
     f.write(''.join('f %d %d %d\n' % t for t in df))
+
+# The Cornell box with every coordinate on the grid of 1/64 (the lamp lowered to 126/64, one step
+# under the ceiling, which the rounding would otherwise meet): moved by up to 1e5 (ulp 2^-7) its
+# vertices stay exact, so the moved scenes hold the same geometry and differ only in precision.
+with open('scenes/models/CornellBox-Original.obj') as f:
+    src = f.read().splitlines()
+grid = ['# CornellBox-Original.obj (scenes/models) with its coordinates rounded to the grid of 1/64',
+        'mtllib ../../scenes/models/CornellBox-Original.mtl']
+for line in src:
+    if line.startswith('mtllib'):
+        continue
+    if line.startswith('v '):
+        v = [round(float(t) * 64) / 64 for t in line.split()[1:4]]
+        if float(line.split()[2]) == 1.98:  # the lamp
+            v[1] = 126 / 64
+        line = 'v %r %r %r' % tuple(v)
+    grid.append(line)
+with open(f'{D}/cornell-grid.obj', 'w') as f:
+    f.write('\n'.join(grid) + '\n')
+for off in ('0', '1e3', '1e5'):
+    o = float(off)
+    with open(f'{D}/cornell-moved-{off}.txt', 'w') as f:
+        f.write(f'# The Cornell box of the 1/64 grid moved by {off} on every axis (camera too): the image\n'
+                '# must not depend on where the scene is (extremes_test.c, cornell_moved_far_from_the_origin).\n'
+                f'camera eye={o:.9g},{o + 1:.9g},{o + 3.90625:.9g} look-at={o:.9g},{o + 1:.9g},{o:.9g} '
+                'up=0,1,0 fov=40\n'
+                'film width=32 height=32\nrender spp=2048 max-depth=6 sampler=independent\n'
+                f'mesh file=cornell-grid.obj translate={o:.9g},{o:.9g},{o:.9g}\n')
