@@ -585,12 +585,13 @@ static bool plane_t(struct dvec3 q, struct dvec3 n, struct dvec3 n_abs, const st
  * face's normal is m, so the origin moves towards it by at most 4 (m . e): the first term,
  * 6 (m . e), keeps it in front of that face, never on its plane or past it.  A face at angle
  * theta has normal m sin(theta) - n cos(theta), towards which the origin moves by at most
- * 4 (m . e) sin + (4 (n . e) + push) |cos|; the second term covers that while
- * tan(theta) > 5 / 2, i.e. from 68 to 112 degrees, and from 51 to 129 where m . e ~ n . e.
- * Projecting on m, not summing every component's error, leaves out what cannot cross the
- * neighbour: a wall at x = 10^6 has an error of 0.03 in x (its coordinate) but ~10^-7 in y, z,
- * so its points are pulled ~10^-6 from its edges, not 0.2 (the whole of a wall of size 2: each
- * triangle then rendered as its centre, tests/extremes, the Cornell box moved). */
+ * 4 (m . e) sin + (4 (n . e) + push) |cos|; the margin covers that while
+ * (2 (m . e) + (n . e)) sin > 5 (n . e) |cos|: from 59 to 121 degrees where m . e ~ n . e, from
+ * 79 to 101 where the error lies along n.  Projecting on m, not summing every component's
+ * error, leaves out what cannot cross a right-angled neighbour: a wall at x = 10^6 has an error
+ * of 0.06 in x (its coordinate) but ~10^-7 in y and z, so its points are pulled 0.06 from its
+ * edges (the second term), where 6 E pulled them 0.36 and, shrunk towards the centre, a wall of
+ * size 2 rendered nearly as its triangles' centres (tests/extremes, the Cornell box moved). */
 #define EDGE_MARGIN_E 6.0
 #define EDGE_MARGIN_N 1.0
 
