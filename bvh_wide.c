@@ -1614,8 +1614,11 @@ static inline bool wide_ray8_fast(const struct bvh *bvh, const struct ray *ray, 
     const float far_scale = 1.0f + 4.0f * mcpt_gamma(3); /* wide_ray_setup's */
     const __m128 zero = _mm_setzero_ps();
     const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
-    __m128 o_t = _mm_loadu_ps(&ray->o.x); /* o.x, o.y, o.z, t_min (struct ray's layout) */
-    __m128 d_t = _mm_loadu_ps(&ray->d.x); /* d.x, d.y, d.z, t_max */
+    /* o.x, o.y, o.z, t_min and d.x, d.y, d.z, t_max, a float at a time: the caller has just
+     * written the ray so, and a 16-byte load of those bytes would wait for the stores to reach
+     * the cache instead of being forwarded from them (docs/performance.md, "Store forwarding") */
+    __m128 o_t = _mm_setr_ps(ray->o.x, ray->o.y, ray->o.z, ray->t_min);
+    __m128 d_t = _mm_setr_ps(ray->d.x, ray->d.y, ray->d.z, ray->t_max);
     /* ray_setup_box: inv_d = 1 / d (+-inf for d = +-0), near plane max_a where inv_d_a < 0 */
     __m128 d = _mm_blend_ps(d_t, _mm_set1_ps(1.0f), 8);
     __m128 o = _mm_blend_ps(o_t, zero, 8);

@@ -312,8 +312,10 @@ static bool is_behind(const struct material *m, struct dvec3 p0, struct dvec3 n,
 }
 
 bool light_sample(const struct light_table *lt, uint32_t light_idx, const struct surface *ref,
-                  vec3 n_sky, vec2 u, struct light_sample *ls)
+                  const vec3 *n_sky_p, const vec2 *u_p, struct light_sample *ls)
 {
+    const vec3 n_sky = {n_sky_p->x, n_sky_p->y, n_sky_p->z}; /* read a float at a time (light.h) */
+    const vec2 u = {u_p->x, u_p->y};
     const struct scene *scene = lt->scene;
     if (light_idx == lt->sky_idx)
         return sample_sky(&scene->sky, n_sky, u, ls);

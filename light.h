@@ -52,9 +52,12 @@ struct light_sample {
  * spheres seen from inside uniformly by area, spheres seen from outside uniformly in their cone
  * of directions (shape.h), point lights by their one direction, the sky cosine-weighted about
  * n_sky (the shading normal turned to the side being lit).  False when the sample carries no
- * light (back of a one-sided emitter, degenerate geometry); *ls is then unspecified. */
+ * light (back of a one-sided emitter, degenerate geometry); *ls is then unspecified.  n_sky and
+ * u come by pointer: by value, gcc assembled them in memory a float at a time and read them back
+ * 8 bytes at once, which the CPU cannot forward from the narrower stores (docs/performance.md,
+ * "Store forwarding"). */
 bool light_sample(const struct light_table *lt, uint32_t light_idx, const struct surface *ref,
-                  vec3 n_sky, vec2 u, struct light_sample *ls);
+                  const vec3 *n_sky, const vec2 *u, struct light_sample *ls);
 /* The solid-angle density with which light_sample picks the unit direction wi from ref, given
  * the point `on` where the ray along wi first meets light light_idx (NULL for the sky, which
  * needs only wi and n_sky); 0 for delta lights and indices outside the table. */

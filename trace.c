@@ -834,7 +834,7 @@ static vec3 sample_one_light(const struct trace_scene *ts, const struct trace_op
     if (!nee && !light_is_delta(ts->lights, light_idx))
         return zero;
     struct light_sample ls;
-    if (!light_sample(ts->lights, light_idx, sf, v->n_sky, u_light, &ls))
+    if (!light_sample(ts->lights, light_idx, sf, &v->n_sky, &u_light, &ls))
         return zero;
     /* reflection only towards the geometric side of wo: no leaks through surfaces whose
      * shading normal disagrees with the geometry (no material has a non-delta transmission) */

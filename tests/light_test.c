@@ -183,7 +183,7 @@ static bool light_draw(void *ctx, const float u[3], vec3 *w)
 {
     struct light_ctx *c = ctx;
     struct light_sample ls;
-    if (!light_sample(c->lt, c->light_idx, &REF, c->n_sky, (vec2){u[0], u[1]}, &ls))
+    if (!light_sample(c->lt, c->light_idx, &REF, &c->n_sky, &(vec2){u[0], u[1]}, &ls))
         return false;
     *w = ls.wi;
     return true;
@@ -242,7 +242,7 @@ Test(light, pdf_agrees_with_sample)
             for (int i = 0; i < 2000; i++) {
                 vec2 u = {sample_pcg32_float(&rng), sample_pcg32_float(&rng)};
                 struct light_sample ls;
-                if (!light_sample(lt, k, &REF, n_sky, u, &ls))
+                if (!light_sample(lt, k, &REF, &n_sky, &u, &ls))
                     continue;
                 n_ok++;
                 cr_assert(!ls.is_delta && ls.pdf_sa > 0.0f && isfinite(ls.pdf_sa));
@@ -283,8 +283,9 @@ Test(light, one_sided_emitter_from_behind)
         front.p = v3_add(p0, v3_normalize(n));
         back.p = v3_sub(p0, v3_normalize(n));
         struct light_sample ls;
-        cr_assert(light_sample(lt, k, &front, front.ns, (vec2){0.3f, 0.4f}, &ls), "light %u", k);
-        cr_assert_not(light_sample(lt, k, &back, back.ns, (vec2){0.3f, 0.4f}, &ls), "light %u", k);
+        cr_assert(light_sample(lt, k, &front, &front.ns, &(vec2){0.3f, 0.4f}, &ls), "light %u", k);
+        cr_assert_not(light_sample(lt, k, &back, &back.ns, &(vec2){0.3f, 0.4f}, &ls), "light %u",
+                      k);
     }
     light_table_free(lt);
 }
@@ -301,7 +302,7 @@ Test(light, point_light_is_delta)
     cr_assert_eq(light_sky_idx(lt), LIGHT_NONE);
     cr_assert(light_is_delta(lt, 4) && !light_is_delta(lt, 0));
     struct light_sample ls;
-    cr_assert(light_sample(lt, 4, &REF, REF.ns, (vec2){0.3f, 0.6f}, &ls));
+    cr_assert(light_sample(lt, 4, &REF, &REF.ns, &(vec2){0.3f, 0.6f}, &ls));
     vec3 d = v3_sub(lt_lights[4].position, REF.p);
     float r2 = v3_dot(d, d);
     cr_assert(ls.is_delta && !ls.is_infinite && ls.pdf_sa == 0.0f);
