@@ -74,21 +74,27 @@ static float float_up(double x)
     return f;
 }
 
-/* The float point nearest p_d, where p_d is within err_d (per component) of the exact point,
- * with the bound of its error: err_d plus the rounding to float, at most 2^-24 |p_d| (half an
- * ulp) or 2^-150 below FLT_MIN.  eta bounds each component of the error of the unit normal the
- * caller returns beside the point: offset_ray_origin pushes along that normal by n . p_error,
- * and 4 eta (sum of the errors) added to every component keeps the push, projected on the exact
- * normal, beyond the exact distance (docs/theory.md, "Self-intersection"). */
-static ALWAYS_INLINE vec3 round_point(struct dvec3 p_d, struct dvec3 err_d, double eta,
-                                      vec3 *p_error)
+/* The bound, per component and in double, of the error of the float point nearest p_d, where
+ * p_d is within err_d of the exact point: err_d plus the rounding to float, at most 2^-24 |p_d|
+ * (half an ulp) or 2^-150 below FLT_MIN.  eta bounds each component of the error of the unit
+ * normal the caller returns beside the point: offset_ray_origin pushes along that normal by
+ * n . p_error, and 4 eta (sum of the errors) added to every component keeps the push, projected
+ * on the exact normal, beyond the exact distance (docs/theory.md, "Self-intersection"). */
+static ALWAYS_INLINE struct dvec3 point_error_d(struct dvec3 p_d, struct dvec3 err_d, double eta)
 {
-    vec3 p = d3_to_float(p_d);
     struct dvec3 e = d3_add(err_d, d3_add(d3_scale(d3_abs(p_d), 0x1p-24),
                                           (struct dvec3){0x1p-149, 0x1p-149, 0x1p-149}));
     double spread = 4.0 * eta * d3_sum(e);
-    *p_error = (vec3){float_up(e.x + spread), float_up(e.y + spread), float_up(e.z + spread)};
-    return p;
+    return d3_add(e, (struct dvec3){spread, spread, spread});
+}
+
+/* The float point nearest p_d, with that bound rounded up to float. */
+static ALWAYS_INLINE vec3 round_point(struct dvec3 p_d, struct dvec3 err_d, double eta,
+                                      vec3 *p_error)
+{
+    struct dvec3 e = point_error_d(p_d, err_d, eta);
+    *p_error = (vec3){float_up(e.x), float_up(e.y), float_up(e.z)};
+    return d3_to_float(p_d);
 }
 
 /* The point o + a e1 + b e2 of the plane through o spanned by e1, e2 (exact doubles: a
@@ -112,15 +118,11 @@ static double rounded_error_sum(struct dvec3 p_d, struct dvec3 err_d, double eta
     return e * (1.0 + 12.0 * eta) * (1.0 + 0x1p-20);
 }
 
-/* An upper bound on each component of the error round_point will give p_d, the spread included
- * (4 eta times the sum, as round_point adds it), so that a margin may project it on a direction:
- * the sum of its components is at most rounded_error_sum's. */
+/* point_error_d's bound, raised past the rounding of round_point's float_up, so that a margin
+ * may project it on a direction: the sum of its components is at most rounded_error_sum's. */
 static struct dvec3 rounded_error_vec(struct dvec3 p_d, struct dvec3 err_d, double eta)
 {
-    struct dvec3 e = d3_add(err_d, d3_add(d3_scale(d3_abs(p_d), 0x1p-24),
-                                          (struct dvec3){0x1p-149, 0x1p-149, 0x1p-149}));
-    double spread = 4.0 * eta * d3_sum(e);
-    return d3_scale(d3_add(e, (struct dvec3){spread, spread, spread}), 1.0 + 0x1p-20);
+    return d3_scale(point_error_d(p_d, err_d, eta), 1.0 + 0x1p-20);
 }
 
 /* The ray's point o + t_hit d projected onto the plane through o_pl with normal c (c_abs: the

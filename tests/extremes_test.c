@@ -447,8 +447,8 @@ static void write_quad_box(const char *path, const double m[4], bool as_params)
  * keep the corners and edges the file wrote in double, so neighbouring faces meet to double
  * precision (in float they had gaps of half an ulp of the corner, which let sky in from an
  * offset of 100 sizes on), and a point is pulled inside its quad by a margin of its error
- * (shape.c, edge_margin), beyond what the spawned origin can move (twice its error let a box of size 1e-12
- * at 1e-9 leak). */
+ * (shape.c, edge_margin), beyond what the spawned origin can move (twice its error let a box of
+ * size 1e-12 at 1e-9 leak). */
 Test(extremes, moved_quad_box_sees_no_sky, .timeout = TEST_TIMEOUT_S(120))
 {
     static const double moves[][4] = {

@@ -372,9 +372,10 @@ static int origins_past_right_angled_neighbour(const struct quad *q, int edge, i
 }
 
 /* A point on the edge of a face, pulled inside by shape.c's margin (EDGE_MARGIN_E times its
- * error projected on the edge's normal in the plane, edge_margin), spawns rays whose origins lie strictly in front of a neighbouring face at a right angle
- * across that edge, whatever the direction: the push along the face's normal is parallel to the
- * neighbour, and only roundings move the origin towards it, by less than the margin.  First the
+ * error projected on the edge's normal in the plane, edge_margin), spawns rays whose origins lie
+ * strictly in front of a neighbouring face at a right angle across that edge, whatever the
+ * direction: the push along the face's normal is parallel to the neighbour, and only roundings
+ * move the origin towards it, by less than the margin.  First the
  * face of a rotated box of quads at size 1e-12 and offset 1e-9 that let sky in (tests/extremes,
  * moved_quad_box_sees_no_sky): with twice the error as the margin, 4.7% of its origins crossed.
  * Then quads and triangles of a box turned 16 ways at sizes and offsets where float resolves
