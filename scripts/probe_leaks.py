@@ -1,0 +1,258 @@
+#!/usr/bin/env python3
+"""probe_leaks.py - random probes of issue 12's classes: closed meshes that must let no sky in,
+sheared quads that must render exactly, and images that must not depend on scale or position.
+
+Python standard library only; renders with an mcpt binary in a scratch folder.  Modes:
+
+  cubes    a closed cube (camera inside, diffuse walls, constant white sky) under a random
+           rotation (--no-turn: none), scale 1e-15..1e15 and offset up to 1e4 sizes; every pixel
+           must be exactly 0.  --cells N cuts each face into an N x N grid whose faces share
+           their edges' vertices; --strips N into N strips, as tests/extremes_test.c does, whose
+           ends are T-junctions on the next face's edge.
+  quads    a parallelogram of albedo 0.8 under a sky of 2, sheared to 0.1..20 degrees, turned,
+           scaled 1e-12..1e12 and moved up to 100 sizes, seen from either side: every pixel 1.6.
+  offset   CornellBox-Original rounded to a grid of 1/G, moved by each --offsets value (camera
+           too), against the same at the origin: image means and their z (independent sampler).
+  scales   an OBJ (--obj) scaled by 1e-15, 1e-6, 1e6, 1e15 (camera too) against scale 1.
+
+  python3 scripts/probe_leaks.py cubes --cells 10 --cases 50 --seed 22
+  python3 scripts/probe_leaks.py cubes --strips 30 --cases 50 --seed 21
+  python3 scripts/probe_leaks.py quads --cases 100 --seed 2
+  python3 scripts/probe_leaks.py offset --grid 32 --offsets 1e5,2e5,4e5
+  python3 scripts/probe_leaks.py scales --obj ../shared/models/cornell-box/CornellBox-Sphere.obj
+"""
+
+import argparse
+import math
+import os
+import random
+import subprocess
+import sys
+import tempfile
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from exr_mean import image_stats, read_exr  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def fmt(v):
+    return ",".join("%.9g" % x for x in v)
+
+
+def normalize(v):
+    n = math.sqrt(sum(x * x for x in v))
+    return [x / n for x in v]
+
+
+def cross(a, b):
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+def rotation(axis, degrees):
+    """Rodrigues' rotation about the unit axis, the sense of the scene format's rotate=."""
+    ux, uy, uz = axis
+    c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
+
+    def rot(p):
+        x, y, z = p
+        d = ux * x + uy * y + uz * z
+        cx, cy, cz = uy * z - uz * y, uz * x - ux * z, ux * y - uy * x
+        return [x * c + cx * s + ux * d * (1 - c), y * c + cy * s + uy * d * (1 - c),
+                z * c + cz * s + uz * d * (1 - c)]
+    return rot
+
+
+def render(mcpt, scene, seed=0):
+    exr = scene + ".exr"
+    r = subprocess.run([mcpt, scene, "-o", exr, "--threads", "2", "--seed", str(seed)],
+                       capture_output=True, text=True)
+    if r.returncode != 0:
+        sys.exit("%s: %s" % (scene, r.stderr.strip()))
+    return exr
+
+
+def cube_obj(path, cells, strips, inward):
+    """The cube [-1, 1]^3: a grid of cells x cells per face sharing vertices by index, or strips
+    per face (T-junctions where they end on the next face)."""
+    n, m = (strips, 1) if strips else (cells, cells)
+    verts, out_v, out_f = {}, [], []
+
+    def vid(p):
+        if p not in verts:
+            verts[p] = len(verts) + 1
+            out_v.append("v %.9g %.9g %.9g" % tuple(-1 + 2 * c / (n * m) for c in p))
+        return verts[p]
+    for axis in range(3):
+        for sign in (-1, 1):
+            u, w = (axis + 1) % 3, (axis + 2) % 3
+            for i in range(n):
+                for j in range(m):
+                    def corner(a, b):
+                        p = [0, 0, 0]
+                        p[axis] = 0 if sign < 0 else n * m
+                        p[u], p[w] = a * m, b * n
+                        return vid(tuple(p))
+                    a, b, c, d = corner(i, j), corner(i + 1, j), corner(i + 1, j + 1), corner(i, j + 1)
+                    if (sign > 0) == inward:
+                        out_f.append("f %d %d %d\nf %d %d %d" % (a, c, b, a, d, c))
+                    else:
+                        out_f.append("f %d %d %d\nf %d %d %d" % (a, b, c, a, c, d))
+    with open(path, "w") as f:
+        f.write("\n".join(out_v + out_f) + "\n")
+
+
+def probe_cubes(args, tmp):
+    rng = random.Random(args.seed)
+    leaks = ran = 0
+    for it in range(args.cases):
+        inward = rng.random() < 0.5
+        obj = os.path.join(tmp, "cube-%d.obj" % inward)
+        cube_obj(obj, args.cells, args.strips, inward)
+        s = 10 ** rng.uniform(-15, 15)
+        t = [rng.uniform(-1, 1) * s * rng.choice([0, 1, 10, 100, 1000, 1e4]) for _ in range(3)]
+        axis = normalize([rng.gauss(0, 1) for _ in range(3)])
+        angle = rng.uniform(0, 360) if args.turn else 0.0
+        rot = rotation(axis, angle)
+        # the camera inside, down to 64 float steps of the coordinates (or 1e-6) from a wall
+        rel = max(abs(x) for x in t) / s + 2
+        lo = math.log10(max(1e-6, 64 * 2 ** -23 * rel))
+        if lo > -1 or rel * s > 1e17:  # no room for the camera, or beyond the scene's range
+            continue
+        e = [rng.choice([rng.uniform(-0.99, 0.99), rng.choice([-1, 1]) * (1 - 10 ** rng.uniform(lo, -1))])
+             for _ in range(3)]
+        la = [rng.uniform(-1, 1) for _ in range(3)]
+        eye = [v * s + o for v, o in zip(rot(e), t)]
+        at = [v * s + o for v, o in zip(rot(la), t)]
+        if max(abs(a - b) for a, b in zip(eye, at)) < 1e-3 * s:
+            continue
+        scene = os.path.join(tmp, "cube.txt")
+        with open(scene, "w") as f:
+            f.write("camera eye=%s look-at=%s up=0.1,1,0.2 fov=%.3f\n" % (fmt(eye), fmt(at), rng.uniform(30, 150)))
+            f.write("film width=24 height=24\nrender spp=64 sampler=independent\n")
+            f.write("material name=m type=diffuse albedo=0.9,0.9,0.9\n")
+            f.write("mesh file=%s material=m rotate=%s,%.9g scale=%.9g translate=%s\n"
+                    % (obj, fmt(axis), angle, s, fmt(t)))
+            f.write("sky type=constant radiance=1,1,1\n")
+        ran += 1
+        _, _, planes = read_exr(render(args.mcpt, scene))
+        brightest = max(planes["R"])
+        if brightest != 0:
+            leaks += 1
+            print("leak: case %d, scale %.3g, brightest pixel %.3g" % (it, s, brightest))
+    print("cubes: %d of %d let sky in" % (leaks, ran))
+    return leaks == 0
+
+
+def probe_quads(args, tmp):
+    rng = random.Random(args.seed)
+    bad = ran = 0
+    for it in range(args.cases):
+        s = 10 ** rng.uniform(-12, 12)
+        theta = math.radians(10 ** rng.uniform(-1, 1.3))
+        a = normalize([rng.gauss(0, 1) for _ in range(3)])
+        t = normalize(cross(a, [rng.gauss(0, 1) for _ in range(3)]))
+        b = [math.cos(theta) * x + math.sin(theta) * y for x, y in zip(a, t)]
+        la, lb = rng.uniform(0.3, 3), rng.uniform(0.3, 3)
+        e1, e2 = [x * la * s for x in a], [x * lb * s for x in b]
+        c = [rng.uniform(-1, 1) * s * rng.choice([0, 1, 10, 100]) for _ in range(3)]
+        n = normalize(cross(e1, e2))
+        al, be = rng.uniform(0.3, 0.7), rng.uniform(0.3, 0.7)
+        p = [c[k] + al * e1[k] + be * e2[k] for k in range(3)]
+        side = rng.choice([1, -1])
+        v = normalize([side * n[k] + 0.5 * rng.gauss(0, 1) for k in range(3)])
+        if sum(v[k] * n[k] for k in range(3)) * side < 0.5:
+            continue
+        dist = s * 10 ** rng.uniform(-1, 2)
+        eye = [p[k] + dist * v[k] for k in range(3)]
+        # the view's footprint well inside the parallelogram
+        h = min(la, lb) * s * math.sin(theta) * min(al, be, 1 - al, 1 - be)
+        fov = 2 * math.degrees(math.atan(0.2 * h / dist / 1.5))
+        if fov < 1e-4:
+            continue
+        up = normalize(cross(v, [rng.gauss(0, 1) for _ in range(3)]))
+        scene = os.path.join(tmp, "quad.txt")
+        with open(scene, "w") as f:
+            f.write("camera eye=%s look-at=%s up=%s fov=%.6g\n" % (fmt(eye), fmt(p), fmt(up), fov))
+            f.write("film width=16 height=16\nrender spp=64 sampler=independent\n")
+            f.write("material name=f type=diffuse albedo=0.8,0.8,0.8\n")
+            f.write("quad corner=%s edge1=%s edge2=%s material=f\n" % (fmt(c), fmt(e1), fmt(e2)))
+            f.write("sky type=constant radiance=2,2,2\n")
+        ran += 1
+        _, _, planes = read_exr(render(args.mcpt, scene))
+        # 1.6 to the float rounding of a pixel's mean of 64 samples
+        if not all(abs(x - 1.6) < 1e-6 for x in planes["R"]):
+            bad += 1
+            print("case %d: scale %.3g, %.3g degrees: pixels %.7g..%.7g"
+                  % (it, s, math.degrees(theta), min(planes["R"]), max(planes["R"])))
+    print("quads: %d of %d not exactly 1.6" % (bad, ran))
+    return bad == 0
+
+
+def compare_means(base, others):
+    ok = True
+    for label, st in others:
+        z = [(st["mean"][c] - base["mean"][c]) / math.hypot(st["se"][c], base["se"][c]) for c in range(3)]
+        rel = [st["mean"][c] / base["mean"][c] - 1 for c in range(3)]
+        print("%s: %s" % (label, ", ".join("%+.2f%% (z %.1f)" % (100 * r, x) for r, x in zip(rel, z))))
+        ok &= all(abs(x) <= 4 for x in z)
+    return ok
+
+
+def probe_offset(args, tmp):
+    src = os.path.join(ROOT, "scenes", "models", "CornellBox-Original.obj")
+    obj = os.path.join(tmp, "grid.obj")
+    with open(src) as f, open(obj, "w") as out:
+        for line in f:
+            if line.startswith("v "):
+                v = [round(float(x) * args.grid) / args.grid for x in line.split()[1:4]]
+                line = "v %r %r %r\n" % tuple(v)
+            elif line.startswith("mtllib"):
+                line = "mtllib %s\n" % os.path.join(ROOT, "scenes", "models", "CornellBox-Original.mtl")
+            out.write(line)
+    stats = []
+    for k, off in enumerate([0.0] + [float(x) for x in args.offsets.split(",")]):
+        scene = os.path.join(tmp, "offset-%d.txt" % k)
+        with open(scene, "w") as f:
+            f.write("camera eye=%.9g,%.9g,%.9g look-at=%.9g,%.9g,%.9g up=0,1,0 fov=40\n"
+                    % (off, off + 1, off + 3.906, off, off + 1, off))
+            f.write("film width=32 height=32\nrender spp=%d max-depth=6 sampler=independent\n" % args.spp)
+            f.write("mesh file=%s translate=%.9g,%.9g,%.9g\n" % (obj, off, off, off))
+        stats.append(("offset %g" % off, image_stats(render(args.mcpt, scene, seed=5 + k))))
+    return compare_means(stats[0][1], stats[1:])
+
+
+def probe_scales(args, tmp):
+    stats = []
+    for k, s in enumerate([1, 1e-15, 1e-6, 1e6, 1e15]):
+        scene = os.path.join(tmp, "scale-%d.txt" % k)
+        with open(scene, "w") as f:
+            f.write("camera eye=0,%.9g,%.9g look-at=0,%.9g,0 up=0,1,0 fov=40\n" % (s, 3.9 * s, s))
+            f.write("film width=32 height=32\nrender spp=%d sampler=independent\n" % args.spp)
+            f.write("mesh file=%s scale=%g\n" % (os.path.abspath(args.obj), s))
+        stats.append(("scale %g" % s, image_stats(render(args.mcpt, scene, seed=1 + k))))
+    return compare_means(stats[0][1], stats[1:])
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("mode", choices=["cubes", "quads", "offset", "scales"])
+    ap.add_argument("--mcpt", default=os.path.join(ROOT, "mcpt"))
+    ap.add_argument("--cases", type=int, default=50)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--cells", type=int, default=3, help="cubes: grid cells per face side")
+    ap.add_argument("--strips", type=int, default=0, help="cubes: strips per face instead")
+    ap.add_argument("--no-turn", dest="turn", action="store_false", help="cubes: no rotation")
+    ap.add_argument("--grid", type=int, default=32, help="offset: vertices on the grid of 1/G")
+    ap.add_argument("--offsets", default="1e5,2e5,4e5")
+    ap.add_argument("--obj", default=os.path.join(ROOT, "scenes", "models", "CornellBox-Original.obj"))
+    ap.add_argument("--spp", type=int, default=4096)
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        ok = {"cubes": probe_cubes, "quads": probe_quads, "offset": probe_offset,
+              "scales": probe_scales}[args.mode](args, tmp)
+    sys.exit(0 if ok else 1)
+
+
+if __name__ == "__main__":
+    main()
