@@ -86,7 +86,8 @@ struct shape_sample {
 /* What every point of a triangle shares, computed in double once (shape_triangle_plane) for a
  * triangle that emits (the light table keeps one per emitting triangle, 120 bytes): sampling
  * then skips a cross product, a square root and a division per sample, and gives the same bits
- * as shape_triangle_sample and shape_triangle_pdf. */
+ * as shape_triangle_sample and shape_triangle_pdf.  trace.c keeps one per triangle of a small
+ * scene for its hits (shape_triangle_plane_surface). */
 struct triangle_plane {
     vec3 p0;         /* the first corner */
     struct dvec3 e1; /* p1 - p0 */
@@ -97,6 +98,10 @@ struct triangle_plane {
     double eta;      /* bound on the error of each component of ng */
 };
 void shape_triangle_plane(const vec3 p[3], struct triangle_plane *tp);
+/* shape_triangle_surface of the triangle whose plane is *tp: the same bits. */
+struct surface shape_triangle_plane_surface(const struct triangle_plane *tp, const vec3 *ns,
+                                            const vec2 *uv, const struct ray *ray, float t_hit,
+                                            float b1, float b2, uint32_t mat_idx);
 
 /* Sample a point on the shape from ref->p with uniforms u.  False when the sample is unusable:
  * the point coincides with ref->p, is seen edge-on, or its density is not finite. */

@@ -4,6 +4,7 @@
  * sampled points on their shape, with the density shape_*_pdf gives (PBRT 4e, ch. 6, "Shape
  * Interface").  The distributions of the samples are tested in light_test.c (chi-square). */
 #include <criterion/criterion.h>
+#include <string.h>
 
 #include "bvh_test_util.h"
 #include "shape.h"
@@ -231,6 +232,65 @@ Test(shape, triangle_surface_interpolates)
     cr_assert(v3_length(v3_sub(ng, sf.ng)) < 1e-6f);
     cr_assert_float_eq(area, 0.5f * v3_length(v3_cross(v3_sub(p[1], p[0]), v3_sub(p[2], p[0]))),
                        1e-6f);
+}
+
+/* A hit's surface from the triangle's kept plane (shape_triangle_plane, out of line, as trace.c
+ * keeps it for a small scene's triangles) is that of shape_triangle_surface, which computes the
+ * plane inline, to the bit: the two must not round differently (contracted multiply-adds, say),
+ * or a small scene's image would change.  Random triangles from 1e-6 to 1e6 units, hit from
+ * nearby and from far (the point rebuilt from the barycentrics, or projected from the ray where
+ * the triangle is 2^8 times larger than the hit distance), with and without shading normals and
+ * uvs, and without a ray. */
+Test(shape, triangle_plane_surface_equals_triangle_surface)
+{
+    struct rng rng = {777};
+    const vec3 ns[3] = {{0, 0, 1}, {0, 1, 0}, {1, 0, 0}};
+    const vec2 uv[3] = {{0, 0}, {1, 0}, {0, 1}};
+    int n_projected = 0, n_rebuilt = 0;
+    for (int i = 0; i < 20000; i++) {
+        /* the hit point x 4 sizes from the world's origin, or within 1e-3 of a size (half the
+         * triangles), and the ray's origin 1e-4 to 10 sizes before it: the point is projected
+         * from the ray where the triangle is 2^8 times larger than the distance plus |o| */
+        float scale = (float)pow(10.0, 12.0 * rng_float(&rng) - 6.0);
+        float far = i % 2 ? 4.0f : 1e-3f;
+        vec3 x = v3_scale(rng_in_box(&rng, -1.0f, 1.0f), scale * far);
+        vec3 e1 = v3_scale(rng_in_box(&rng, -1.0f, 1.0f), scale);
+        vec3 e2 = v3_scale(rng_in_box(&rng, -1.0f, 1.0f), scale);
+        float b1 = rng_float(&rng), b2 = rng_float(&rng);
+        if (b1 + b2 > 1.0f) {
+            b1 = 1.0f - b1;
+            b2 = 1.0f - b2;
+        }
+        vec3 p0 = v3_sub(x, v3_add(v3_scale(e1, b1), v3_scale(e2, b2)));
+        const vec3 p[3] = {p0, v3_add(p0, e1), v3_add(p0, e2)};
+        float dist = scale * (float)pow(10.0, 5.0 * rng_float(&rng) - 4.0);
+        vec3 d = rng_dir(&rng);
+        struct ray r = mkray(v3_sub(x, v3_scale(d, dist)), d);
+        double near = 256.0 * ((double)dist + fmax(fabsf(r.o.x), fmax(fabsf(r.o.y), fabsf(r.o.z))));
+        if (fmax(v3_dot(e1, e1), v3_dot(e2, e2)) > near * near * 1.01)
+            n_projected++;
+        else
+            n_rebuilt++;
+        struct triangle_plane tp;
+        shape_triangle_plane(p, &tp);
+        for (int variant = 0; variant < 3; variant++) {
+            const struct ray *ray = variant == 2 ? NULL : &r;
+            const vec3 *n = variant == 1 ? ns : NULL;
+            const vec2 *t = variant == 1 ? uv : NULL;
+            struct surface a = shape_triangle_surface(p, n, t, ray, ray ? dist : 0.0f, b1, b2, 3);
+            struct surface b = shape_triangle_plane_surface(&tp, n, t, ray, ray ? dist : 0.0f, b1,
+                                                            b2, 3);
+            cr_assert(memcmp(&a.p, &b.p, sizeof a.p) == 0 &&
+                          memcmp(&a.p_error, &b.p_error, sizeof a.p_error) == 0 &&
+                          memcmp(&a.ng, &b.ng, sizeof a.ng) == 0 &&
+                          memcmp(&a.ns, &b.ns, sizeof a.ns) == 0 &&
+                          memcmp(&a.uv, &b.uv, sizeof a.uv) == 0 && a.mat_idx == b.mat_idx,
+                      "triangle %d, variant %d (scale %g, distance %g): the surfaces differ", i,
+                      variant, scale, dist);
+        }
+    }
+    cr_assert(n_projected > 1000 && n_rebuilt > 1000, "projected %d, rebuilt %d", n_projected,
+              n_rebuilt);
 }
 
 /* Sampled points lie on their shape to within their error bound: on the plane of a triangle
