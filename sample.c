@@ -766,12 +766,14 @@ static vec2 cos_sin_quarter(float phi)
     return (vec2){c, sn};
 }
 
-vec2 sample_concentric_disk(vec2 u)
+/* sample_concentric_disk, with the point's radius |r| in *radius. */
+static ALWAYS_INLINE vec2 concentric_disk(vec2 u, float *radius)
 {
     /* map u to [-1,1]^2, then squares to concentric rings (Shirley & Chiu 1997):
      * r = ox, theta = pi/4 oy/ox when |ox| > |oy|, else r = oy, theta = pi/2 - pi/4 ox/oy, whose
      * cos and sin are the sin and cos of pi/4 ox/oy */
     float ox = 2.0f * u.x - 1.0f, oy = 2.0f * u.y - 1.0f;
+    *radius = 0.0f;
     if (ox == 0.0f && oy == 0.0f)
         return (vec2){0.0f, 0.0f};
     /* the two wedges as selects, not a branch: which one u falls in is a coin toss, and a
@@ -779,8 +781,15 @@ vec2 sample_concentric_disk(vec2 u)
     bool x_wedge = fabsf(ox) > fabsf(oy);
     float r = x_wedge ? ox : oy;
     float other = x_wedge ? oy : ox;
+    *radius = fabsf(r);
     vec2 cs = cos_sin_quarter((MCPT_PI / 4.0f) * (other / r));
     return x_wedge ? (vec2){r * cs.x, r * cs.y} : (vec2){r * cs.y, r * cs.x};
+}
+
+vec2 sample_concentric_disk(vec2 u)
+{
+    float r;
+    return concentric_disk(u, &r);
 }
 
 vec2 sample_invert_concentric_disk(vec2 p)
@@ -808,9 +817,12 @@ vec2 sample_invert_concentric_disk(vec2 p)
 
 vec3 sample_cosine_hemisphere(vec2 u)
 {
-    /* Malley: a uniform disk point lifted to the hemisphere is cosine distributed */
-    vec2 d = sample_concentric_disk(u);
-    float z = sqrtf(max_f(0.0f, 1.0f - d.x * d.x - d.y * d.y));
+    /* Malley: a uniform disk point lifted to the hemisphere is cosine distributed; z from the
+     * ring's radius r, |d| in exact arithmetic, which is known before the angle's division and
+     * polynomial, so that the square root runs beside them instead of after */
+    float r;
+    vec2 d = concentric_disk(u, &r);
+    float z = sqrtf(max_f(0.0f, 1.0f - r * r));
     return (vec3){d.x, d.y, z};
 }
 
