@@ -290,7 +290,9 @@ Test(extremes, closed_cube_sees_no_sky, .timeout = TEST_TIMEOUT_S(120))
 /* The same cube with each face cut into n strips of two triangles (slivers of aspect n), wound
  * outward or inward, written into dir; the scene's path goes to scene_path.  The strips of
  * neighbouring faces meet in T-junctions whose vertices lie exactly on the other face's edge
- * (the cube is axis-aligned, every coordinate k/n exact in float), so the mesh is closed. */
+ * (the cube is axis-aligned: such a vertex differs from the edge's ends only in the coordinate
+ * along the edge, however -1 + 2i/n rounds), so the mesh is closed.  A rotation would round
+ * them off it (docs/theory.md, "What no scheme can promise"). */
 static void write_strip_cube(const char *dir, int n, bool inward, char *scene_path, size_t bytes)
 {
     char obj_path[300];
