@@ -1479,6 +1479,23 @@ static bool do_sphere(struct parser *ps, const struct stmt *st)
     if (!(s.radius > 0.0f))
         return fail(ps, scale->val_col, "expected 'radius' times 'scale' > 0, got %g" UNDERFLOW_WHY,
                     r);
+    /* a surface point is rounded to float at the centre's magnitude, and a ray spawned from it
+     * is pushed off by its error and the surface's curvature (shape.c, sphere_point); below
+     * 2^-20 of the largest coordinate (16 float steps across) that push can cross the sphere.
+     * Seen from outside it renders (a tiny lamp, a distant ball); a path inside it may escape */
+    double r_min = ldexp(fmax(fmax(fabs((double)s.center.x), fabs((double)s.center.y)),
+                              fabs((double)s.center.z)),
+                         -20);
+    if ((double)s.radius < r_min) {
+        char line[SCENE_WARNING_BYTES];
+        snprintf(line, sizeof line,
+                 "%s:%d:%d: warning: sphere of radius %g at center %g,%g,%g is under 16 "
+                 "single-precision steps across (radius < 2^-20 of the centre's largest "
+                 "coordinate, %g): it renders from outside, but a path inside it may escape",
+                 ps->path, ps->line, get(st, "radius")->val_col, (double)s.radius,
+                 (double)s.center.x, (double)s.center.y, (double)s.center.z, r_min);
+        add_warning(ps, line);
+    }
     struct scene *sc = ps->scene;
     if (!RESERVE(ps, sc->spheres, ps->cap_spheres, (uint64_t)sc->n_spheres + 1))
         return false;

@@ -466,7 +466,19 @@ static vec3 sphere_point(const struct sphere *s, struct dvec3 n, vec3 *ng, vec3 
     struct dvec3 p = d3_add(c, d3_scale(u, s->radius));
     double e = gamma_d(8) * (d3_sum(d3_abs(c)) + s->radius);
     *ng = d3_to_float(u);
-    return round_point(p, (struct dvec3){e, e, e}, 0x1p-23, p_error);
+    /* the sagitta: the offset origin (offset_ray_origin) is off the exact point by the point's
+     * error and by the rounding of its push, at most 1.5 ulps = 3 of each component's half-ulp
+     * share of ep, so up to |f| <= 4 |ep| sideways; there it lies outside the curved surface by
+     * up to |f|^2 / (2 r) beyond the push along the normal, and a ray spawned into the sphere
+     * could leave between the tangent plane and the surface (a sphere of radius 1e5 at 1e10).
+     * 8 |ep|^2 / r added to every component raises the push n . p_error by at least that.
+     * It is below r / 10 for a sphere at least 2^-20 of its centre's coordinates in radius
+     * (16 float steps across); a smaller one (scene.c warns) is capped at r, so that a tiny
+     * lamp's sampled points are not pushed away by more than its size. */
+    struct dvec3 ep = point_error_d(p, (struct dvec3){e, e, e}, 0x1p-23);
+    double sag = fmin(8.0 * d3_dot(ep, ep) / s->radius * (1.0 + 0x1p-20), (double)s->radius);
+    *p_error = (vec3){float_up(ep.x + sag), float_up(ep.y + sag), float_up(ep.z + sag)};
+    return d3_to_float(p);
 }
 
 struct surface shape_sphere_surface(const struct sphere *s, const struct ray *ray, float t_hit)

@@ -9,6 +9,9 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
            must be exactly 0.  --cells N cuts each face into an N x N grid whose faces share
            their edges' vertices; --strips N into N strips, as tests/extremes_test.c does, whose
            ends are T-junctions on the next face's edge.
+  spheres  a closed analytic sphere (camera inside, diffuse walls, white sky) of radius 1e-15..1e15
+           moved up to 2^20 radii from the origin in a random direction (down to the smallest
+           radius scene.c accepts there); every pixel must be exactly 0.
   quads    a parallelogram of albedo 0.8 under a sky of 2, sheared to 0.1..20 degrees, turned,
            scaled 1e-12..1e12 and moved up to 100 sizes, seen from either side: every pixel 1.6.
   offset   CornellBox-Original rounded to a grid of 1/G, moved by each --offsets value (camera
@@ -17,6 +20,7 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
 
   python3 scripts/probe_leaks.py cubes --cells 10 --cases 50 --seed 22
   python3 scripts/probe_leaks.py cubes --strips 30 --cases 50 --seed 21
+  python3 scripts/probe_leaks.py spheres --cases 50 --seed 3
   python3 scripts/probe_leaks.py quads --cases 100 --seed 2
   python3 scripts/probe_leaks.py offset --grid 32 --offsets 1e5,2e5,4e5
   python3 scripts/probe_leaks.py scales --obj ../shared/models/cornell-box/CornellBox-Sphere.obj
@@ -63,10 +67,13 @@ def rotation(axis, degrees):
     return rot
 
 
-def render(mcpt, scene, seed=0):
+def render(mcpt, scene, seed=0, refusal_ok=False):
+    """The EXR mcpt renders of scene; None where it refuses the scene (exit 2) and refusal_ok."""
     exr = scene + ".exr"
     r = subprocess.run([mcpt, scene, "-o", exr, "--threads", "2", "--seed", str(seed)],
                        capture_output=True, text=True)
+    if r.returncode == 2 and refusal_ok:
+        return None
     if r.returncode != 0:
         sys.exit("%s: %s" % (scene, r.stderr.strip()))
     return exr
@@ -141,6 +148,46 @@ def probe_cubes(args, tmp):
             leaks += 1
             print("leak: case %d, scale %.3g, brightest pixel %.3g" % (it, s, brightest))
     print("cubes: %d of %d let sky in" % (leaks, ran))
+    return leaks == 0
+
+
+def probe_spheres(args, tmp):
+    rng = random.Random(args.seed)
+    leaks = ran = 0
+    for it in range(args.cases):
+        r = 10 ** rng.uniform(-15, 15)
+        # half of them along an axis: there one coordinate's rounding is large and the others'
+        # small, the case where a point off sideways can sit outside the curved surface
+        d = normalize([rng.gauss(0, 1) for _ in range(3)])
+        if rng.random() < 0.5:
+            d = [0.0, 0.0, 0.0]
+            d[rng.randrange(3)] = rng.choice([-1.0, 1.0])
+        far = r * 2 ** rng.uniform(0, 20) if rng.random() < 0.8 else 0.0
+        c = [x * far for x in d]
+        if max(abs(x) for x in c) + r > 1e17:
+            continue
+        e = normalize([rng.gauss(0, 1) for _ in range(3)])
+        k = rng.uniform(0, 0.95)
+        eye = [c[i] + k * r * e[i] for i in range(3)]
+        at = [c[i] + r * rng.gauss(0, 1) for i in range(3)]
+        scene = os.path.join(tmp, "sphere.txt")
+        with open(scene, "w") as f:
+            f.write("camera eye=%s look-at=%s up=0.1,1,0.2 fov=%.3f\n" % (fmt(eye), fmt(at), rng.uniform(30, 150)))
+            f.write("film width=24 height=24\nrender spp=64 sampler=independent\n")
+            f.write("material name=m type=diffuse albedo=0.9,0.9,0.9\n")
+            f.write("sphere center=%s radius=%.9g material=m\n" % (fmt(c), r))
+            f.write("sky type=constant radiance=1,1,1\n")
+        out = render(args.mcpt, scene, refusal_ok=True)
+        if out is None:
+            continue  # refused: the eye rounds onto look-at
+        ran += 1
+        _, _, planes = read_exr(out)
+        brightest = max(planes["R"])
+        if brightest != 0:
+            leaks += 1
+            print("leak: case %d, radius %.3g at %.3g radii, brightest pixel %.3g"
+                  % (it, r, far / r, brightest))
+    print("spheres: %d of %d let sky in" % (leaks, ran))
     return leaks == 0
 
 
@@ -236,7 +283,7 @@ def probe_scales(args, tmp):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("mode", choices=["cubes", "quads", "offset", "scales"])
+    ap.add_argument("mode", choices=["cubes", "spheres", "quads", "offset", "scales"])
     ap.add_argument("--mcpt", default=os.path.join(ROOT, "mcpt"))
     ap.add_argument("--cases", type=int, default=50)
     ap.add_argument("--seed", type=int, default=1)
@@ -249,7 +296,7 @@ def main():
     ap.add_argument("--spp", type=int, default=4096)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        ok = {"cubes": probe_cubes, "quads": probe_quads, "offset": probe_offset,
+        ok = {"cubes": probe_cubes, "spheres": probe_spheres, "quads": probe_quads, "offset": probe_offset,
               "scales": probe_scales}[args.mode](args, tmp)
     sys.exit(0 if ok else 1)
 

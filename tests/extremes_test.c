@@ -657,6 +657,44 @@ Test(extremes, smooth_sphere_lets_no_sky_in, .timeout = TEST_TIMEOUT_S(60))
     test_remove_dir(dir);
 }
 
+/* A closed analytic sphere far from the origin, the camera inside (diffuse, albedo 0.5, white
+ * sky): every pixel exactly 0.  Its surface points are rounded to float at the centre's
+ * magnitude, and a point off sideways lies outside the curved surface beyond its push along the
+ * normal (the sagitta, shape.c sphere_point): before that was bounded, a sphere of radius 1 at
+ * x = 1e5 let sky into its mean at 1e-3, and radius 1e5 at 1e10 at 3e-4.  The last case is the
+ * smallest sphere scene.c accepts there (radius 2^-20 of the centre's coordinate). */
+Test(extremes, sphere_far_from_the_origin_lets_no_sky_in, .timeout = TEST_TIMEOUT_S(60))
+{
+    const double cases[][4] = {
+        {1e5, 0.0, 0.0, 1.0},
+        {0.0, 0.0, 3e5, 1.0},
+        {1e10, 0.0, 0.0, 1e5},
+        {2.5e4, -7e3, 3e3, 0.05},
+        {-3e-6, 1e-7, 0.0, 1e-11},
+        {4e14, 1e14, -2e14, 1e9},
+        {1e6, 2e5, -3e5, 0x1p-20 * 1e6},
+    };
+    char dir[64], path[400];
+    test_make_dir(dir, sizeof dir, "farsphere");
+    snprintf(path, sizeof path, "%s/scene.txt", dir);
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        const double *c = cases[k], r = cases[k][3];
+        FILE *f = fopen(path, "w");
+        cr_assert_not_null(f);
+        fprintf(f,
+                "camera eye=%.17g,%.17g,%.17g look-at=%.17g,%.17g,%.17g up=0,1,0 fov=100\n"
+                "film width=32 height=32\nrender spp=64 sampler=independent\n"
+                "material name=m type=diffuse albedo=0.5,0.5,0.5\n"
+                "sphere center=%.17g,%.17g,%.17g radius=%.17g material=m\n"
+                "sky type=constant radiance=1,1,1\n",
+                c[0] + 0.3 * r, c[1] + 0.1 * r, c[2] - 0.2 * r, c[0] + r, c[1] + 0.5 * r, c[2] - r,
+                c[0], c[1], c[2], r);
+        fclose(f);
+        assert_black(path);
+    }
+    test_remove_dir(dir);
+}
+
 /* Rays aimed exactly at the vertices and at points along every edge of a mesh hit it: from the
  * centre of the closed icosphere (every edge shared by two faces), and from above the sliver fan
  * (its interior edges).  Woop et al. 2013's test is watertight, so no such ray slips through. */

@@ -1104,6 +1104,25 @@ Test(scene, mesh_warnings_reach_the_scene)
     cr_assert_eq(sc.n_warnings, 0);
 }
 
+/* A sphere under 16 float steps across at its centre's magnitude (radius < 2^-20 of the largest
+ * coordinate) renders from outside but cannot keep a path inside it (shape.c, sphere_point):
+ * a warning at its radius, none at the bound itself. */
+Test(scene, tiny_sphere_far_out_warns)
+{
+    struct scene sc;
+    load_ok(CAM MAT "sphere center=1e7,0,0 radius=1 material=red\n"
+                    "sphere center=0,-1048576,0 radius=1 material=red\n",
+            &sc);
+    cr_assert_eq(sc.n_warnings, 1);
+    const char *want = "/scene.txt:3:30: warning: sphere of radius 1 at center 1e+07,0,0 is "
+                       "under 16 single-precision steps across (radius < 2^-20 of the centre's "
+                       "largest coordinate, 9.53674): it renders from outside, but a path inside "
+                       "it may escape";
+    const char *w = strstr(sc.warnings[0], want);
+    cr_assert(w && strlen(w) == strlen(want), "%s", sc.warnings[0]);
+    scene_free(&sc);
+}
+
 /* 200k named materials and 200k spheres naming them: the name lookups were linear scans
  * (2e10 string compares, minutes; issue 15 measured 17 s for 100k); hashed, this loads in well
  * under a second.  The timeout is the hang cap, far above the linear time even under the
