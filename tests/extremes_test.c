@@ -695,6 +695,45 @@ Test(extremes, sphere_far_from_the_origin_lets_no_sky_in, .timeout = TEST_TIMEOU
     test_remove_dir(dir);
 }
 
+/* The same class through glass: a dielectric sphere (IOR 1.5, no absorption) under a constant
+ * sky of 1 renders 1 in every pixel (each path ends in the sky with weight 1; to float
+ * rounding), also far from the origin.  Before the sagitta was bounded, refracted rays whose
+ * origins sat outside the surface lost their way: at x = 1e5 pixels fell to 0.84, at 3e5 to
+ * 0.50. */
+Test(extremes, glass_sphere_far_from_the_origin_keeps_its_energy, .timeout = TEST_TIMEOUT_S(60))
+{
+    const double cases[][4] = {{1e5, 0.0, 0.0, 1.0}, {0.0, -3e5, 0.0, 1.0}, {1e10, 0.0, 0.0, 1e5}};
+    char dir[64], path[400];
+    test_make_dir(dir, sizeof dir, "farglass");
+    snprintf(path, sizeof path, "%s/scene.txt", dir);
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        const double *c = cases[k], r = cases[k][3];
+        FILE *f = fopen(path, "w");
+        cr_assert_not_null(f);
+        fprintf(f,
+                "camera eye=%.17g,%.17g,%.17g look-at=%.17g,%.17g,%.17g up=0,1,0 fov=20\n"
+                "film width=32 height=32\nrender spp=64 sampler=independent max-depth=inf\n"
+                "material name=g type=dielectric ior=1.5\n"
+                "sphere center=%.17g,%.17g,%.17g radius=%.17g material=g\n"
+                "sky type=constant radiance=1,1,1\n",
+                c[0] + 0.2 * r, c[1] + 0.3 * r, c[2] + 4.0 * r, c[0], c[1], c[2], c[0], c[1], c[2],
+                r);
+        fclose(f);
+        struct film film;
+        struct trace_result res;
+        render_file(path, 1, &film, &res);
+        cr_assert_eq(res.n_nonfinite, 0);
+        for (size_t i = 0; i < (size_t)film.width * (size_t)film.height; i++)
+            for (int ch = 0; ch < 3; ch++) {
+                double m = film_mean(&film.pixels[i], ch);
+                cr_assert(fabs(m - 1.0) <= 1e-6, "centre %g,%g,%g: pixel %zu channel %d: %.9f",
+                          c[0], c[1], c[2], i, ch, m);
+            }
+        film_free(&film);
+    }
+    test_remove_dir(dir);
+}
+
 /* Rays aimed exactly at the vertices and at points along every edge of a mesh hit it: from the
  * centre of the closed icosphere (every edge shared by two faces), and from above the sliver fan
  * (its interior edges).  Woop et al. 2013's test is watertight, so no such ray slips through. */
