@@ -311,6 +311,23 @@ static bool is_behind(const struct material *m, struct dvec3 p0, struct dvec3 n,
     return n.x * r[0] + n.y * r[1] + n.z * r[2] <= 0.0;
 }
 
+/* Whether the point ref lies on or inside sphere s of material m that emits outwards only:
+ * then every segment from ref to a point of the sphere meets that point from inside, where
+ * mat_emission gives 0, so sampling one would be wasted; and where ref and the point lie on the
+ * sphere a few rounding errors apart, the rounded direction can point either way: a diffuse
+ * sphere of radius 1 at x = 1e5 sampled from inside counted a few such samples as lit, with
+ * the tiny distance's huge weight.  "On" is within ref's own error bound (in double). */
+static bool is_within(const struct material *m, const struct sphere *s, const struct surface *ref)
+{
+    if (m->two_sided_emission)
+        return false;
+    double d[3] = {(double)ref->p.x - s->center.x, (double)ref->p.y - s->center.y,
+                   (double)ref->p.z - s->center.z};
+    double e[3] = {ref->p_error.x, ref->p_error.y, ref->p_error.z};
+    double reach = (double)s->radius + sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
+    return d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= reach * reach * (1.0 + 0x1p-40);
+}
+
 bool light_sample(const struct light_table *lt, uint32_t light_idx, const struct surface *ref,
                   const vec3 *n_sky_p, const vec2 *u_p, struct light_sample *ls)
 {
@@ -356,10 +373,14 @@ bool light_sample(const struct light_table *lt, uint32_t light_idx, const struct
                                 : shape_quad_sample(q, ref, u, &ss);
         break;
     }
-    case LIGHT_SPHERE:
-        ok = shape_sphere_sample(&scene->spheres[l->prim_idx], ref, u, &ss);
-        mat_idx = scene->spheres[l->prim_idx].mat_idx;
+    case LIGHT_SPHERE: {
+        const struct sphere *s = &scene->spheres[l->prim_idx];
+        mat_idx = s->mat_idx;
+        if (is_within(&scene->materials[mat_idx], s, ref))
+            return false;
+        ok = shape_sphere_sample(s, ref, u, &ss);
         break;
+    }
     default:
         return false;
     }
@@ -398,8 +419,11 @@ float light_pdf(const struct light_table *lt, uint32_t light_idx, const struct s
         return lt->by_solid_angle ? shape_quad_pdf_solid_angle(q, ref, on, wi)
                                   : shape_quad_pdf(q, ref, on, wi);
     }
-    case LIGHT_SPHERE:
-        return shape_sphere_pdf(&scene->spheres[l->prim_idx], ref, on, wi);
+    case LIGHT_SPHERE: {
+        const struct sphere *s = &scene->spheres[l->prim_idx];
+        return is_within(&scene->materials[s->mat_idx], s, ref) ? 0.0f
+                                                                : shape_sphere_pdf(s, ref, on, wi);
+    }
     case LIGHT_POINT:
         break;
     }

@@ -695,6 +695,37 @@ Test(extremes, sphere_far_from_the_origin_lets_no_sky_in, .timeout = TEST_TIMEOU
     test_remove_dir(dir);
 }
 
+/* A sphere that emits outwards only (diffuse, albedo 0.5, emission 1), the camera inside, no
+ * sky: no point on or inside it receives its light, so every pixel is exactly 0, also far
+ * from the origin.  Before light.c's is_within, light samples of the sphere from a point on its
+ * inner surface a few rounding errors away counted as lit (image mean 1e-3 at x = 1e5 beside
+ * the paths that escaped; 1e-4 once they no longer did). */
+Test(extremes, emitting_sphere_is_dark_inside, .timeout = TEST_TIMEOUT_S(60))
+{
+    const double cases[][4] = {{0.0, 0.0, 0.0, 1.0},
+                               {1e5, 0.0, 0.0, 1.0},
+                               {0.0, 3e5, 0.0, 1.0},
+                               {1e10, 0.0, 0.0, 1e5}};
+    char dir[64], path[400];
+    test_make_dir(dir, sizeof dir, "lampsphere");
+    snprintf(path, sizeof path, "%s/scene.txt", dir);
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        const double *c = cases[k], r = cases[k][3];
+        FILE *f = fopen(path, "w");
+        cr_assert_not_null(f);
+        fprintf(f,
+                "camera eye=%.17g,%.17g,%.17g look-at=%.17g,%.17g,%.17g up=0,1,0 fov=100\n"
+                "film width=32 height=32\nrender spp=64 sampler=independent max-depth=inf\n"
+                "material name=m type=diffuse albedo=0.5,0.5,0.5 emission=1,1,1\n"
+                "sphere center=%.17g,%.17g,%.17g radius=%.17g material=m\n",
+                c[0] + 0.3 * r, c[1] + 0.1 * r, c[2] - 0.2 * r, c[0] + r, c[1] + 0.5 * r, c[2] - r,
+                c[0], c[1], c[2], r);
+        fclose(f);
+        assert_black(path);
+    }
+    test_remove_dir(dir);
+}
+
 /* The same class through glass: a dielectric sphere (IOR 1.5, no absorption) under a constant
  * sky of 1 renders 1 in every pixel (each path ends in the sky with weight 1; to float
  * rounding), also far from the origin.  Before the sagitta was bounded, refracted rays whose
