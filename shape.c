@@ -476,7 +476,7 @@ static vec3 sphere_point(const struct sphere *s, struct dvec3 n, vec3 *ng, vec3 
      * (16 float steps across); a smaller one (scene.c warns) is capped at r, so that a tiny
      * lamp's sampled points are not pushed away by more than its size. */
     struct dvec3 ep = point_error_d(p, (struct dvec3){e, e, e}, 0x1p-23);
-    double sag = fmin(8.0 * d3_dot(ep, ep) / s->radius * (1.0 + 0x1p-20), (double)s->radius);
+    double sag = fmin(d3_dot(ep, ep) * (8.0 * (1.0 + 0x1p-20) / s->radius), (double)s->radius);
     *p_error = (vec3){float_up(ep.x + sag), float_up(ep.y + sag), float_up(ep.z + sag)};
     return d3_to_float(p);
 }
