@@ -183,6 +183,62 @@ Test(shape, sphere_offset_no_self_hit)
     }
 }
 
+/* pbrt-v4's sphere Reintersect test (tests/shapes.cpp), both ways and far from the origin:
+ * spheres of radius 10^-8 .. 10^8 moved up to 2^20 radii (half of them along an axis, where one
+ * coordinate's rounding is large and the others' small), a hit point from a random ray, then
+ * rays spawned from it (offset_ray_origin) in random directions: one leaving outwards never
+ * meets the sphere again, and one leaving inwards always meets it (its origin is inside: no
+ * path escapes a closed sphere).  Before the sagitta (shape.c, sphere_point) an inward ray from a
+ * point off sideways could start outside the curved surface and miss it. */
+Test(shape, sphere_reintersect_both_ways)
+{
+    struct rng rng = {7};
+    int n_in = 0, n_out = 0;
+    for (int k = 0; k < 200; k++) {
+        float r = powf(10.0f, rng_range(&rng, -8.0f, 8.0f));
+        vec3 axis = rng_dir(&rng);
+        if (k % 2) {
+            int a = (int)(rng_float(&rng) * 3.0f);
+            axis = v3(a == 0, a == 1, a == 2);
+        }
+        struct sphere s = {.center = v3_scale(axis, r * exp2f(rng_range(&rng, 0.0f, 20.0f))),
+                           .radius = r};
+        for (int i = 0; i < 50; i++) {
+            vec3 dir = rng_dir(&rng);
+            struct ray in = mkray(v3_add(s.center, v3_scale(dir, 3.0f * r)),
+                                  v3_neg(v3_normalize(v3_add(dir, v3_scale(rng_dir(&rng), 0.3f)))));
+            float t;
+            if (!shape_sphere_intersect(&s, &in, &t))
+                continue;
+            struct surface sf = shape_sphere_surface(&s, &in, t);
+            for (int j = 0; j < 20; j++) {
+                vec3 w = rng_dir(&rng);
+                float c = v3_dot(w, sf.ng);
+                if (c == 0.0f)
+                    continue;
+                struct ray out = mkray(offset_ray_origin(sf.p, sf.p_error, sf.ng, w), w);
+                float t2;
+                bool hit = shape_sphere_intersect(&s, &out, &t2);
+                if (c > 0.0f) {
+                    n_out++;
+                    cr_assert(!hit,
+                              "radius %g at %g,%g,%g: an outward ray meets the sphere at "
+                              "t = %g",
+                              r, s.center.x, s.center.y, s.center.z, t2);
+                } else {
+                    n_in++;
+                    cr_assert(hit,
+                              "radius %g at %g,%g,%g: an inward ray (cos %g) leaves the "
+                              "sphere",
+                              r, s.center.x, s.center.y, s.center.z, c);
+                }
+            }
+        }
+    }
+    cr_assert_gt(n_in, 50000);
+    cr_assert_gt(n_out, 50000);
+}
+
 /* A triangle's surface at barycentrics (b0, b1, b2): p lies on the triangle's plane within its
  * error bound projected on the normal (PBRT 4e, ch. 6, "Robust Spawned Ray Origins"), the bound
  * is the rounding to float, a few 2^-24 |p|, not gamma(7) sum |b_i p_i| (docs/theory.md,
