@@ -12,6 +12,10 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
   spheres  a closed analytic sphere (camera inside, diffuse walls, white sky) of radius 1e-15..1e15
            moved up to 2^20 radii from the origin in a random direction (down to the smallest
            radius scene.c accepts there); every pixel must be exactly 0.
+  planes   a closed box of six infinite planes (camera inside, white sky), turned (half of them
+           with one face normal on the x axis), scaled 1e-10..1e10 and moved 10^(D-1)..10^D box
+           sizes (--decade D) along some axes; every pixel must be exactly 0.  Planes have no
+           edges to keep their points from (docs/theory.md, "What no scheme can promise").
   quads    a parallelogram of albedo 0.8 under a sky of 2, sheared to 0.1..20 degrees, turned,
            scaled 1e-12..1e12 and moved up to 100 sizes, seen from either side: every pixel 1.6.
   offset   CornellBox-Original rounded to a grid of 1/G, moved by each --offsets value (camera
@@ -21,6 +25,7 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
   python3 scripts/probe_leaks.py cubes --cells 10 --cases 50 --seed 22
   python3 scripts/probe_leaks.py cubes --strips 30 --cases 50 --seed 21
   python3 scripts/probe_leaks.py spheres --cases 50 --seed 3
+  python3 scripts/probe_leaks.py planes --cases 30 --decade 5 --seed 1
   python3 scripts/probe_leaks.py quads --cases 100 --seed 2
   python3 scripts/probe_leaks.py offset --grid 32 --offsets 1e5,2e5,4e5
   python3 scripts/probe_leaks.py scales --obj ../shared/models/cornell-box/CornellBox-Sphere.obj
@@ -191,6 +196,44 @@ def probe_spheres(args, tmp):
     return leaks == 0
 
 
+def probe_planes(args, tmp):
+    rng = random.Random(args.seed)
+    leaks = ran = 0
+    for it in range(args.cases):
+        s = 10 ** rng.uniform(-10, 10)
+        off = [rng.choice([0, 1, -1]) * s * 10 ** rng.uniform(args.decade - 1, args.decade)
+               for _ in range(3)]
+        a = normalize([rng.gauss(0, 1) for _ in range(3)])
+        if rng.random() < 0.5:
+            a = [1.0, 0.0, 0.0]
+        b = normalize(cross(a, [rng.gauss(0, 1) for _ in range(3)]))
+        c = cross(a, b)
+        eye = [off[i] + s * (0.3 * a[i] + 0.1 * b[i] - 0.2 * c[i]) for i in range(3)]
+        at = [off[i] + s * (0.5 * a[i] - 0.7 * b[i] + 0.4 * c[i]) for i in range(3)]
+        scene = os.path.join(tmp, "planes.txt")
+        with open(scene, "w") as f:
+            f.write("camera eye=%s look-at=%s up=%s fov=120\n" % (fmt(eye), fmt(at), fmt(b)))
+            f.write("film width=24 height=24\nrender spp=64 sampler=independent\n")
+            f.write("material name=m type=diffuse albedo=0.9,0.9,0.9\n")
+            for ax in (a, b, c):
+                for sg in (1, -1):
+                    p = [off[i] + sg * s * ax[i] for i in range(3)]
+                    f.write("plane point=%s normal=%s material=m\n" % (fmt(p), fmt([sg * x for x in ax])))
+            f.write("sky type=constant radiance=1,1,1\n")
+        out = render(args.mcpt, scene, refusal_ok=True)
+        if out is None:
+            continue  # refused: the eye rounds onto look-at
+        ran += 1
+        _, _, planes = read_exr(out)
+        brightest = max(planes["R"])
+        if brightest != 0:
+            leaks += 1
+            print("leak: case %d, size %.3g moved %.3g sizes, brightest pixel %.3g"
+                  % (it, s, max(abs(x) for x in off) / s, brightest))
+    print("planes: %d of %d let sky in" % (leaks, ran))
+    return leaks == 0
+
+
 def probe_quads(args, tmp):
     rng = random.Random(args.seed)
     bad = ran = 0
@@ -283,20 +326,22 @@ def probe_scales(args, tmp):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("mode", choices=["cubes", "spheres", "quads", "offset", "scales"])
+    ap.add_argument("mode", choices=["cubes", "spheres", "planes", "quads", "offset", "scales"])
     ap.add_argument("--mcpt", default=os.path.join(ROOT, "mcpt"))
     ap.add_argument("--cases", type=int, default=50)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--cells", type=int, default=3, help="cubes: grid cells per face side")
     ap.add_argument("--strips", type=int, default=0, help="cubes: strips per face instead")
     ap.add_argument("--no-turn", dest="turn", action="store_false", help="cubes: no rotation")
+    ap.add_argument("--decade", type=int, default=4, help="planes: moved 10^(D-1)..10^D sizes")
     ap.add_argument("--grid", type=int, default=32, help="offset: vertices on the grid of 1/G")
     ap.add_argument("--offsets", default="1e5,2e5,4e5")
     ap.add_argument("--obj", default=os.path.join(ROOT, "scenes", "models", "CornellBox-Original.obj"))
     ap.add_argument("--spp", type=int, default=4096)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        ok = {"cubes": probe_cubes, "spheres": probe_spheres, "quads": probe_quads, "offset": probe_offset,
+        ok = {"cubes": probe_cubes, "spheres": probe_spheres, "planes": probe_planes,
+              "quads": probe_quads, "offset": probe_offset,
               "scales": probe_scales}[args.mode](args, tmp)
     sys.exit(0 if ok else 1)
 
