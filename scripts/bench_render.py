@@ -10,7 +10,10 @@ after one warm-up each:
     and writing the image are left out;
   - error: the noise-corrected MSE against the stored reference bench/ref/SCENE.exr (`mcpt
     compare`; round k renders with seed k, so the MSE is a mean over seeds, +- its standard error);
-  - efficiency = 1 / (MSE * render CPU seconds), the figure of merit of equal-time comparisons;
+  - efficiency = 1 / (MSE * render CPU seconds), the figure of merit of equal-time comparisons:
+    the mean MSE over the seeds times the median seconds (a median of the per-round products
+    would mix the seeds' MSE, which scatters by 15%, into the time: two binaries with the same
+    pixels read efficiency x0.96 where their speed was x1.008);
   - the render's rays/s as a fraction of raybench's on the same scene's own rays: bench/raydump
     writes a 4-spp render's rays (camera and bounce rays; shadow rays) and bench/raybench traces
     them, once per round (single rays, thread CPU time); the fraction needs a scene of triangles
@@ -208,9 +211,9 @@ def main():
                  "mrays_s": statistics.median(msps) * f["rays_per_sample"]}
             if f["mse"]:
                 mse, mse_se = mean_se(f["mse"])
-                eff = [1.0 / (m * t) for m, t in zip(f["mse"], secs) if m > 0]
+                t = statistics.median(secs)
                 r.update(mse=mse, mse_se=mse_se,
-                         efficiency=statistics.median(eff) if eff else float("nan"))
+                         efficiency=1.0 / (mse * t) if mse > 0 else float("nan"))
             if kernel:
                 r["kernel_mrays_s"] = statistics.median(kernel)
                 r["render_over_kernel"] = statistics.median(
