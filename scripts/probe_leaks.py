@@ -114,6 +114,24 @@ def cube_obj(path, cells, strips, inward):
         f.write("\n".join(out_v + out_f) + "\n")
 
 
+def closed_scene(path, camera, shapes):
+    """A camera inside a closed surface of albedo 0.9 (material m) under a constant white sky:
+    camera is the statement's parameters, shapes its statements."""
+    with open(path, "w") as f:
+        f.write("camera %s\n" % camera)
+        f.write("film width=24 height=24\nrender spp=64 sampler=independent\n")
+        f.write("material name=m type=diffuse albedo=0.9,0.9,0.9\n")
+        f.write("".join(line + "\n" for line in shapes))
+        f.write("sky type=constant radiance=1,1,1\n")
+
+
+def brightest(args, scene, refusal_ok=False):
+    """The brightest pixel mcpt renders of scene (0 when no sky gets in); None where it refuses
+    the scene and refusal_ok (the eye rounds onto look-at)."""
+    out = render(args.mcpt, scene, refusal_ok=refusal_ok)
+    return None if out is None else max(read_exr(out)[2]["R"])
+
+
 def probe_cubes(args, tmp):
     rng = random.Random(args.seed)
     leaks = ran = 0
@@ -139,19 +157,14 @@ def probe_cubes(args, tmp):
         if max(abs(a - b) for a, b in zip(eye, at)) < 1e-3 * s:
             continue
         scene = os.path.join(tmp, "cube.txt")
-        with open(scene, "w") as f:
-            f.write("camera eye=%s look-at=%s up=0.1,1,0.2 fov=%.3f\n" % (fmt(eye), fmt(at), rng.uniform(30, 150)))
-            f.write("film width=24 height=24\nrender spp=64 sampler=independent\n")
-            f.write("material name=m type=diffuse albedo=0.9,0.9,0.9\n")
-            f.write("mesh file=%s material=m rotate=%s,%.9g scale=%.9g translate=%s\n"
-                    % (obj, fmt(axis), angle, s, fmt(t)))
-            f.write("sky type=constant radiance=1,1,1\n")
+        closed_scene(scene, "eye=%s look-at=%s up=0.1,1,0.2 fov=%.3f" % (fmt(eye), fmt(at), rng.uniform(30, 150)),
+                     ["mesh file=%s material=m rotate=%s,%.9g scale=%.9g translate=%s"
+                      % (obj, fmt(axis), angle, s, fmt(t))])
         ran += 1
-        _, _, planes = read_exr(render(args.mcpt, scene))
-        brightest = max(planes["R"])
-        if brightest != 0:
+        b = brightest(args, scene)
+        if b != 0:
             leaks += 1
-            print("leak: case %d, scale %.3g, brightest pixel %.3g" % (it, s, brightest))
+            print("leak: case %d, scale %.3g, brightest pixel %.3g" % (it, s, b))
     print("cubes: %d of %d let sky in" % (leaks, ran))
     return leaks == 0
 
@@ -176,22 +189,16 @@ def probe_spheres(args, tmp):
         eye = [c[i] + k * r * e[i] for i in range(3)]
         at = [c[i] + r * rng.gauss(0, 1) for i in range(3)]
         scene = os.path.join(tmp, "sphere.txt")
-        with open(scene, "w") as f:
-            f.write("camera eye=%s look-at=%s up=0.1,1,0.2 fov=%.3f\n" % (fmt(eye), fmt(at), rng.uniform(30, 150)))
-            f.write("film width=24 height=24\nrender spp=64 sampler=independent\n")
-            f.write("material name=m type=diffuse albedo=0.9,0.9,0.9\n")
-            f.write("sphere center=%s radius=%.9g material=m\n" % (fmt(c), r))
-            f.write("sky type=constant radiance=1,1,1\n")
-        out = render(args.mcpt, scene, refusal_ok=True)
-        if out is None:
-            continue  # refused: the eye rounds onto look-at
+        closed_scene(scene, "eye=%s look-at=%s up=0.1,1,0.2 fov=%.3f" % (fmt(eye), fmt(at), rng.uniform(30, 150)),
+                     ["sphere center=%s radius=%.9g material=m" % (fmt(c), r)])
+        b = brightest(args, scene, refusal_ok=True)
+        if b is None:
+            continue
         ran += 1
-        _, _, planes = read_exr(out)
-        brightest = max(planes["R"])
-        if brightest != 0:
+        if b != 0:
             leaks += 1
             print("leak: case %d, radius %.3g at %.3g radii, brightest pixel %.3g"
-                  % (it, r, far / r, brightest))
+                  % (it, r, far / r, b))
     print("spheres: %d of %d let sky in" % (leaks, ran))
     return leaks == 0
 
@@ -211,25 +218,18 @@ def probe_planes(args, tmp):
         eye = [off[i] + s * (0.3 * a[i] + 0.1 * b[i] - 0.2 * c[i]) for i in range(3)]
         at = [off[i] + s * (0.5 * a[i] - 0.7 * b[i] + 0.4 * c[i]) for i in range(3)]
         scene = os.path.join(tmp, "planes.txt")
-        with open(scene, "w") as f:
-            f.write("camera eye=%s look-at=%s up=%s fov=120\n" % (fmt(eye), fmt(at), fmt(b)))
-            f.write("film width=24 height=24\nrender spp=64 sampler=independent\n")
-            f.write("material name=m type=diffuse albedo=0.9,0.9,0.9\n")
-            for ax in (a, b, c):
-                for sg in (1, -1):
-                    p = [off[i] + sg * s * ax[i] for i in range(3)]
-                    f.write("plane point=%s normal=%s material=m\n" % (fmt(p), fmt([sg * x for x in ax])))
-            f.write("sky type=constant radiance=1,1,1\n")
-        out = render(args.mcpt, scene, refusal_ok=True)
-        if out is None:
-            continue  # refused: the eye rounds onto look-at
+        closed_scene(scene, "eye=%s look-at=%s up=%s fov=120" % (fmt(eye), fmt(at), fmt(b)),
+                     ["plane point=%s normal=%s material=m"
+                      % (fmt([off[i] + sg * s * ax[i] for i in range(3)]), fmt([sg * x for x in ax]))
+                      for ax in (a, b, c) for sg in (1, -1)])
+        bright = brightest(args, scene, refusal_ok=True)
+        if bright is None:
+            continue
         ran += 1
-        _, _, planes = read_exr(out)
-        brightest = max(planes["R"])
-        if brightest != 0:
+        if bright != 0:
             leaks += 1
             print("leak: case %d, size %.3g moved %.3g sizes, brightest pixel %.3g"
-                  % (it, s, max(abs(x) for x in off) / s, brightest))
+                  % (it, s, max(abs(x) for x in off) / s, bright))
     print("planes: %d of %d let sky in" % (leaks, ran))
     return leaks == 0
 

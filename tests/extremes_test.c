@@ -657,12 +657,36 @@ Test(extremes, smooth_sphere_lets_no_sky_in, .timeout = TEST_TIMEOUT_S(60))
     test_remove_dir(dir);
 }
 
+/* One sphere, centre c[0..2] and radius c[3], of material m (`material`: its parameters), under
+ * `sky` (a statement, or ""), with the camera inside it looking at its wall, or 4 radii out
+ * looking at its centre; renders of 32 x 32 at 64 independent samples, `render` added. */
+static void write_one_sphere(const char *path, const double c[4], bool inside, const char *render,
+                             const char *material, const char *sky)
+{
+    double r = c[3], eye[3], at[3];
+    const double eye_in[3] = {0.3, 0.1, -0.2}, at_in[3] = {1.0, 0.5, -1.0},
+                 eye_out[3] = {0.2, 0.3, 4.0};
+    for (int i = 0; i < 3; i++) {
+        eye[i] = c[i] + r * (inside ? eye_in[i] : eye_out[i]);
+        at[i] = inside ? c[i] + r * at_in[i] : c[i];
+    }
+    FILE *f = fopen(path, "w");
+    cr_assert_not_null(f);
+    fprintf(f,
+            "camera eye=%.17g,%.17g,%.17g look-at=%.17g,%.17g,%.17g up=0,1,0 fov=%d\n"
+            "film width=32 height=32\nrender spp=64 sampler=independent %s\n"
+            "material name=m %s\nsphere center=%.17g,%.17g,%.17g radius=%.17g material=m\n%s\n",
+            eye[0], eye[1], eye[2], at[0], at[1], at[2], inside ? 100 : 20, render, material, c[0],
+            c[1], c[2], r, sky);
+    fclose(f);
+}
+
 /* A closed analytic sphere far from the origin, the camera inside (diffuse, albedo 0.5, white
  * sky): every pixel exactly 0.  Its surface points are rounded to float at the centre's
  * magnitude, and a point off sideways lies outside the curved surface beyond its push along the
  * normal (the sagitta, shape.c sphere_point): before that was bounded, a sphere of radius 1 at
- * x = 1e5 let sky into its mean at 1e-3, and radius 1e5 at 1e10 at 3e-4.  The last case is the
- * smallest sphere scene.c accepts there (radius 2^-20 of the centre's coordinate). */
+ * x = 1e5 let sky into its mean at 1e-3, and radius 1e5 at 1e10 at 1.3e-3.  The last case is the
+ * smallest radius scene.c accepts there without a warning (2^-20 of the centre's coordinate). */
 Test(extremes, sphere_far_from_the_origin_lets_no_sky_in, .timeout = TEST_TIMEOUT_S(60))
 {
     const double cases[][4] = {
@@ -678,18 +702,8 @@ Test(extremes, sphere_far_from_the_origin_lets_no_sky_in, .timeout = TEST_TIMEOU
     test_make_dir(dir, sizeof dir, "farsphere");
     snprintf(path, sizeof path, "%s/scene.txt", dir);
     for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
-        const double *c = cases[k], r = cases[k][3];
-        FILE *f = fopen(path, "w");
-        cr_assert_not_null(f);
-        fprintf(f,
-                "camera eye=%.17g,%.17g,%.17g look-at=%.17g,%.17g,%.17g up=0,1,0 fov=100\n"
-                "film width=32 height=32\nrender spp=64 sampler=independent\n"
-                "material name=m type=diffuse albedo=0.5,0.5,0.5\n"
-                "sphere center=%.17g,%.17g,%.17g radius=%.17g material=m\n"
-                "sky type=constant radiance=1,1,1\n",
-                c[0] + 0.3 * r, c[1] + 0.1 * r, c[2] - 0.2 * r, c[0] + r, c[1] + 0.5 * r, c[2] - r,
-                c[0], c[1], c[2], r);
-        fclose(f);
+        write_one_sphere(path, cases[k], true, "", "type=diffuse albedo=0.5,0.5,0.5",
+                         "sky type=constant radiance=1,1,1");
         assert_black(path);
     }
     test_remove_dir(dir);
@@ -710,17 +724,8 @@ Test(extremes, emitting_sphere_is_dark_inside, .timeout = TEST_TIMEOUT_S(60))
     test_make_dir(dir, sizeof dir, "lampsphere");
     snprintf(path, sizeof path, "%s/scene.txt", dir);
     for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
-        const double *c = cases[k], r = cases[k][3];
-        FILE *f = fopen(path, "w");
-        cr_assert_not_null(f);
-        fprintf(f,
-                "camera eye=%.17g,%.17g,%.17g look-at=%.17g,%.17g,%.17g up=0,1,0 fov=100\n"
-                "film width=32 height=32\nrender spp=64 sampler=independent max-depth=inf\n"
-                "material name=m type=diffuse albedo=0.5,0.5,0.5 emission=1,1,1\n"
-                "sphere center=%.17g,%.17g,%.17g radius=%.17g material=m\n",
-                c[0] + 0.3 * r, c[1] + 0.1 * r, c[2] - 0.2 * r, c[0] + r, c[1] + 0.5 * r, c[2] - r,
-                c[0], c[1], c[2], r);
-        fclose(f);
+        write_one_sphere(path, cases[k], true, "max-depth=inf",
+                         "type=diffuse albedo=0.5,0.5,0.5 emission=1,1,1", "");
         assert_black(path);
     }
     test_remove_dir(dir);
@@ -738,18 +743,9 @@ Test(extremes, glass_sphere_far_from_the_origin_keeps_its_energy, .timeout = TES
     test_make_dir(dir, sizeof dir, "farglass");
     snprintf(path, sizeof path, "%s/scene.txt", dir);
     for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
-        const double *c = cases[k], r = cases[k][3];
-        FILE *f = fopen(path, "w");
-        cr_assert_not_null(f);
-        fprintf(f,
-                "camera eye=%.17g,%.17g,%.17g look-at=%.17g,%.17g,%.17g up=0,1,0 fov=20\n"
-                "film width=32 height=32\nrender spp=64 sampler=independent max-depth=inf\n"
-                "material name=g type=dielectric ior=1.5\n"
-                "sphere center=%.17g,%.17g,%.17g radius=%.17g material=g\n"
-                "sky type=constant radiance=1,1,1\n",
-                c[0] + 0.2 * r, c[1] + 0.3 * r, c[2] + 4.0 * r, c[0], c[1], c[2], c[0], c[1], c[2],
-                r);
-        fclose(f);
+        const double *c = cases[k];
+        write_one_sphere(path, c, false, "max-depth=inf", "type=dielectric ior=1.5",
+                         "sky type=constant radiance=1,1,1");
         struct film film;
         struct trace_result res;
         render_file(path, 1, &film, &res);
