@@ -378,7 +378,7 @@ bool light_sample(const struct light_table *lt, uint32_t light_idx, const struct
         mat_idx = s->mat_idx;
         if (is_within(&scene->materials[mat_idx], s, ref))
             return false;
-        ok = shape_sphere_sample(s, ref, u, &ss);
+        ok = shape_sphere_sample(s, ref, n_sky, u, &ss);
         break;
     }
     default:
@@ -421,8 +421,9 @@ float light_pdf(const struct light_table *lt, uint32_t light_idx, const struct s
     }
     case LIGHT_SPHERE: {
         const struct sphere *s = &scene->spheres[l->prim_idx];
-        return is_within(&scene->materials[s->mat_idx], s, ref) ? 0.0f
-                                                                : shape_sphere_pdf(s, ref, on, wi);
+        return is_within(&scene->materials[s->mat_idx], s, ref)
+                   ? 0.0f
+                   : shape_sphere_pdf(s, ref, n_sky, wi);
     }
     case LIGHT_POINT:
         break;

@@ -48,10 +48,10 @@ struct light_sample {
     vec3 n;           /* its unit geometric normal; 0 for a point light (no offset at that end) */
 };
 
-/* Samples light light_idx from the surface point ref with uniforms u: triangles, quads and
- * spheres seen from inside uniformly by area, spheres seen from outside uniformly in their cone
- * of directions (shape.h), point lights by their one direction, the sky cosine-weighted about
- * n_sky (the shading normal turned to the side being lit).  False when the sample carries no
+/* Samples light light_idx from the surface point ref with uniforms u: triangles and quads
+ * uniformly by area, spheres seen from outside uniformly in their cone of directions and from
+ * inside cosine-weighted about n_sky (shape.h), point lights by their one direction, the sky
+ * cosine-weighted about n_sky (the shading normal turned to the side being lit).  False when the sample carries no
  * light (back of a one-sided emitter, degenerate geometry); *ls is then unspecified.  n_sky and
  * u come by pointer: by value, gcc assembled them in memory a float at a time and read them back
  * 8 bytes at once, which the CPU cannot forward from the narrower stores (docs/performance.md,

@@ -495,12 +495,6 @@ struct surface shape_sphere_surface(const struct sphere *s, const struct ray *ra
     return sf;
 }
 
-/* Uniform area sampling of the whole sphere: pdf_area = 1 / (4 pi r^2). */
-static double sphere_pdf_area(const struct sphere *s)
-{
-    return 1.0 / (4.0 * MCPT_PI * (double)s->radius * s->radius);
-}
-
 /* The cone of directions in which ref sees sphere s, from ref->p offset towards the centre, so
  * that a point on the sphere itself counts as inside (PBRT 4e, ch. 6, "Spheres"): sin^2
  * theta_max = r^2 / dist^2.  False when that point is inside; *wc = centre - the point. */
@@ -518,16 +512,41 @@ static bool sphere_cone(const struct sphere *s, const struct surface *ref, vec3 
     return true;
 }
 
-bool shape_sphere_sample(const struct sphere *s, const struct surface *ref, vec2 u,
+/* From inside, every direction meets the sphere, so it is sampled as the sky is: wi
+ * cosine-weighted about n_cos (the side of ref being lit), pdf_sa = cos theta / pi (PBRT 4e,
+ * ch. A.5, "Cosine-Weighted Hemisphere Sampling"), its point where the ray spawned along wi
+ * meets the sphere, found as a BSDF ray along wi finds it.  No distance or cosine at the sampled point enters the estimate.  PBRT 4e
+ * samples by area here (ch. 6, "Spheres"), dividing by the cosine at the sampled point; for a
+ * ref on the sphere, that cosine is about dist / 2r, and ref's own rounding (|p_error|) moves it
+ * by |p_error| / dist, so it is noise within sqrt(2 r |p_error|) of ref: a two-sided lamp of
+ * radius 1 at x = 1e5, seen from inside, gave pixels of 1e3 in an image of 2. */
+static bool sphere_sample_inside(const struct sphere *s, const struct surface *ref, vec3 n_cos,
+                                 vec2 u, struct shape_sample *ss)
+{
+    vec3 t, b;
+    v3_basis(n_cos, &t, &b);
+    vec3 wi = v3_normalize(v3_from_local(sample_cosine_hemisphere(u), t, b, n_cos));
+    struct ray ray = {.o = offset_ray_origin(ref->p, ref->p_error, ref->ng, wi),
+                      .t_min = 0.0f,
+                      .d = wi,
+                      .t_max = INFINITY};
+    float t_hit;
+    if (!shape_sphere_intersect(s, &ray, &t_hit))
+        return false;
+    struct dvec3 p = d3_add(d3(ray.o), d3_scale(d3(wi), t_hit));
+    ss->p = sphere_point(s, d3_sub(p, d3(s->center)), &ss->n, &ss->p_error);
+    ss->wi = wi;
+    ss->pdf_sa = max_f(0.0f, v3_dot(wi, n_cos)) * MCPT_INV_PI;
+    return ss->pdf_sa > 0.0f;
+}
+
+bool shape_sphere_sample(const struct sphere *s, const struct surface *ref, vec3 n_cos, vec2 u,
                          struct shape_sample *ss)
 {
-    vec3 wc, p_error, n;
+    vec3 wc;
     struct sample_cone cone;
-    if (!sphere_cone(s, ref, &wc, &cone)) {
-        /* inside: uniform by area */
-        vec3 p = sphere_point(s, d3(sample_uniform_sphere(u)), &n, &p_error);
-        return sample_by_area(p, p_error, n, sphere_pdf_area(s), ref, ss);
-    }
+    if (!sphere_cone(s, ref, &wc, &cone))
+        return sphere_sample_inside(s, ref, n_cos, u, ss);
     /* outside: a direction uniform in the cone (sample.c), pdf_sa = 1 / (2 pi (1 - cos
      * theta_max)), then the angle alpha, seen from the centre, between the reference point and
      * the point where that direction first meets the sphere (PBRT 4e, ch. 6, "Spheres") */
@@ -555,14 +574,13 @@ bool shape_sphere_sample(const struct sphere *s, const struct surface *ref, vec2
     return ss->pdf_sa > 0.0f;
 }
 
-float shape_sphere_pdf(const struct sphere *s, const struct surface *ref, const struct surface *on,
-                       vec3 wi)
+float shape_sphere_pdf(const struct sphere *s, const struct surface *ref, vec3 n_cos, vec3 wi)
 {
     vec3 wc;
     struct sample_cone cone;
     if (sphere_cone(s, ref, &wc, &cone))
         return pdf_uniform_cone(&cone);
-    return pdf_by_area(sphere_pdf_area(s), ref, on, wi);
+    return max_f(0.0f, v3_dot(wi, n_cos)) * MCPT_INV_PI; /* inside: sphere_sample_inside */
 }
 
 /* ---- planes: a quad's and an infinite plane's intersection ---- */

@@ -111,7 +111,11 @@ bool shape_triangle_plane_sample(const struct triangle_plane *tp, const struct s
                                  struct shape_sample *ss);
 bool shape_quad_sample(const struct quad *q, const struct surface *ref, vec2 u,
                        struct shape_sample *ss);
-bool shape_sphere_sample(const struct sphere *s, const struct surface *ref, vec2 u,
+/* A sphere from outside by its cone of directions (PBRT 4e, ch. 6, "Spheres"); from inside (ref
+ * on the sphere counts as inside) cosine-weighted about n_cos, the unit normal on the side of
+ * ref being lit (light.c passes the vertex's sky normal), the point where that direction meets
+ * the sphere. */
+bool shape_sphere_sample(const struct sphere *s, const struct surface *ref, vec3 n_cos, vec2 u,
                          struct shape_sample *ss);
 
 /* The solid-angle density with which shape_*_sample picks the unit direction wi from ref, given
@@ -123,8 +127,8 @@ float shape_triangle_plane_pdf(const struct triangle_plane *tp, const struct sur
                                const struct surface *on, vec3 wi);
 float shape_quad_pdf(const struct quad *q, const struct surface *ref, const struct surface *on,
                      vec3 wi);
-float shape_sphere_pdf(const struct sphere *s, const struct surface *ref, const struct surface *on,
-                       vec3 wi);
+/* The sphere's density depends on ref and wi alone (n_cos: as for shape_sphere_sample). */
+float shape_sphere_pdf(const struct sphere *s, const struct surface *ref, vec3 n_cos, vec3 wi);
 
 /* The same by solid angle (--light-sampling solid-angle): a triangle by Arvo's spherical-triangle
  * map (Arvo 1995), a rectangular quad by the spherical-rectangle map (Urena et al. 2013), each

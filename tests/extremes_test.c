@@ -714,19 +714,79 @@ Test(extremes, sphere_far_from_the_origin_lets_no_sky_in, .timeout = TEST_TIMEOU
  * from the origin.  Before light.c's is_within, light samples of the sphere from a point on its
  * inner surface a few rounding errors away counted as lit (image mean 1e-3 at x = 1e5 beside
  * the paths that escaped; 1e-4 once they no longer did). */
+/* The lamp spheres of the two tests below: centre and radius, at the origin and far from it. */
+static const double LAMP_SPHERES[][4] = {{0.0, 0.0, 0.0, 1.0},
+                                         {1e5, 0.0, 0.0, 1.0},
+                                         {0.0, 3e5, 0.0, 1.0},
+                                         {1e10, 0.0, 0.0, 1e5}};
+#define N_LAMP_SPHERES (sizeof LAMP_SPHERES / sizeof LAMP_SPHERES[0])
+
 Test(extremes, emitting_sphere_is_dark_inside, .timeout = TEST_TIMEOUT_S(60))
 {
-    const double cases[][4] = {{0.0, 0.0, 0.0, 1.0},
-                               {1e5, 0.0, 0.0, 1.0},
-                               {0.0, 3e5, 0.0, 1.0},
-                               {1e10, 0.0, 0.0, 1e5}};
     char dir[64], path[400];
     test_make_dir(dir, sizeof dir, "lampsphere");
     snprintf(path, sizeof path, "%s/scene.txt", dir);
-    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
-        write_one_sphere(path, cases[k], true, "max-depth=inf",
+    for (size_t k = 0; k < N_LAMP_SPHERES; k++) {
+        write_one_sphere(path, LAMP_SPHERES[k], true, "max-depth=inf",
                          "type=diffuse albedo=0.5,0.5,0.5 emission=1,1,1", "");
         assert_black(path);
+    }
+    test_remove_dir(dir);
+}
+
+/* A sphere that emits on both sides (diffuse, albedo 0.5, emission 1), the camera inside, no
+ * sky: every point inside sees radiance 1 / (1 - 0.5) = 2, far from the origin too, with light
+ * sampling alone (`--direct light`) and with MIS.  Sampled by area from a point on its inner
+ * surface, the cosine at the sampled point was rounding noise near that point (shape.c,
+ * sphere_sample_inside): at x = 1e5 pixels reached 1e3 with light sampling, and MIS gave an
+ * image mean of 1.9983 +- 0.0003.  Each pixel lies within 8 of its standard errors (pooled over
+ * the image) of 2, the image mean within 4. */
+Test(extremes, two_sided_lamp_sphere_is_even_inside, .timeout = TEST_TIMEOUT_S(60))
+{
+    const enum render_direct directs[] = {RENDER_DIRECT_LIGHT, RENDER_DIRECT_MIS};
+    char dir[64], path[400];
+    test_make_dir(dir, sizeof dir, "twosided");
+    snprintf(path, sizeof path, "%s/scene.txt", dir);
+    for (size_t k = 0; k < N_LAMP_SPHERES; k++) {
+        const double *c = LAMP_SPHERES[k];
+        write_one_sphere(path, c, true, "max-depth=inf",
+                         "type=diffuse albedo=0.5,0.5,0.5 emission=1,1,1 two-sided=true", "");
+        struct scene scene;
+        struct mcpt_error err;
+        cr_assert(scene_load(path, &scene, &err), "%s", err.msg);
+        struct trace_scene *ts = trace_prepare(&scene, 2, &err);
+        cr_assert_not_null(ts, "%s", err.msg);
+        for (size_t j = 0; j < sizeof directs / sizeof directs[0]; j++) {
+            struct film f;
+            struct trace_result res;
+            cr_assert(film_init(&f, scene.width, scene.height, &err));
+            struct trace_options opt = {.spp = 256,
+                                        .max_depth = TRACE_DEPTH_INFINITE,
+                                        .seed = 5 + k,
+                                        .sampler = SAMPLER_INDEPENDENT,
+                                        .direct = directs[j],
+                                        .n_threads = 2};
+            cr_assert(trace_render(ts, &opt, &f, &res, &err), "%s", err.msg);
+            size_t n = (size_t)f.width * (size_t)f.height;
+            double sum = 0.0, var = 0.0;
+            for (size_t i = 0; i < n; i++) {
+                sum += film_mean(&f.pixels[i], 0);
+                var += film_var_of_mean(&f.pixels[i], 0);
+            }
+            double se_pixel = sqrt(var / (double)n), mean = sum / (double)n;
+            cr_assert(fabs(mean - 2.0) <= 4.0 * se_pixel / sqrt((double)n),
+                      "centre %g,%g,%g, direct %d: image mean %.6f, SE %.2g", c[0], c[1], c[2],
+                      (int)directs[j], mean, se_pixel / sqrt((double)n));
+            for (size_t i = 0; i < n; i++) {
+                double m = film_mean(&f.pixels[i], 0);
+                cr_assert(fabs(m - 2.0) <= 8.0 * se_pixel,
+                          "centre %g,%g,%g, direct %d: pixel %zu: %.6f (pixel SE %.2g)", c[0], c[1],
+                          c[2], (int)directs[j], i, m, se_pixel);
+            }
+            film_free(&f);
+        }
+        trace_free(ts);
+        scene_free(&scene);
     }
     test_remove_dir(dir);
 }

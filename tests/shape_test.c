@@ -372,8 +372,8 @@ Test(shape, samples_lie_on_the_shape)
         struct shape_sample ss[6];
         bool ok[6] = {shape_triangle_sample(tri, &ref, u, &ss[0]),
                       shape_quad_sample(&q, &ref, u, &ss[1]),
-                      shape_sphere_sample(&far, &ref, u, &ss[2]),
-                      shape_sphere_sample(&around, &ref, u, &ss[3]),
+                      shape_sphere_sample(&far, &ref, ref.ns, u, &ss[2]),
+                      shape_sphere_sample(&around, &ref, ref.ns, u, &ss[3]),
                       shape_triangle_sample_solid_angle(tri, &ref, u, &ss[4]),
                       shape_quad_sample_solid_angle(&rect, &ref, u, &ss[5])};
         for (int k = 0; k < 6; k++) {
@@ -402,8 +402,8 @@ Test(shape, samples_lie_on_the_shape)
             struct surface on = {.p = s->p, .ng = s->n};
             float pdf = k == 0   ? shape_triangle_pdf(tri, &ref, &on, s->wi)
                         : k == 1 ? shape_quad_pdf(&q, &ref, &on, s->wi)
-                        : k == 2 ? shape_sphere_pdf(&far, &ref, &on, s->wi)
-                        : k == 3 ? shape_sphere_pdf(&around, &ref, &on, s->wi)
+                        : k == 2 ? shape_sphere_pdf(&far, &ref, ref.ns, s->wi)
+                        : k == 3 ? shape_sphere_pdf(&around, &ref, ref.ns, s->wi)
                         : k == 4 ? shape_triangle_pdf_solid_angle(tri, &ref, &on, s->wi)
                                  : shape_quad_pdf_solid_angle(&rect, &ref, &on, s->wi);
             if (k >= 4)
