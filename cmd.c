@@ -564,16 +564,15 @@ static int run_convert(int argc, char **argv)
     struct image img;
     if (!image_read_exr(in, &img, &err))
         return cmd_fail(&err);
-    int rgb_idx[3] = {image_find_channel(&img, "R"), image_find_channel(&img, "G"),
-                      image_find_channel(&img, "B")};
+    int rgb_idx[3];
+    size_t prefix_len;
     size_t n_pixels = (size_t)img.width * (size_t)img.height;
     float *rgb = NULL;
-    bool ok = rgb_idx[0] >= 0 && rgb_idx[1] >= 0 && rgb_idx[2] >= 0;
+    bool ok = image_find_rgb(&img, rgb_idx, &prefix_len);
     if (!ok)
-        mcpt_error_set(&err, in, 0, 0, "expected channels R, G and B, got an image without %s",
-                       rgb_idx[0] < 0   ? "R"
-                       : rgb_idx[1] < 0 ? "G"
-                                        : "B");
+        mcpt_error_set(&err, in, 0, 0,
+                       "expected channels R, G and B, or one layer's (LAYER.R, LAYER.G, "
+                       "LAYER.B; of several, the one named Combined), got an image without them");
     else if (!(rgb = malloc(sizeof(float) * 3 * n_pixels))) {
         mcpt_error_runtime(&err, in, "out of memory");
         ok = false;

@@ -562,6 +562,62 @@ int image_find_channel(const struct image *img, const char *name)
     return -1;
 }
 
+/* Whether channel k is LAYER.R with LAYER.G and LAYER.B beside it: their indices in idx. */
+static bool layer_rgb(const struct image *img, int k, int idx[3])
+{
+    const char *name = img->names[k];
+    size_t len = strnlen(name, sizeof img->names[k]);
+    if (len < 3 || strcmp(name + len - 2, ".R") != 0)
+        return false;
+    char other[sizeof img->names[k]];
+    memcpy(other, name, len + 1);
+    idx[0] = k;
+    other[len - 1] = 'G';
+    idx[1] = image_find_channel(img, other);
+    other[len - 1] = 'B';
+    idx[2] = image_find_channel(img, other);
+    return idx[1] >= 0 && idx[2] >= 0;
+}
+
+/* Whether the layer LAYER of channel LAYER.R ends in "Combined" (after a dot, or alone). */
+static bool is_combined(const char *name_r)
+{
+    size_t len = strlen(name_r) - 2; /* without ".R" */
+    const char *want = "Combined";
+    size_t n = strlen(want);
+    return len >= n && memcmp(name_r + len - n, want, n) == 0 &&
+           (len == n || name_r[len - n - 1] == '.');
+}
+
+bool image_find_rgb(const struct image *img, int idx[3], size_t *prefix_len)
+{
+    static const char *plain[3] = {"R", "G", "B"};
+    bool all = true;
+    for (int c = 0; c < 3; c++)
+        all = (idx[c] = image_find_channel(img, plain[c])) >= 0 && all;
+    *prefix_len = 0;
+    if (all)
+        return true;
+    int n_layers = 0, n_combined = 0, layer[3] = {-1, -1, -1}, combined[3] = {-1, -1, -1};
+    for (int k = 0; k < img->n_channels && k < IMAGE_MAX_CHANNELS; k++) {
+        int found[3];
+        if (!layer_rgb(img, k, found))
+            continue;
+        n_layers++;
+        memcpy(layer, found, sizeof layer);
+        if (is_combined(img->names[k])) {
+            n_combined++;
+            memcpy(combined, found, sizeof combined);
+        }
+    }
+    const int *pick = n_layers == 1 ? layer : n_combined == 1 ? combined : NULL;
+    if (!pick)
+        return false;
+    memcpy(idx, pick, sizeof layer);
+    *prefix_len = strlen(img->names[pick[0]]) - 1;
+    return true;
+}
+
 const char *image_find_attr(const struct image *img, const char *name)
 {
     for (int a = 0; a < img->n_attrs && a < IMAGE_MAX_ATTRS; a++) {

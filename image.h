@@ -62,6 +62,13 @@ bool image_read_exr(const char *path, struct image *img, struct mcpt_error *err)
 /* Finds a channel by name; returns its index or -1. */
 int image_find_channel(const struct image *img, const char *name);
 
+/* The colour channels of an image: R, G and B, or else those of one layer, LAYER.R, LAYER.G and
+ * LAYER.B, as Blender's multilayer EXRs name them ("ViewLayer.Combined.R"): the only layer
+ * that has all three, or among several the one whose last part is "Combined" (Blender's
+ * beauty pass).  Fills idx with the three indices and *prefix_len with the length of
+ * "LAYER." (0 for R, G, B); false when there is no such set or no way to choose one. */
+bool image_find_rgb(const struct image *img, int idx[3], size_t *prefix_len);
+
 /* Finds a string attribute by name; returns its value (owned by img) or NULL. */
 const char *image_find_attr(const struct image *img, const char *name);
 

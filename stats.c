@@ -43,26 +43,32 @@ static double sqrt_or_nan(double v) { return v > 0.0 ? sqrt(v) : NAN; }
 bool stats_image_from_exr(const struct image *img, const char *path, struct stats_image *out,
                           struct mcpt_error *err)
 {
-    static const char *rgb_names[3] = {"R", "G", "B"};
-    static const char *var_names[3] = {"variance.R", "variance.G", "variance.B"};
     memset(out, 0, sizeof *out);
     out->width = img->width;
     out->height = img->height;
+    int rgb[3];
+    size_t prefix_len;
+    if (!image_find_rgb(img, rgb, &prefix_len)) {
+        char got[256] = "";
+        size_t len = 0;
+        for (int k = 0; k < img->n_channels && len + 40 < sizeof got; k++)
+            len += (size_t)snprintf(got + len, sizeof got - len, "%s%s", k ? ", " : "",
+                                    img->names[k]);
+        mcpt_error_set(err, path, 0, 0,
+                       "expected channels R, G and B, or one layer's (LAYER.R, LAYER.G, LAYER.B; "
+                       "of several, the one named Combined), got %s",
+                       img->n_channels ? got : "none");
+        return false;
+    }
+    /* the variances and counts mcpt writes beside them: variance.R .. B, samples, with the
+     * same layer prefix */
+    char name[64];
     int n_var = 0;
     for (int c = 0; c < 3; c++) {
-        int idx = image_find_channel(img, rgb_names[c]);
-        if (idx < 0) {
-            char got[256] = "";
-            size_t len = 0;
-            for (int k = 0; k < img->n_channels && len + 40 < sizeof got; k++)
-                len += (size_t)snprintf(got + len, sizeof got - len, "%s%s", k ? ", " : "",
-                                        img->names[k]);
-            mcpt_error_set(err, path, 0, 0, "expected channels R, G and B, got %s",
-                           img->n_channels ? got : "none");
-            return false;
-        }
-        out->rgb[c] = img->data[idx];
-        idx = image_find_channel(img, var_names[c]);
+        out->rgb[c] = img->data[rgb[c]];
+        snprintf(name, sizeof name, "%.*svariance.%c", (int)prefix_len, img->names[rgb[0]],
+                 "RGB"[c]);
+        int idx = image_find_channel(img, name);
         if (idx >= 0) {
             out->var[c] = img->data[idx];
             n_var++;
@@ -70,7 +76,8 @@ bool stats_image_from_exr(const struct image *img, const char *path, struct stat
     }
     if (n_var < 3)
         out->var[0] = out->var[1] = out->var[2] = NULL;
-    int idx = image_find_channel(img, "samples");
+    snprintf(name, sizeof name, "%.*ssamples", (int)prefix_len, img->names[rgb[0]]);
+    int idx = image_find_channel(img, name);
     out->count = idx >= 0 ? img->data[idx] : NULL;
     /* an image without one pixel the metrics can use would give NaN for every one of them */
     size_t n_pixels = (size_t)img->width * (size_t)img->height;

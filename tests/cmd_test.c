@@ -143,21 +143,28 @@ Test(cmd, integrate_sampler_list_has_no_empty_name, .init = setup, .fini = teard
     cr_assert_eq(run_mcpt(good, err, sizeof err), 0, "%s", err);
 }
 
-/* Writes a 4x3 EXR of R, G, B, every value v (with all_nan, one channel of each pixel NaN)
- * and, with var, variance.R/G/B of value *var. */
-static void write_rgb(const char *path, float v, bool all_nan, const float *var)
+/* Writes a 4x3 EXR of channels names[0 .. n-1], channel c from planes[c]. */
+static void write_planes(const char *path, int n, const char *const *names, float planes[][12])
 {
-    struct image img = {.width = 4, .height = 3, .n_channels = var ? 6 : 3};
-    const char *names[] = {"R", "G", "B", "variance.R", "variance.G", "variance.B"};
-    float planes[6][12];
-    for (int c = 0; c < img.n_channels; c++) {
+    struct image img = {.width = 4, .height = 3, .n_channels = n};
+    for (int c = 0; c < n; c++) {
         snprintf(img.names[c], sizeof img.names[c], "%s", names[c]);
-        for (int i = 0; i < 12; i++)
-            planes[c][i] = c >= 3 ? *var : all_nan && (c == i % 3) ? NAN : v;
         img.data[c] = planes[c];
     }
     struct mcpt_error err;
     cr_assert(image_write_exr(path, &img, &err), "%s", err.msg);
+}
+
+/* Writes a 4x3 EXR of R, G, B, every value v (with all_nan, one channel of each pixel NaN)
+ * and, with var, variance.R/G/B of value *var. */
+static void write_rgb(const char *path, float v, bool all_nan, const float *var)
+{
+    const char *names[] = {"R", "G", "B", "variance.R", "variance.G", "variance.B"};
+    float planes[6][12];
+    for (int c = 0; c < 6; c++)
+        for (int i = 0; i < 12; i++)
+            planes[c][i] = c >= 3 ? (var ? *var : 0.0f) : all_nan && (c == i % 3) ? NAN : v;
+    write_planes(path, var ? 6 : 3, names, planes);
 }
 
 /* An image whose every pixel has a NaN or infinite channel (a half-float EXR of values over
@@ -208,4 +215,67 @@ Test(cmd, images_without_usable_pixels_refused, .init = setup, .fini = teardown,
     cr_assert_str_eq(err, want);
     cr_assert_not(test_exists(out));
     cr_assert_not(test_exists(csv));
+}
+
+/* Writes a 4x3 EXR of channels names[0 .. n-1], channel c every value values[c]. */
+static void write_channels(const char *path, int n, const char *const *names, const float *values)
+{
+    float planes[IMAGE_MAX_CHANNELS][12];
+    for (int c = 0; c < n; c++)
+        for (int i = 0; i < 12; i++)
+            planes[c][i] = values[c];
+    write_planes(path, n, names, planes);
+}
+
+/* compare and convert read Blender's multilayer EXRs (a Cycles reference saved as "OpenEXR
+ * MultiLayer"): the colour is that of the one layer with .R, .G and .B, or of the layer named
+ * Combined among several, so the layered copy of an image compares to it with MSE 0; two layers
+ * neither of which is Combined are refused (exit 2) with one line that says what was expected.
+ * Before, every such file was refused for lacking plain R, G and B. */
+Test(cmd, compare_and_convert_read_blender_layers, .init = setup, .fini = teardown,
+     .timeout = TEST_TIMEOUT_S(60))
+{
+    char plain[300], layered[300], one[300], two[300], png[300], out[4096], err[4096];
+    snprintf(plain, sizeof plain, "%s/plain.exr", tmpdir);
+    snprintf(layered, sizeof layered, "%s/layered.exr", tmpdir);
+    snprintf(one, sizeof one, "%s/one.exr", tmpdir);
+    snprintf(two, sizeof two, "%s/two.exr", tmpdir);
+    snprintf(png, sizeof png, "%s/out.png", tmpdir);
+    const char *rgb[] = {"R", "G", "B"};
+    const float colour[] = {0.25f, 0.5f, 0.75f};
+    write_channels(plain, 3, rgb, colour);
+    const char *blender[] = {"ViewLayer.Combined.R",    "ViewLayer.Combined.G",
+                             "ViewLayer.Combined.B",    "ViewLayer.Combined.A",
+                             "ViewLayer.Depth.Z",       "ViewLayer.Noisy Image.R",
+                             "ViewLayer.Noisy Image.G", "ViewLayer.Noisy Image.B"};
+    const float blender_v[] = {0.25f, 0.5f, 0.75f, 1.0f, 7.0f, 9.0f, 9.0f, 9.0f};
+    write_channels(layered, 8, blender, blender_v);
+    const char *single[] = {"Image.R", "Image.G", "Image.B", "Image.A"};
+    write_channels(one, 4, single, blender_v);
+    const char *ambiguous[] = {"A.R", "A.G", "A.B", "B.R", "B.G", "B.B"};
+    write_channels(two, 6, ambiguous, blender_v);
+
+    char json[300];
+    snprintf(json, sizeof json, "%s/out.json", tmpdir);
+    const char *cmp[] = {"compare", layered, plain, "--json", NULL};
+    cr_assert_eq(test_run_mcpt(cmp, json, NULL, 60), 0);
+    test_read_file(json, out, sizeof out);
+    cr_assert(strstr(out, "\"mse\": 0,") || strstr(out, "\"mse\":0,"), "%s", out);
+    const char *cmp1[] = {"compare", plain, one, "--json", NULL};
+    cr_assert_eq(test_run_mcpt(cmp1, json, NULL, 60), 0);
+    test_read_file(json, out, sizeof out);
+    cr_assert(strstr(out, "\"mse\": 0,") || strstr(out, "\"mse\":0,"), "%s", out);
+    const char *conv[] = {"convert", layered, png, "--quiet", NULL};
+    cr_assert_eq(run_mcpt(conv, err, sizeof err), 0, "%s", err);
+
+    const char *bad[] = {"compare", two, plain, NULL};
+    cr_assert_eq(run_mcpt(bad, err, sizeof err), 2, "%s", err);
+    char want[600];
+    snprintf(want, sizeof want,
+             "%s: error: expected channels R, G and B, or one layer's (LAYER.R, LAYER.G, LAYER.B; "
+             "of several, the one named Combined), got A.B, A.G, A.R, B.B, B.G, B.R\n",
+             two);
+    cr_assert_str_eq(err, want);
+    const char *bad_conv[] = {"convert", two, png, NULL};
+    cr_assert_eq(run_mcpt(bad_conv, err, sizeof err), 2, "%s", err);
 }
