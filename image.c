@@ -312,6 +312,89 @@ bool image_write_exr(const char *path, const struct image *img, struct mcpt_erro
            image_encode_exr(&af, img, err) && file_atomic_rename(&af, err);
 }
 
+/* ---- channel names --------------------------------------------------------------------------- */
+
+/* A channel's name as struct image keeps it: at most 31 bytes and a NUL. */
+typedef char channel_name[sizeof((struct image *)0)->names[0]];
+
+static int find_name(const channel_name *names, int n, const char *name)
+{
+    for (int c = 0; c < n; c++) {
+        if (strncmp(names[c], name, sizeof names[c]) == 0)
+            return c;
+    }
+    return -1;
+}
+
+int image_find_channel(const struct image *img, const char *name)
+{
+    int n = img->n_channels < IMAGE_MAX_CHANNELS ? img->n_channels : IMAGE_MAX_CHANNELS;
+    return find_name(img->names, n, name);
+}
+
+/* Whether channel k is LAYER.R with LAYER.G and LAYER.B beside it: their indices in idx. */
+static bool layer_rgb(const channel_name *names, int n, int k, int idx[3])
+{
+    const char *name = names[k];
+    size_t len = strnlen(name, sizeof names[k]);
+    if (len < 3 || len == sizeof names[k] || strcmp(name + len - 2, ".R") != 0)
+        return false;
+    channel_name other;
+    memcpy(other, name, len + 1);
+    idx[0] = k;
+    other[len - 1] = 'G';
+    idx[1] = find_name(names, n, other);
+    other[len - 1] = 'B';
+    idx[2] = find_name(names, n, other);
+    return idx[1] >= 0 && idx[2] >= 0;
+}
+
+/* Whether the layer LAYER of channel LAYER.R ends in "Combined" (after a dot, or alone). */
+static bool is_combined(const char *name_r)
+{
+    size_t len = strlen(name_r) - 2; /* without ".R" */
+    const char *want = "Combined";
+    size_t n = strlen(want);
+    return len >= n && memcmp(name_r + len - n, want, n) == 0 &&
+           (len == n || name_r[len - n - 1] == '.');
+}
+
+/* image_find_rgb over the names of n channels. */
+static bool find_rgb(const channel_name *names, int n, int idx[3], size_t *prefix_len)
+{
+    static const char *plain[3] = {"R", "G", "B"};
+    bool all = true;
+    for (int c = 0; c < 3; c++)
+        all = (idx[c] = find_name(names, n, plain[c])) >= 0 && all;
+    *prefix_len = 0;
+    if (all)
+        return true;
+    int n_layers = 0, n_combined = 0, layer[3] = {-1, -1, -1}, combined[3] = {-1, -1, -1};
+    for (int k = 0; k < n; k++) {
+        int found[3];
+        if (!layer_rgb(names, n, k, found))
+            continue;
+        n_layers++;
+        memcpy(layer, found, sizeof layer);
+        if (is_combined(names[k])) {
+            n_combined++;
+            memcpy(combined, found, sizeof combined);
+        }
+    }
+    const int *pick = n_layers == 1 ? layer : n_combined == 1 ? combined : NULL;
+    if (!pick)
+        return false;
+    memcpy(idx, pick, sizeof layer);
+    *prefix_len = strlen(names[pick[0]]) - 1;
+    return true;
+}
+
+bool image_find_rgb(const struct image *img, int idx[3], size_t *prefix_len)
+{
+    int n = img->n_channels < IMAGE_MAX_CHANNELS ? img->n_channels : IMAGE_MAX_CHANNELS;
+    return find_rgb(img->names, n, idx, prefix_len);
+}
+
 /* ---- EXR reading ----------------------------------------------------------------------------- */
 
 /* Decodes one chunk (a band of scanlines or a tile) whose top-left pixel is (x0, y0) relative to
@@ -333,6 +416,10 @@ static exr_result_t decode_chunk(exr_context_t ctxt, const exr_chunk_info_t *chu
     for (int k = 0; k < decode->channel_count; k++) {
         exr_coding_channel_info_t *ch = &decode->channels[k];
         int c = image_find_channel(img, ch->channel_name);
+        if (c < 0 && img->n_channels < decode->channel_count) {
+            ch->decode_to_ptr = NULL; /* a channel left out (image_alloc_from_header) */
+            continue;
+        }
         if (c < 0)
             return EXR_ERR_INVALID_ATTR;
         ch->decode_to_ptr = (uint8_t *)(img->data[c] + (size_t)y0 * width + (size_t)x0);
@@ -394,6 +481,65 @@ static exr_result_t decode_part(exr_context_t ctxt, exr_storage_t storage,
     return rv;
 }
 
+/* The channels image_read_exr keeps, as indices into chlist: all of them, up to
+ * IMAGE_MAX_CHANNELS; of more (a Blender multilayer EXR with every pass has about 100), the colour
+ * that image_find_rgb would take and the variance.R/G/B and samples beside it, the names
+ * compared as the file spells them (a name with a control character or past 31 bytes is passed
+ * over).  False with *err filled when there is no such colour. */
+static bool select_channels(const char *path, const exr_attr_chlist_t *chlist,
+                            int keep[IMAGE_MAX_CHANNELS], int *n_keep, struct mcpt_error *err)
+{
+    int n = chlist->num_channels;
+    if (n < 1) {
+        mcpt_error_set(err, path, 0, 0, "expected 1 or more channels, got %d", n);
+        return false;
+    }
+    *n_keep = 0;
+    if (n <= IMAGE_MAX_CHANNELS) {
+        for (int c = 0; c < n; c++)
+            keep[(*n_keep)++] = c;
+        return true;
+    }
+    channel_name *names = calloc((size_t)n, sizeof *names);
+    if (!names) {
+        mcpt_error_runtime(err, path, "cannot read: %s", strerror(ENOMEM));
+        return false;
+    }
+    for (int c = 0; c < n; c++) {
+        const exr_attr_string_t *name = &chlist->entries[c].name;
+        bool usable = name->length >= 1 && (size_t)name->length < sizeof names[c];
+        for (int k = 0; usable && k < name->length; k++)
+            usable = (unsigned char)name->str[k] >= 0x20 && name->str[k] != 0x7f;
+        if (usable)
+            memcpy(names[c], name->str, (size_t)name->length);
+    }
+    const channel_name *read_only = (const channel_name *)names;
+    int rgb[3];
+    size_t prefix_len;
+    bool ok = find_rgb(read_only, n, rgb, &prefix_len);
+    if (ok) {
+        const char *beside[4] = {"variance.R", "variance.G", "variance.B", "samples"};
+        for (int c = 0; c < 3; c++)
+            keep[(*n_keep)++] = rgb[c];
+        for (int k = 0; k < 4; k++) {
+            channel_name want;
+            int len = snprintf(want, sizeof want, "%.*s%s", (int)prefix_len, names[rgb[0]],
+                               beside[k]);
+            int c = len < (int)sizeof want ? find_name(read_only, n, want) : -1;
+            if (c >= 0)
+                keep[(*n_keep)++] = c;
+        }
+    } else {
+        mcpt_error_set(err, path, 0, 0,
+                       "expected at most %d channels, or R, G and B among more (or one layer's: "
+                       "LAYER.R, LAYER.G, LAYER.B; of several, the one named Combined), got %d "
+                       "channels without them",
+                       IMAGE_MAX_CHANNELS, n);
+    }
+    free(names);
+    return ok;
+}
+
 /* Checks the header of part 0 and allocates img's channels; false with *err filled. */
 /* Decoded bytes a file may claim per byte it holds: deflate (ZIP), the compression mcpt writes,
  * packs at most 1032:1; anything beyond a margin over that is a header that lies. */
@@ -416,28 +562,25 @@ static bool image_alloc_from_header(const char *path, exr_storage_t storage,
                        (long long)width, (long long)height);
         return false;
     }
-    if (chlist->num_channels < 1 || chlist->num_channels > IMAGE_MAX_CHANNELS) {
-        mcpt_error_set(err, path, 0, 0, "expected 1 to %d channels, got %d", IMAGE_MAX_CHANNELS,
-                       chlist->num_channels);
+    int keep[IMAGE_MAX_CHANNELS], n_keep = 0;
+    if (!select_channels(path, chlist, keep, &n_keep, err))
         return false;
-    }
     /* checked before allocating: a header of a few bytes claimed gigabytes */
     uint64_t claim_bytes = (uint64_t)width * (uint64_t)height * sizeof(float);
     uint64_t most_bytes = (uint64_t)file_bytes * EXR_MAX_RATIO;
-    if (claim_bytes > (EXR_MIN_CLAIM_BYTES > most_bytes ? EXR_MIN_CLAIM_BYTES : most_bytes) /
-                          (uint64_t)chlist->num_channels) {
+    if (claim_bytes >
+        (EXR_MIN_CLAIM_BYTES > most_bytes ? EXR_MIN_CLAIM_BYTES : most_bytes) / (uint64_t)n_keep) {
         mcpt_error_set(err, path, 0, 0,
                        "expected pixels its %lld bytes can hold, got a header of %lldx%lld pixels "
                        "and %d channels (%.0f MiB)",
-                       (long long)file_bytes, (long long)width, (long long)height,
-                       chlist->num_channels,
-                       (double)claim_bytes * chlist->num_channels / 1048576.0);
+                       (long long)file_bytes, (long long)width, (long long)height, n_keep,
+                       (double)claim_bytes * n_keep / 1048576.0);
         return false;
     }
     img->width = (int)width;
     img->height = (int)height;
-    for (int c = 0; c < chlist->num_channels; c++) {
-        const exr_attr_chlist_entry_t *e = &chlist->entries[c];
+    for (int c = 0; c < n_keep; c++) {
+        const exr_attr_chlist_entry_t *e = &chlist->entries[keep[c]];
         if (e->name.length < 1 || (size_t)e->name.length >= sizeof img->names[c]) {
             mcpt_error_set(err, path, 0, 0, "expected channel names of 1 to %zu characters, got %d",
                            sizeof img->names[c] - 1, (int)e->name.length);
@@ -551,71 +694,6 @@ fail:
     close(s.fd);
     image_free(img);
     return false;
-}
-
-int image_find_channel(const struct image *img, const char *name)
-{
-    for (int c = 0; c < img->n_channels && c < IMAGE_MAX_CHANNELS; c++) {
-        if (strncmp(img->names[c], name, sizeof img->names[c]) == 0)
-            return c;
-    }
-    return -1;
-}
-
-/* Whether channel k is LAYER.R with LAYER.G and LAYER.B beside it: their indices in idx. */
-static bool layer_rgb(const struct image *img, int k, int idx[3])
-{
-    const char *name = img->names[k];
-    size_t len = strnlen(name, sizeof img->names[k]);
-    if (len < 3 || strcmp(name + len - 2, ".R") != 0)
-        return false;
-    char other[sizeof img->names[k]];
-    memcpy(other, name, len + 1);
-    idx[0] = k;
-    other[len - 1] = 'G';
-    idx[1] = image_find_channel(img, other);
-    other[len - 1] = 'B';
-    idx[2] = image_find_channel(img, other);
-    return idx[1] >= 0 && idx[2] >= 0;
-}
-
-/* Whether the layer LAYER of channel LAYER.R ends in "Combined" (after a dot, or alone). */
-static bool is_combined(const char *name_r)
-{
-    size_t len = strlen(name_r) - 2; /* without ".R" */
-    const char *want = "Combined";
-    size_t n = strlen(want);
-    return len >= n && memcmp(name_r + len - n, want, n) == 0 &&
-           (len == n || name_r[len - n - 1] == '.');
-}
-
-bool image_find_rgb(const struct image *img, int idx[3], size_t *prefix_len)
-{
-    static const char *plain[3] = {"R", "G", "B"};
-    bool all = true;
-    for (int c = 0; c < 3; c++)
-        all = (idx[c] = image_find_channel(img, plain[c])) >= 0 && all;
-    *prefix_len = 0;
-    if (all)
-        return true;
-    int n_layers = 0, n_combined = 0, layer[3] = {-1, -1, -1}, combined[3] = {-1, -1, -1};
-    for (int k = 0; k < img->n_channels && k < IMAGE_MAX_CHANNELS; k++) {
-        int found[3];
-        if (!layer_rgb(img, k, found))
-            continue;
-        n_layers++;
-        memcpy(layer, found, sizeof layer);
-        if (is_combined(img->names[k])) {
-            n_combined++;
-            memcpy(combined, found, sizeof combined);
-        }
-    }
-    const int *pick = n_layers == 1 ? layer : n_combined == 1 ? combined : NULL;
-    if (!pick)
-        return false;
-    memcpy(idx, pick, sizeof layer);
-    *prefix_len = strlen(img->names[pick[0]]) - 1;
-    return true;
 }
 
 const char *image_find_attr(const struct image *img, const char *name)

@@ -53,10 +53,12 @@ struct file_atomic; /* file.h */
 bool image_encode_exr(struct file_atomic *af, const struct image *img, struct mcpt_error *err);
 
 /* Reads every channel of a scanline or tiled EXR (half, float or uint channels are converted
- * to float), the first IMAGE_MAX_ATTRS string attributes of its header that fit (name of
- * at most 31 bytes, value of at most IMAGE_ATTR_BYTES - 1; others are skipped, and so are the
- * structural "type" and "name") and the chromaticities when present.  On success
- * *img owns its data (free with image_free). */
+ * to float); of a file with more than IMAGE_MAX_CHANNELS (a Blender multilayer EXR with its
+ * render passes), only the colour image_find_rgb takes and the variance.R/G/B and samples
+ * beside it, or none (an error) where there is no such colour; the first IMAGE_MAX_ATTRS
+ * string attributes of its header that fit (name of at most 31 bytes, value of at most
+ * IMAGE_ATTR_BYTES - 1; others are skipped, and so are the structural "type" and "name") and
+ * the chromaticities when present.  On success *img owns its data (free with image_free). */
 bool image_read_exr(const char *path, struct image *img, struct mcpt_error *err);
 
 /* Finds a channel by name; returns its index or -1. */

@@ -864,3 +864,47 @@ Test(image, tone_curves_on_known_values)
     cr_assert_not(image_tonemap_parse("filmic", &t));
     cr_assert_not(image_tonemap_parse("ACES", &t));
 }
+
+/* A Blender multilayer EXR with every render pass (96 channels, tests/data/image/README): more
+ * than an image holds, so the reader keeps the colour image_find_rgb takes (the layer named
+ * Combined) and leaves the passes out; its pixels are those of the same render saved as plain
+ * R, G, B.  With no layer named Combined among the many it refuses the file, naming what it
+ * expected.  Before, both were refused for having more than IMAGE_MAX_CHANNELS channels. */
+Test(image, exr_reads_the_colour_of_a_file_with_many_channels)
+{
+    struct image layers, plain;
+    struct mcpt_error err;
+    cr_assert(image_read_exr("tests/data/image/blender-passes.exr", &layers, &err), "%s", err.msg);
+    cr_assert(image_read_exr("tests/data/image/blender-single.exr", &plain, &err), "%s", err.msg);
+    cr_assert_eq(layers.n_channels, 3);
+    const char *names[3] = {"ViewLayer.Combined.R", "ViewLayer.Combined.G", "ViewLayer.Combined.B"};
+    int idx[3], plain_idx[3];
+    size_t prefix_len;
+    cr_assert(image_find_rgb(&layers, idx, &prefix_len));
+    cr_assert_eq(prefix_len, strlen("ViewLayer.Combined."));
+    cr_assert(image_find_rgb(&plain, plain_idx, &prefix_len));
+    cr_assert_eq(prefix_len, 0);
+    cr_assert_eq(layers.width, plain.width);
+    cr_assert_eq(layers.height, plain.height);
+    double sum = 0.0;
+    for (int c = 0; c < 3; c++) {
+        cr_assert_str_eq(layers.names[idx[c]], names[c]);
+        for (int i = 0; i < layers.width * layers.height; i++) {
+            cr_assert_eq(layers.data[idx[c]][i], plain.data[plain_idx[c]][i], "%s[%d]", names[c],
+                         i);
+            sum += plain.data[plain_idx[c]][i];
+        }
+    }
+    cr_assert_gt(sum, 0.0); /* a lit render, not an empty plane */
+    image_free(&layers);
+    image_free(&plain);
+
+    const char *renamed = "tests/data/image/blender-passes-renamed.exr";
+    cr_assert_not(image_read_exr(renamed, &layers, &err));
+    cr_assert_str_eq(err.file, renamed);
+    cr_assert_str_eq(err.msg,
+                     "expected at most 32 channels, or R, G and B among more (or one layer's: "
+                     "LAYER.R, LAYER.G, LAYER.B; of several, the one named Combined), got 96 "
+                     "channels without them");
+    cr_assert_eq(layers.n_channels, 0);
+}
