@@ -273,12 +273,23 @@ static float warp_by_cosine(vec2 *u, const float w[4])
     return pdf_bilinear(*u, w);
 }
 
-/* Completes *ss, whose point p is set, with the unit direction wi from ref->p and the density
- * pdf_sa; false when p coincides with ref->p or is seen edge-on (n, any length, is the
- * shape's normal) or the density is not finite. */
-static bool direction_to(struct shape_sample *ss, vec3 n, const struct surface *ref, float pdf_sa)
+/* The apex of a shape's spherical projection (sampling by solid angle): ref's spawned origin on
+ * the side of the point `toward` (the shape's centre), where a BSDF ray towards the shape
+ * starts, so that the directions the sampler covers are those such a ray finds the shape along
+ * (the projection from ref->p itself differs by |p_error| / dist at the silhouette). */
+static vec3 solid_angle_apex(const struct surface *ref, vec3 toward)
 {
-    vec3 d = v3_sub(ss->p, ref->p);
+    return offset_ray_origin(ref->p, ref->p_error, ref->ng, v3_sub(toward, ref->p));
+}
+
+/* Completes *ss, whose point p is set, with the unit direction wi from apex (solid_angle_apex)
+ * to x, the point sampled before rounding (far from the origin the rounded p can be a few
+ * percent of the distance off, and the density is that of the sampled direction), and the
+ * density pdf_sa; false when x coincides with the apex or is seen edge-on (n, any length, is
+ * the shape's normal) or the density is not finite. */
+static bool direction_to(struct shape_sample *ss, vec3 x, vec3 n, vec3 apex, float pdf_sa)
+{
+    vec3 d = v3_sub(x, apex);
     float dist = v3_length(d);
     if (!(dist > 0.0f) || v3_dot(n, d) == 0.0f)
         return false;
@@ -576,7 +587,11 @@ bool shape_sphere_sample(const struct sphere *s, const struct surface *ref, vec3
     vec3 dir = v3_from_local(v3(sin_alpha * cosf(phi), sin_alpha * sinf(phi), cos_alpha), wx, wy,
                              wz);
     ss->p = sphere_point(s, d3(dir), &ss->n, &ss->p_error);
-    struct dvec3 d = d3_sub(d3(ss->p), d3(ref->p));
+    /* wi from the cone's apex to the point before rounding (far from the origin the rounded
+     * point, and ref->p, can be a few percent of the distance off) */
+    struct dvec3 apex = d3_sub(d3(s->center), w);
+    struct dvec3 x = d3_add(d3(s->center), d3_scale(d3(dir), (double)s->radius));
+    struct dvec3 d = d3_sub(x, apex);
     double dist = d3_length(d);
     if (!(dist > 0.0))
         return false;
@@ -790,14 +805,15 @@ float shape_quad_pdf(const struct quad *q, const struct surface *ref, const stru
  * w[4] with the cosine weights at ref's shading normal of the corners corner, + e1, + e2,
  * + e1 + e2, where u = (0,0), (1,0), (0,1), (1,1) map. */
 static bool quad_by_solid_angle(const struct quad *q, const struct surface *ref,
-                                struct sample_sph_rect *sr, float w[4])
+                                struct sample_sph_rect *sr, float w[4], vec3 *apex)
 {
     vec3 corner = d3_to_float(q->corner), e1 = d3_to_float(q->e1), e2 = d3_to_float(q->e2);
-    if (!sample_sph_rect_init(ref->p, corner, e1, e2, sr) || !(sr->area >= SPHERICAL_MIN_SR))
+    *apex = solid_angle_apex(ref, v3_add(corner, v3_scale(v3_add(e1, e2), 0.5f)));
+    if (!sample_sph_rect_init(*apex, corner, e1, e2, sr) || !(sr->area >= SPHERICAL_MIN_SR))
         return false;
     vec3 c[4] = {corner, v3_add(corner, e1), v3_add(corner, e2), v3_add(v3_add(corner, e1), e2)};
     for (int k = 0; k < 4; k++)
-        c[k] = v3_normalize(v3_sub(c[k], ref->p));
+        c[k] = v3_normalize(v3_sub(c[k], *apex));
     receiver_weights(ref, c[0], c[1], c[2], c[3], w);
     return true;
 }
@@ -807,16 +823,19 @@ bool shape_quad_sample_solid_angle(const struct quad *q, const struct surface *r
 {
     struct sample_sph_rect sr;
     float w[4];
-    if (!quad_by_solid_angle(q, ref, &sr, w))
+    vec3 apex;
+    if (!quad_by_solid_angle(q, ref, &sr, w, &apex))
         return shape_quad_sample(q, ref, u, ss);
     /* Urena et al. 2013, u first warped by the cosine at the receiver:
      * pdf_sa = pdf_bilinear(u) / S */
     float pdf_u = warp_by_cosine(&u, w);
-    struct dvec3 pr = d3_sub(d3(sample_spherical_rectangle(&sr, u)), q->corner);
+    vec3 x = sample_spherical_rectangle(&sr, u);
+    struct dvec3 pr = d3_sub(d3(x), q->corner);
     double alpha = fmin(1.0, fmax(0.0, d3_dot(pr, q->e1) / d3_dot(q->e1, q->e1)));
     double beta = fmin(1.0, fmax(0.0, d3_dot(pr, q->e2) / d3_dot(q->e2, q->e2)));
     ss->p = quad_point(q, alpha, beta, &ss->n, &ss->p_error);
-    return direction_to(ss, ss->n, ref, pdf_u * pdf_spherical_rectangle(&sr));
+    /* wi to the sampled point, not to its rounded copy: the density is that direction's */
+    return direction_to(ss, x, ss->n, apex, pdf_u * pdf_spherical_rectangle(&sr));
 }
 
 float shape_quad_pdf_solid_angle(const struct quad *q, const struct surface *ref,
@@ -824,10 +843,15 @@ float shape_quad_pdf_solid_angle(const struct quad *q, const struct surface *ref
 {
     struct sample_sph_rect sr;
     float w[4];
-    if (!quad_by_solid_angle(q, ref, &sr, w))
+    vec3 apex;
+    if (!quad_by_solid_angle(q, ref, &sr, w, &apex))
         return shape_quad_pdf(q, ref, on, wi);
-    /* pdf_sa = pdf_bilinear(u) / S at the u that maps to the point on->p */
-    return pdf_bilinear(sample_invert_spherical_rectangle(&sr, on->p), w) *
+    /* pdf_sa = pdf_bilinear(u) / S at the u that maps to the point where apex + t wi meets the
+     * quad's plane (in double: on->p, rounded, can be a few percent of the distance off) */
+    struct dvec3 c = d3_cross(q->e1, q->e2), o = d3(apex), w_d = d3(wi);
+    double t = d3_dot(c, d3_sub(q->corner, o)) / d3_dot(c, w_d);
+    vec3 x = t > 0.0 && isfinite(t) ? d3_to_float(d3_add(o, d3_scale(w_d, t))) : on->p;
+    return pdf_bilinear(sample_invert_spherical_rectangle(&sr, x), w) *
            pdf_spherical_rectangle(&sr);
 }
 
@@ -1111,11 +1135,13 @@ float shape_triangle_pdf(const vec3 p[3], const struct surface *ref, const struc
  * corners of Arvo's u square at ref's shading normal (u = (0,0) and (1,0) map to p[1], (0,1) to
  * p[0], (1,1) to p[2]). */
 static bool triangle_by_solid_angle(const vec3 p[3], const struct surface *ref,
-                                    struct sample_sph_triangle *st, float w[4])
+                                    struct sample_sph_triangle *st, float w[4], vec3 *apex)
 {
+    vec3 centroid = v3_scale(v3_add(v3_add(p[0], p[1]), p[2]), 1.0f / 3.0f);
+    *apex = solid_angle_apex(ref, centroid);
     vec3 d[3];
     for (int k = 0; k < 3; k++) {
-        d[k] = v3_sub(p[k], ref->p);
+        d[k] = v3_sub(p[k], *apex);
         float len = v3_length(d[k]);
         if (!(len > 0.0f))
             return false;
@@ -1133,14 +1159,15 @@ bool shape_triangle_sample_solid_angle(const vec3 p[3], const struct surface *re
 {
     struct sample_sph_triangle st;
     float w[4];
-    if (!triangle_by_solid_angle(p, ref, &st, w))
+    vec3 apex;
+    if (!triangle_by_solid_angle(p, ref, &st, w, &apex))
         return shape_triangle_sample(p, ref, u, ss);
     /* Arvo 1995, u first warped by the cosine at the receiver: pdf_sa = pdf_bilinear(u) / Omega */
     float pdf_u = warp_by_cosine(&u, w);
     vec3 wi = sample_spherical_triangle(&st, u);
-    /* the barycentrics where the ray ref->p + t wi meets the triangle's plane (Moller & Trumbore
+    /* the barycentrics where the ray apex + t wi meets the triangle's plane (Moller & Trumbore
      * 1997), clamped onto the triangle against rounding */
-    vec3 e1 = v3_sub(p[1], p[0]), e2 = v3_sub(p[2], p[0]), s = v3_sub(ref->p, p[0]);
+    vec3 e1 = v3_sub(p[1], p[0]), e2 = v3_sub(p[2], p[0]), s = v3_sub(apex, p[0]);
     vec3 s1 = v3_cross(wi, e2);
     float divisor = v3_dot(s1, e1);
     if (divisor == 0.0f)
@@ -1156,7 +1183,11 @@ bool shape_triangle_sample_solid_angle(const vec3 p[3], const struct surface *re
     triangle_plane(p, &tp);
     ss->p = triangle_point(&tp, b1, b2, &ss->p_error);
     ss->n = tp.ng;
-    return direction_to(ss, ss->n, ref, pdf_u * pdf_spherical_triangle(&st));
+    struct dvec3 x = d3_add(d3(tp.p0), d3_add(d3_scale(tp.e1, b1), d3_scale(tp.e2, b2)));
+    if (!direction_to(ss, d3_to_float(x), ss->n, apex, pdf_u * pdf_spherical_triangle(&st)))
+        return false;
+    ss->wi = wi; /* the sampled direction, whose density this is */
+    return true;
 }
 
 float shape_triangle_pdf_solid_angle(const vec3 p[3], const struct surface *ref,
@@ -1164,7 +1195,8 @@ float shape_triangle_pdf_solid_angle(const vec3 p[3], const struct surface *ref,
 {
     struct sample_sph_triangle st;
     float w[4];
-    if (!triangle_by_solid_angle(p, ref, &st, w))
+    vec3 apex;
+    if (!triangle_by_solid_angle(p, ref, &st, w, &apex))
         return shape_triangle_pdf(p, ref, on, wi);
     /* pdf_sa = pdf_bilinear(u) / Omega at the u that maps to wi */
     return pdf_bilinear(sample_invert_spherical_triangle(&st, wi), w) * pdf_spherical_triangle(&st);
