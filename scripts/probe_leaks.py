@@ -21,6 +21,10 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
   offset   CornellBox-Original rounded to a grid of 1/G, moved by each --offsets value (camera
            too), against the same at the origin: image means and their z (independent sampler).
   scales   an OBJ (--obj) scaled by 1e-15, 1e-6, 1e6, 1e15 (camera too) against scale 1.
+  scene    a scene file (--scene, default every one of scenes/) scaled by each --factors value
+           (every length: camera, lens, radii, corners, edges, planes, checker periods, meshes;
+           point-light intensity by the square), or with --move moved by it along x, at 48 x 36
+           and --spp independent samples, against the scene as written (image means and z).
 
   python3 scripts/probe_leaks.py cubes --cells 10 --cases 50 --seed 22
   python3 scripts/probe_leaks.py cubes --strips 30 --cases 50 --seed 21
@@ -29,6 +33,8 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
   python3 scripts/probe_leaks.py quads --cases 100 --seed 2
   python3 scripts/probe_leaks.py offset --grid 32 --offsets 1e5,2e5,4e5
   python3 scripts/probe_leaks.py scales --obj ../shared/models/cornell-box/CornellBox-Sphere.obj
+  python3 scripts/probe_leaks.py scene --factors 1e-15,1e-6,1e6,1e15 --spp 256
+  python3 scripts/probe_leaks.py scene --move --factors 1e3,1e4,1e5 --spp 256
 """
 
 import argparse
@@ -324,9 +330,79 @@ def probe_scales(args, tmp):
     return compare_means(stats[0][1], stats[1:])
 
 
+# The parameters that are lengths, per statement: points (moved by --move) and vectors.
+SCENE_POINTS = {("camera", "eye"), ("camera", "look-at"), ("sphere", "center"), ("quad", "corner"),
+                ("plane", "point"), ("light", "position"), ("mesh", "translate"),
+                ("quad", "translate"), ("sphere", "translate")}
+SCENE_VECTORS = {("quad", "edge1"), ("quad", "edge2")}
+SCENE_NUMBERS = {("camera", "aperture"), ("camera", "focus-dist"), ("sphere", "radius"),
+                 ("material", "checker-scale")}
+
+
+def transformed_scene(src, s, move, spp):
+    """The scene file src scaled by s (or moved by s along x), at 48 x 36 and spp independent
+    samples; mesh paths made absolute."""
+    out = []
+    for line in open(src):
+        words = line.split("#")[0].split()
+        if not words:
+            continue
+        st, new = words[0], [words[0]]
+        scaled_mesh = False
+        for w in words[1:]:
+            k, v = w.split("=", 1)
+            nums = v.split(",")
+            if (st, k) in SCENE_POINTS:
+                v = ",".join("%.17g" % (float(x) + (s if i == 0 else 0.0) if move else float(x) * s)
+                             for i, x in enumerate(nums))
+            elif (st, k) in SCENE_VECTORS or (st, k) in SCENE_NUMBERS or (st, k) == ("mesh", "scale"):
+                v = ",".join("%.17g" % (float(x) * (1.0 if move else s)) for x in nums)
+                scaled_mesh = scaled_mesh or st == "mesh"
+            elif st == "light" and k == "intensity" and not move:
+                v = ",".join("%.17g" % (float(x) * s * s) for x in nums)
+            elif st == "mesh" and k == "file":
+                v = os.path.abspath(os.path.join(os.path.dirname(src), v))
+            elif st == "film" or (st == "render" and k in ("spp", "sampler")):
+                continue
+            new.append(k + "=" + v)
+        if st == "mesh" and not move and not scaled_mesh:
+            new.append("scale=%.17g" % s)
+        if st == "mesh" and move and not any(w.startswith("translate=") for w in new):
+            new.append("translate=%.17g,0,0" % s)
+        out.append(" ".join(new))
+    out = [l for l in out if not l.startswith("render")] + \
+        ["render spp=%d sampler=independent %s" % (spp, " ".join(
+            w for l in out if l.startswith("render") for w in l.split()[1:]))]
+    out = [l for l in out if not l.startswith("film")] + ["film width=48 height=36"]
+    return "\n".join(out) + "\n"
+
+
+def probe_scene(args, tmp):
+    scenes = [args.scene] if args.scene else sorted(
+        os.path.join(ROOT, "scenes", f) for f in os.listdir(os.path.join(ROOT, "scenes"))
+        if f.endswith(".txt"))
+    ok = True
+    for src in scenes:
+        stats = []
+        for k, s in enumerate([0.0 if args.move else 1.0] + [float(x) for x in args.factors.split(",")]):
+            path = os.path.join(tmp, "scene-%d.txt" % k)
+            with open(path, "w") as f:
+                f.write(transformed_scene(src, s, args.move, args.spp))
+            out = render(args.mcpt, path, seed=1 + k, refusal_ok=True)
+            if out is None:
+                print("%s at %g: refused (exit 2)" % (os.path.basename(src), s))
+                continue
+            stats.append(("%s %s %g" % (os.path.basename(src), "moved" if args.move else "scale", s),
+                          image_stats(out)))
+        if stats:
+            ok &= compare_means(stats[0][1], stats[1:])
+    return ok
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("mode", choices=["cubes", "spheres", "planes", "quads", "offset", "scales"])
+    ap.add_argument("mode", choices=["cubes", "spheres", "planes", "quads", "offset", "scales",
+                                     "scene"])
     ap.add_argument("--mcpt", default=os.path.join(ROOT, "mcpt"))
     ap.add_argument("--cases", type=int, default=50)
     ap.add_argument("--seed", type=int, default=1)
@@ -338,11 +414,14 @@ def main():
     ap.add_argument("--offsets", default="1e5,2e5,4e5")
     ap.add_argument("--obj", default=os.path.join(ROOT, "scenes", "models", "CornellBox-Original.obj"))
     ap.add_argument("--spp", type=int, default=4096)
+    ap.add_argument("--scene", help="scene: one scene file (default: every one of scenes/)")
+    ap.add_argument("--factors", default="1e-15,1e-6,1e6,1e15", help="scene: scales or moves")
+    ap.add_argument("--move", action="store_true", help="scene: move along x instead of scaling")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         ok = {"cubes": probe_cubes, "spheres": probe_spheres, "planes": probe_planes,
               "quads": probe_quads, "offset": probe_offset,
-              "scales": probe_scales}[args.mode](args, tmp)
+              "scales": probe_scales, "scene": probe_scene}[args.mode](args, tmp)
     sys.exit(0 if ok else 1)
 
 
