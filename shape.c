@@ -537,11 +537,12 @@ static bool sphere_cone(const struct sphere *s, const struct surface *ref, vec3 
 /* From inside, every direction meets the sphere, so it is sampled as the sky is: wi
  * cosine-weighted about n_cos (the side of ref being lit), pdf_sa = cos theta / pi (PBRT 4e,
  * ch. A.5, "Cosine-Weighted Hemisphere Sampling"), its point where the ray spawned along wi
- * meets the sphere, found as a BSDF ray along wi finds it.  No distance or cosine at the sampled point enters the estimate.  PBRT 4e
- * samples by area here (ch. 6, "Spheres"), dividing by the cosine at the sampled point; for a
- * ref on the sphere, that cosine is about dist / 2r, and ref's own rounding (|p_error|) moves it
- * by |p_error| / dist, so it is noise within sqrt(2 r |p_error|) of ref: a two-sided lamp of
- * radius 1 at x = 1e5, seen from inside, gave pixels of 1e3 in an image of 2. */
+ * meets the sphere, found as a BSDF ray along wi finds it.  No distance or cosine at the
+ * sampled point enters the estimate.  PBRT 4e samples by area here (ch. 6, "Spheres"), dividing
+ * by the cosine at the sampled point; for a ref on the sphere, that cosine is about dist / 2r,
+ * and ref's own rounding (|p_error|) moves it by |p_error| / dist, so it is noise within
+ * sqrt(2 r |p_error|) of ref: a two-sided lamp of radius 1 at x = 1e5, seen from inside, gave
+ * pixels of 1e3 in an image of 2. */
 static bool sphere_sample_inside(const struct sphere *s, const struct surface *ref, vec3 n_cos,
                                  vec2 u, struct shape_sample *ss)
 {
