@@ -51,11 +51,11 @@ struct light_sample {
 /* Samples light light_idx from the surface point ref with uniforms u: triangles and quads
  * uniformly by area, spheres seen from outside uniformly in their cone of directions and from
  * inside cosine-weighted about n_sky (shape.h), point lights by their one direction, the sky
- * cosine-weighted about n_sky (the shading normal turned to the side being lit).  False when the sample carries no
- * light (back of a one-sided emitter, degenerate geometry); *ls is then unspecified.  n_sky and
- * u come by pointer: by value, gcc assembled them in memory a float at a time and read them back
- * 8 bytes at once, which the CPU cannot forward from the narrower stores (docs/performance.md,
- * "Store forwarding"). */
+ * cosine-weighted about n_sky (the shading normal turned to the side being lit).  False when
+ * the sample carries no light (back of a one-sided emitter, degenerate geometry); *ls is then
+ * unspecified.  n_sky and u come by pointer: by value, gcc assembled them in memory a float at
+ * a time and read them back 8 bytes at once, which the CPU cannot forward from the narrower
+ * stores (docs/performance.md, "Store forwarding"). */
 bool light_sample(const struct light_table *lt, uint32_t light_idx, const struct surface *ref,
                   const vec3 *n_sky, const vec2 *u, struct light_sample *ls);
 /* The solid-angle density with which light_sample picks the unit direction wi from ref, given
