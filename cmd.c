@@ -571,8 +571,7 @@ static int run_convert(int argc, char **argv)
     bool ok = image_find_rgb(&img, rgb_idx, &prefix_len);
     if (!ok)
         mcpt_error_set(&err, in, 0, 0,
-                       "expected channels R, G and B, or one layer's (LAYER.R, LAYER.G, "
-                       "LAYER.B; of several, the one named Combined), got an image without them");
+                       "expected " IMAGE_RGB_EXPECTED ", got an image without them");
     else if (!(rgb = malloc(sizeof(float) * 3 * n_pixels))) {
         mcpt_error_runtime(&err, in, "out of memory");
         ok = false;

@@ -395,6 +395,21 @@ bool image_find_rgb(const struct image *img, int idx[3], size_t *prefix_len)
     return find_rgb(img->names, n, idx, prefix_len);
 }
 
+/* image_find_beside over the names of n channels. */
+static int find_beside(const channel_name *names, int n, int r, size_t prefix_len,
+                       const char *suffix)
+{
+    channel_name want;
+    int len = snprintf(want, sizeof want, "%.*s%s", (int)prefix_len, names[r], suffix);
+    return len < (int)sizeof want ? find_name(names, n, want) : -1;
+}
+
+int image_find_beside(const struct image *img, int r, size_t prefix_len, const char *suffix)
+{
+    int n = img->n_channels < IMAGE_MAX_CHANNELS ? img->n_channels : IMAGE_MAX_CHANNELS;
+    return find_beside(img->names, n, r, prefix_len, suffix);
+}
+
 /* ---- EXR reading ----------------------------------------------------------------------------- */
 
 /* Decodes one chunk (a band of scanlines or a tile) whose top-left pixel is (x0, y0) relative to
@@ -522,18 +537,14 @@ static bool select_channels(const char *path, const exr_attr_chlist_t *chlist,
         for (int c = 0; c < 3; c++)
             keep[(*n_keep)++] = rgb[c];
         for (int k = 0; k < 4; k++) {
-            channel_name want;
-            int len = snprintf(want, sizeof want, "%.*s%s", (int)prefix_len, names[rgb[0]],
-                               beside[k]);
-            int c = len < (int)sizeof want ? find_name(read_only, n, want) : -1;
+            int c = find_beside(read_only, n, rgb[0], prefix_len, beside[k]);
             if (c >= 0)
                 keep[(*n_keep)++] = c;
         }
     } else {
         mcpt_error_set(err, path, 0, 0,
-                       "expected at most %d channels, or R, G and B among more (or one layer's: "
-                       "LAYER.R, LAYER.G, LAYER.B; of several, the one named Combined), got %d "
-                       "channels without them",
+                       "expected at most %d channels, or among more: " IMAGE_RGB_EXPECTED
+                       ", got %d channels without them",
                        IMAGE_MAX_CHANNELS, n);
     }
     free(names);

@@ -70,6 +70,13 @@ int image_find_channel(const struct image *img, const char *name);
  * beauty pass).  Fills idx with the three indices and *prefix_len with the length of
  * "LAYER." (0 for R, G, B); false when there is no such set or no way to choose one. */
 bool image_find_rgb(const struct image *img, int idx[3], size_t *prefix_len);
+/* What image_find_rgb looks for, as error messages say it. */
+#define IMAGE_RGB_EXPECTED                                                                         \
+    "channels R, G and B, or one layer's (LAYER.R, LAYER.G, LAYER.B; of several, the one named "   \
+    "Combined)"
+/* The channel named suffix ("variance.R", "samples") in the layer of the colour image_find_rgb
+ * found, whose R is channel r and whose "LAYER." is prefix_len bytes; -1 when there is none. */
+int image_find_beside(const struct image *img, int r, size_t prefix_len, const char *suffix);
 
 /* Finds a string attribute by name; returns its value (owned by img) or NULL. */
 const char *image_find_attr(const struct image *img, const char *name);

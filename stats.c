@@ -54,21 +54,16 @@ bool stats_image_from_exr(const struct image *img, const char *path, struct stat
         for (int k = 0; k < img->n_channels && len + 40 < sizeof got; k++)
             len += (size_t)snprintf(got + len, sizeof got - len, "%s%s", k ? ", " : "",
                                     img->names[k]);
-        mcpt_error_set(err, path, 0, 0,
-                       "expected channels R, G and B, or one layer's (LAYER.R, LAYER.G, LAYER.B; "
-                       "of several, the one named Combined), got %s",
+        mcpt_error_set(err, path, 0, 0, "expected " IMAGE_RGB_EXPECTED ", got %s",
                        img->n_channels ? got : "none");
         return false;
     }
-    /* the variances and counts mcpt writes beside them: variance.R .. B, samples, with the
-     * same layer prefix */
-    char name[64];
+    /* the variances and counts mcpt writes beside them, in the same layer */
+    static const char *var_names[3] = {"variance.R", "variance.G", "variance.B"};
     int n_var = 0;
     for (int c = 0; c < 3; c++) {
         out->rgb[c] = img->data[rgb[c]];
-        snprintf(name, sizeof name, "%.*svariance.%c", (int)prefix_len, img->names[rgb[0]],
-                 "RGB"[c]);
-        int idx = image_find_channel(img, name);
+        int idx = image_find_beside(img, rgb[0], prefix_len, var_names[c]);
         if (idx >= 0) {
             out->var[c] = img->data[idx];
             n_var++;
@@ -76,8 +71,7 @@ bool stats_image_from_exr(const struct image *img, const char *path, struct stat
     }
     if (n_var < 3)
         out->var[0] = out->var[1] = out->var[2] = NULL;
-    snprintf(name, sizeof name, "%.*ssamples", (int)prefix_len, img->names[rgb[0]]);
-    int idx = image_find_channel(img, name);
+    int idx = image_find_beside(img, rgb[0], prefix_len, "samples");
     out->count = idx >= 0 ? img->data[idx] : NULL;
     /* an image without one pixel the metrics can use would give NaN for every one of them */
     size_t n_pixels = (size_t)img->width * (size_t)img->height;

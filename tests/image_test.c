@@ -903,8 +903,8 @@ Test(image, exr_reads_the_colour_of_a_file_with_many_channels)
     cr_assert_not(image_read_exr(renamed, &layers, &err));
     cr_assert_str_eq(err.file, renamed);
     cr_assert_str_eq(err.msg,
-                     "expected at most 32 channels, or R, G and B among more (or one layer's: "
-                     "LAYER.R, LAYER.G, LAYER.B; of several, the one named Combined), got 96 "
-                     "channels without them");
+                     "expected at most 32 channels, or among more: channels R, G and B, or one "
+                     "layer's (LAYER.R, LAYER.G, LAYER.B; of several, the one named Combined), "
+                     "got 96 channels without them");
     cr_assert_eq(layers.n_channels, 0);
 }
