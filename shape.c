@@ -226,9 +226,9 @@ static bool sample_by_area(vec3 p, vec3 p_error, vec3 n, struct dvec3 x, double 
 }
 
 /* The solid-angle density of the direction wi for a shape in the plane through p0 with normal
- * c (in double, any length) sampled with pdf_area: the ray from o along wi meets the plane at
- * distance dist, seen at |cos theta_light| = |c . wi| / (|c| |wi|). */
-static float pdf_by_area(double pdf_area, struct dvec3 p0, struct dvec3 c,
+ * c (in double, any length, c_len = |c|: the callers' area) sampled with pdf_area: the ray from o
+ * along wi meets the plane at distance dist, seen at |cos theta_light| = |c . wi| / (|c| |wi|). */
+static float pdf_by_area(double pdf_area, struct dvec3 p0, struct dvec3 c, double c_len,
                          const struct surface *ref, vec3 wi)
 {
     vec3 o = offset_ray_origin(ref->p, ref->p_error, ref->ng, wi);
@@ -236,7 +236,7 @@ static float pdf_by_area(double pdf_area, struct dvec3 p0, struct dvec3 c,
     double den = d3_dot(c, w);
     double t = d3_dot(c, d3_sub(p0, d3(o))) / den;
     double w_len = d3_length(w);
-    double cos_light = fabs(den) / (d3_length(c) * w_len);
+    double cos_light = fabs(den) / (c_len * w_len);
     if (!(t > 0.0) || !(cos_light > 0.0))
         return 0.0f;
     double dist = t * w_len;
@@ -798,7 +798,8 @@ float shape_quad_pdf(const struct quad *q, const struct surface *ref, const stru
 {
     (void)on; /* the plane's own point along wi (pdf_by_area) */
     struct dvec3 c = d3_cross(q->e1, q->e2);
-    return pdf_by_area(1.0 / d3_length(c), q->corner, c, ref, wi);
+    double c_len = d3_length(c);
+    return pdf_by_area(1.0 / c_len, q->corner, c, c_len, ref, wi);
 }
 
 /* Whether the quad q is sampled by solid angle from ref: a rectangle whose solid angle is at
@@ -1112,7 +1113,7 @@ float shape_triangle_plane_pdf(const struct triangle_plane *tp, const struct sur
 {
     (void)on; /* the plane's own point along wi (pdf_by_area) */
     double area = 0.5 * tp->area2;
-    return area > 0.0 ? pdf_by_area(1.0 / area, d3(tp->p0), tp->c, ref, wi) : 0.0f;
+    return area > 0.0 ? pdf_by_area(1.0 / area, d3(tp->p0), tp->c, tp->area2, ref, wi) : 0.0f;
 }
 
 bool shape_triangle_sample(const vec3 p[3], const struct surface *ref, vec2 u,
