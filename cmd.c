@@ -501,9 +501,11 @@ static int run_merge(int argc, char **argv)
 
 static const char CONVERT_USAGE[] =
     "usage: mcpt convert IN.exr OUT.png [--exposure E] [--tonemap T] [--quiet]\n"
-    "Writes the R, G, B channels of IN.exr (linear Rec. 709, as mcpt writes them) to OUT.png,\n"
-    "8-bit sRGB: times 2^E, then the tone curve T, then the sRGB encoding.  Changes the look\n"
-    "of a render without rendering it again (pbrt-v4: imgtool convert).\n"
+    "Writes the R, G, B channels of IN.exr (linear Rec. 709, as mcpt writes them; or one\n"
+    "layer's, LAYER.R/G/B, as Blender's multilayer EXRs name them: the one named Combined\n"
+    "among several) to OUT.png, 8-bit sRGB: times 2^E, then the tone curve T, then the sRGB\n"
+    "encoding.  Changes the look of a render without rendering it again (pbrt-v4: imgtool\n"
+    "convert).\n"
     "      --exposure E   exposure in stops (default 0)\n"
     "      --tonemap T    clamp (default: values above 1 clip), reinhard (Reinhard et al.\n"
     "                     2002, eq. 3, on luminance) or aces (Narkowicz 2016's ACES fit)\n"
