@@ -789,7 +789,8 @@ bool shape_quad_sample(const struct quad *q, const struct surface *ref, vec2 u,
     /* uniform by area: p = corner + u0 e1 + u1 e2, pdf_area = 1 / |e1 x e2| */
     vec3 n, p_error;
     vec3 p = quad_point(q, u.x, u.y, &n, &p_error);
-    struct dvec3 x = d3_add(q->corner, d3_add(d3_scale(q->e1, u.x), d3_scale(q->e2, u.y)));
+    struct dvec3 x_err; /* the point as quad_point forms it, before its margins */
+    struct dvec3 x = plane_point_d(q->corner, q->e1, q->e2, u.x, u.y, &x_err);
     return sample_by_area(p, p_error, n, x, 1.0 / d3_length(d3_cross(q->e1, q->e2)), ref, ss);
 }
 
@@ -1104,7 +1105,8 @@ bool shape_triangle_plane_sample(const struct triangle_plane *tp, const struct s
     double b1 = b.y, b2 = 1.0 - (double)b.x - (double)b.y;
     vec3 p_error;
     vec3 pt = triangle_point(tp, b1, b2, &p_error);
-    struct dvec3 x = d3_add(d3(tp->p0), d3_add(d3_scale(tp->e1, b1), d3_scale(tp->e2, b2)));
+    struct dvec3 x_err; /* the point as triangle_point forms it, before its margins */
+    struct dvec3 x = plane_point_d(d3(tp->p0), tp->e1, tp->e2, b1, b2, &x_err);
     return sample_by_area(pt, p_error, tp->ng, x, 1.0 / area, ref, ss);
 }
 
@@ -1185,7 +1187,8 @@ bool shape_triangle_sample_solid_angle(const vec3 p[3], const struct surface *re
     triangle_plane(p, &tp);
     ss->p = triangle_point(&tp, b1, b2, &ss->p_error);
     ss->n = tp.ng;
-    struct dvec3 x = d3_add(d3(tp.p0), d3_add(d3_scale(tp.e1, b1), d3_scale(tp.e2, b2)));
+    struct dvec3 x_err;
+    struct dvec3 x = plane_point_d(d3(tp.p0), tp.e1, tp.e2, b1, b2, &x_err);
     if (!direction_to(ss, d3_to_float(x), ss->n, apex, pdf_u * pdf_spherical_triangle(&st)))
         return false;
     ss->wi = wi; /* the sampled direction, whose density this is */
