@@ -193,23 +193,25 @@ static bool t_to_float(double t, const struct ray *ray, float *t_hit)
 /* ---- from area to solid angle ---- */
 
 /* Sampling by area, and the density of a direction found otherwise, are both measured from the
- * vertex the path leaves, o: ref's spawned origin on the side of the direction
- * (offset_ray_origin), where the shadow ray and a BSDF ray along the same direction start, and to
- * the exact point on the shape's plane (in double), not to its rounded copy.  Then the two
- * strategies that MIS combines price every point alike, far from the origin too: there a
- * rounded point, and ref's own, can be a few percent of the distance off (a closed emitting
- * cube 32 float steps across lost 0.15% of its direct light with MIS, and light sampling alone
- * gained 4%, docs/theory.md, "Self-intersection").  pdf_sa = pdf_area dist^2 / |cos theta_light|
- * (PBRT 4e, ch. 4, "Radiometric Integrals": dw = |cos theta| dA / r^2); in double, since dist^2
- * and pdf_area scale as the square and inverse square of the scene's unit. */
+ * vertex's point ref->p, as PBRT 4e measures them (ch. 6, "Shape Interface": the sample
+ * context's p(), not its spawned origin), to the exact point on the shape's plane (in double):
+ * the sampled point before rounding, or where the line from ref->p along wi meets the plane.
+ * Then the two strategies that MIS combines price every point alike, far from the origin too,
+ * where a rounded point can be a few percent of the distance off (a closed emitting cube 32
+ * float steps across lost 0.15% of its direct light with MIS, docs/theory.md,
+ * "Self-intersection").  Not from the spawned origin (offset_ray_origin), where the shadow ray
+ * and BSDF rays start: it lies a float step or two off the surface, and an estimate measured
+ * from it is the light of a point moved into the room (the Cornell box 10^5 from the origin
+ * gained 0.9% so, where from ref->p it gains 0.25%).  pdf_sa = pdf_area dist^2 /
+ * |cos theta_light| (PBRT 4e, ch. 4, "Radiometric Integrals": dw = |cos theta| dA / r^2); in
+ * double, since dist^2 and pdf_area scale as the square and inverse square of the scene's unit. */
 
 /* The point x (exact, on the shape; p its rounded copy with error p_error, n the unit normal)
  * sampled with density pdf_area per unit area, as seen from ref: fills *ss with wi and pdf_sa. */
 static bool sample_by_area(vec3 p, vec3 p_error, vec3 n, struct dvec3 x, double pdf_area,
                            const struct surface *ref, struct shape_sample *ss)
 {
-    vec3 o = offset_ray_origin(ref->p, ref->p_error, ref->ng, d3_to_float(d3_sub(x, d3(ref->p))));
-    struct dvec3 d = d3_sub(x, d3(o));
+    struct dvec3 d = d3_sub(x, d3(ref->p));
     double dist = d3_length(d);
     if (!(dist > 0.0))
         return false;
@@ -231,10 +233,9 @@ static bool sample_by_area(vec3 p, vec3 p_error, vec3 n, struct dvec3 x, double 
 static float pdf_by_area(double pdf_area, struct dvec3 p0, struct dvec3 c, double c_len,
                          const struct surface *ref, vec3 wi)
 {
-    vec3 o = offset_ray_origin(ref->p, ref->p_error, ref->ng, wi);
     struct dvec3 w = d3(wi);
     double den = d3_dot(c, w);
-    double t = d3_dot(c, d3_sub(p0, d3(o))) / den;
+    double t = d3_dot(c, d3_sub(p0, d3(ref->p))) / den;
     double w_len = d3_length(w);
     double cos_light = fabs(den) / (c_len * w_len);
     if (!(t > 0.0) || !(cos_light > 0.0))
@@ -273,14 +274,9 @@ static float warp_by_cosine(vec2 *u, const float w[4])
     return pdf_bilinear(*u, w);
 }
 
-/* The apex of a shape's spherical projection (sampling by solid angle): ref's spawned origin on
- * the side of the point `toward` (the shape's centre), where a BSDF ray towards the shape
- * starts, so that the directions the sampler covers are those such a ray finds the shape along
- * (the projection from ref->p itself differs by |p_error| / dist at the silhouette). */
-static vec3 solid_angle_apex(const struct surface *ref, vec3 toward)
-{
-    return offset_ray_origin(ref->p, ref->p_error, ref->ng, v3_sub(toward, ref->p));
-}
+/* The apex of a shape's spherical projection (sampling by solid angle): the vertex's point
+ * ref->p, from which sample_by_area measures too. */
+static vec3 solid_angle_apex(const struct surface *ref) { return ref->p; }
 
 /* Completes *ss, whose point p is set, with the unit direction wi from apex (solid_angle_apex)
  * to x, the point sampled before rounding (far from the origin the rounded p can be a few
@@ -811,7 +807,7 @@ static bool quad_by_solid_angle(const struct quad *q, const struct surface *ref,
                                 struct sample_sph_rect *sr, float w[4], vec3 *apex)
 {
     vec3 corner = d3_to_float(q->corner), e1 = d3_to_float(q->e1), e2 = d3_to_float(q->e2);
-    *apex = solid_angle_apex(ref, v3_add(corner, v3_scale(v3_add(e1, e2), 0.5f)));
+    *apex = solid_angle_apex(ref);
     if (!sample_sph_rect_init(*apex, corner, e1, e2, sr) || !(sr->area >= SPHERICAL_MIN_SR))
         return false;
     vec3 c[4] = {corner, v3_add(corner, e1), v3_add(corner, e2), v3_add(v3_add(corner, e1), e2)};
@@ -1141,8 +1137,7 @@ float shape_triangle_pdf(const vec3 p[3], const struct surface *ref, const struc
 static bool triangle_by_solid_angle(const vec3 p[3], const struct surface *ref,
                                     struct sample_sph_triangle *st, float w[4], vec3 *apex)
 {
-    vec3 centroid = v3_scale(v3_add(v3_add(p[0], p[1]), p[2]), 1.0f / 3.0f);
-    *apex = solid_angle_apex(ref, centroid);
+    *apex = solid_angle_apex(ref);
     vec3 d[3];
     for (int k = 0; k < 3; k++) {
         d[k] = v3_sub(p[k], *apex);

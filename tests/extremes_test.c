@@ -219,11 +219,11 @@ Test(extremes, analytic_scene_scale_1e_minus_15_to_1e15, .timeout = TEST_TIMEOUT
  * box (2 units) to 256 steps and its lamp (0.47 units) to 60.  The points' margins from their
  * edges project the error on the edge's normal in the plane (shape.c, EDGE_MARGIN_E); summed over
  * the components, as before, they pulled every point of a wall near an edge towards its
- * triangle's centre and the image gained 6% at 1e5 (10% at 1e6).  What is left at 1e5 is a
- * gain of 1.2% (path tracing without light sampling agrees: +1.3%, 7.7 SE at 32768 spp), which
- * this test's 2048 spp puts at 2.6 SE (docs/scene-format.md, "Far from the origin").  Half of
- * it is the lamp, which hangs 1/64 below the ceiling, 2 float steps at 1e5: lowered to y = 1.5
- * the gain is 0.57% (2.3 SE at 8192 spp). */
+ * triangle's centre and the image gained 6% at 1e5 (10% at 1e6).  With light samples measured
+ * from the spawned origin, a float step or two off the surface, it gained 1.3% (2.6 SE here);
+ * measured from the vertex's point, as now, 0.7% (1.4 SE), the rest being the pull of points
+ * near edges (docs/theory.md, "Self-intersection"; docs/scene-format.md, "Far from the
+ * origin"). */
 Test(extremes, cornell_moved_far_from_the_origin, .timeout = TEST_TIMEOUT_S(120))
 {
     static const char *const offsets[] = {"1e3", "1e5"};
@@ -803,7 +803,9 @@ Test(extremes, two_sided_lamp_sphere_is_even_inside, .timeout = TEST_TIMEOUT_S(6
  * the sampled point's rounded copy, and BSDF hits from the vertex to the rounded hit point; a
  * few percent of the distance off at 1e6, the two strategies priced the same points
  * differently, and MIS lost or gained energy (at x = 1e6, 1024 spp: 1.50296 +- 0.00016 by area;
- * by solid angle, with the directions measured from ref->p, 1.49849 +- 0.00014). */
+ * by solid angle, its sample's wi pointing at the rounded point, 1.49849 +- 0.00014).  Both
+ * measure from ref->p, the spawned origin a float step or two away, so they still differ at
+ * the silhouettes of the faces: 1.50031 +- 0.00015 by area at 1e6 (docs/theory.md). */
 Test(extremes, emitting_cube_far_from_the_origin_keeps_its_energy, .timeout = TEST_TIMEOUT_S(120))
 {
     const double moves[] = {0.0, 3e5, 1e6};
