@@ -228,8 +228,9 @@ static bool sample_by_area(vec3 p, vec3 p_error, vec3 n, struct dvec3 x, double 
 }
 
 /* The solid-angle density of the direction wi for a shape in the plane through p0 with normal
- * c (in double, any length, c_len = |c|: the callers' area) sampled with pdf_area: the ray from o
- * along wi meets the plane at distance dist, seen at |cos theta_light| = |c . wi| / (|c| |wi|). */
+ * c (in double, any length, c_len = |c|: the callers' area) sampled with pdf_area: the line from
+ * ref->p along wi meets the plane at distance dist, seen at |cos theta_light| =
+ * |c . wi| / (|c| |wi|). */
 static float pdf_by_area(double pdf_area, struct dvec3 p0, struct dvec3 c, double c_len,
                          const struct surface *ref, vec3 wi)
 {

@@ -818,8 +818,9 @@ Test(extremes, two_sided_lamp_sphere_is_even_inside, .timeout = TEST_TIMEOUT_S(6
  * few percent of the distance off at 1e6, the two strategies priced the same points
  * differently, and MIS lost or gained energy (at x = 1e6, 1024 spp: 1.50296 +- 0.00016 by area;
  * by solid angle, its sample's wi pointing at the rounded point, 1.49849 +- 0.00014).  Both
- * measure from ref->p, the spawned origin a float step or two away, so they still differ at
- * the silhouettes of the faces: 1.50031 +- 0.00015 by area at 1e6 (docs/theory.md). */
+ * now measure from ref->p, while BSDF rays start from the spawned origin a float step or two
+ * away, so they still differ at the silhouettes of the faces: 1.50031 +- 0.00015 by area at
+ * 1e6 (32 x 32, 1024 spp, seed 7; docs/theory.md, "Self-intersection"). */
 Test(extremes, emitting_cube_far_from_the_origin_keeps_its_energy, .timeout = TEST_TIMEOUT_S(120))
 {
     const double moves[] = {0.0, 3e5, 1e6};
