@@ -1707,6 +1707,17 @@ bool bvh_occluded_from(const struct bvh *bvh, const struct ray *ray, uint32_t fr
     return binary_occluded(bvh, ray, from);
 }
 
+void bvh_occluded_stream(const struct bvh *bvh, const struct ray *rays, const uint32_t *from,
+                         size_t n, bool *occluded)
+{
+    if (bvh->layouts & BVH_LAYOUT_WIDE) {
+        bvh_wide_occluded_stream(bvh, rays, from, n, occluded);
+        return;
+    }
+    for (size_t i = 0; i < n; i++)
+        occluded[i] = binary_occluded(bvh, &rays[i], from ? from[i] : BVH_NO_PRIM);
+}
+
 bool bvh_intersect(const struct bvh *bvh, const struct ray *ray, struct bvh_hit *hit)
 {
     return bvh_intersect_from(bvh, ray, BVH_NO_PRIM, hit);

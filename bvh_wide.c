@@ -2318,6 +2318,188 @@ void bvh_packet_set(struct bvh_packet *packet, int lane, const struct ray *ray)
     packet->t_max[lane] = ray->t_max;
 }
 
+/* ---- Streams: many rays, one traversal ----------------------------------------------------------
+ * Any hit for a batch of rays, BVH_STREAM_RAYS at a time (ray stream tracing: Tsakok 2009,
+ * "Faster Incoherent Rays: Multi-BVH Ray Stream Tracing"; Embree's rtcOccluded1M).  The stream
+ * visits a node once for all of its rays that entered it; there each ray runs the single ray's
+ * own slab test on the eight children (wide_box_hit's fused form, its constants broadcast from
+ * memory) and adds its bit to the ray mask of every child it hits; a child some ray hit is
+ * pushed with that mask.  A leaf is tested by each ray of its mask in turn (wide_leaf_hit, the
+ * single ray's test).  What the rays share is the node's loads, the stack and the branches of
+ * the traversal, which neighbouring shadow rays toward one light share.  Every ray gets what
+ * bvh_occluded_from gives it: the same box tests and leaf tests decide, and an any-hit search
+ * reports a hit iff some leaf its box tests reach holds one.  Rays without the fused constants
+ * (a direction parallel to an axis plane) take bvh_wide_occluded. */
+#if BVH_FUSED_SLABS
+/* One ray's fused slab constants (wide_ray8_fast's lane 0), scalars broadcast at each test. */
+struct stream_ray {
+    float inv_d_far[3];
+    float inv_d[3];
+    float c_near[3];
+    float c_far[3];
+    float t_min;
+    float t_max;
+    uint32_t near_off[3]; /* byte offsets of the near and far bounds rows */
+    uint32_t far_off[3];
+}; /* 80 bytes */
+
+/* (BVH_FUSED_SLABS implies AVX2: the helpers below have no scalar form) */
+static inline float f8_lane0(struct f8 a) { return _mm256_cvtss_f32(a.v); }
+
+/* wide_box_hit's fused form for ray *r: bit c set when child c is hit in [t_min, t_max]. */
+static ALWAYS_INLINE struct m8 stream_box_hit(const struct wide_node *node,
+                                              const struct stream_ray *r)
+{
+    struct f8 t_near[3];
+    struct f8 t_far[3];
+    const char *base = (const char *)node->bounds;
+    for (int j = 0; j < 3; j++) {
+        struct f8 near = f8_load((const float *)(base + r->near_off[j]));
+        struct f8 far = f8_load((const float *)(base + r->far_off[j]));
+        t_near[j] = f8_fmsub(near, f8_set1(r->inv_d[j]), f8_set1(r->c_near[j]));
+        t_far[j] = f8_fmsub(far, f8_set1(r->inv_d_far[j]), f8_set1(r->c_far[j]));
+    }
+    struct f8 t0 = f8_max_num(f8_max_num(f8_set1(r->t_min), t_near[2]),
+                              f8_max_num(t_near[1], t_near[0]));
+    struct f8 t1 = f8_min_num(f8_min_num(f8_set1(r->t_max), t_far[2]),
+                              f8_min_num(t_far[1], t_far[0]));
+    return f8_le(t0, t1);
+}
+
+/* rays |= (hit lanes of m) & bit, lane by lane */
+static inline struct i8 i8_or_bit(struct i8 rays, struct m8 m, uint32_t bit)
+{
+    return (struct i8){_mm256_or_si256(rays.v, _mm256_and_si256(_mm256_castps_si256(m.v),
+                                                                _mm256_set1_epi32((int)bit)))};
+}
+
+/* bit i set where lane i is not 0 */
+static inline uint32_t i8_nonzero(struct i8 a)
+{
+    __m256i zero = _mm256_cmpeq_epi32(a.v, _mm256_setzero_si256());
+    return ~(uint32_t)_mm256_movemask_ps(_mm256_castsi256_ps(zero)) & 0xffu;
+}
+
+struct stream_entry {
+    uint32_t ref;  /* wide reference */
+    uint32_t rays; /* the stream's rays that hit its box */
+};
+
+/* rays[0 .. n) (n <= BVH_STREAM_RAYS), from[i] or BVH_NO_PRIM: occluded[i]. */
+static void stream_any(const struct bvh *bvh, const struct ray *rays, const uint32_t *from,
+                       uint32_t n, bool *occluded)
+{
+    struct stream_ray sr[BVH_STREAM_RAYS];
+    struct ray_pre rp[BVH_STREAM_RAYS];
+    uint32_t active = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        struct wide_ray8 v;
+        bool is_miss;
+        occluded[i] = false;
+        if (!wide_ray8_fast(bvh, &rays[i], &rp[i], &v, &is_miss)) {
+            occluded[i] = bvh_wide_occluded(bvh, &rays[i], from ? from[i] : BVH_NO_PRIM);
+            continue;
+        }
+        if (is_miss)
+            continue;
+        struct stream_ray *r = &sr[i];
+        for (int j = 0; j < 3; j++) {
+            r->inv_d[j] = f8_lane0(v.inv_d[j]);
+            r->inv_d_far[j] = f8_lane0(v.inv_d_far[j]);
+            r->c_near[j] = f8_lane0(v.c_near[j]);
+            r->c_far[j] = f8_lane0(v.c_far[j]);
+            r->near_off[j] = (uint32_t)v.near_off[j];
+            r->far_off[j] = (uint32_t)v.far_off[j];
+        }
+        r->t_min = rays[i].t_min;
+        r->t_max = rays[i].t_max;
+        active |= 1u << i;
+    }
+    uint32_t done = 0;       /* rays found occluded */
+    uint32_t woop_ready = 0; /* rays whose Woop constants are in rp */
+    struct stream_entry stack[WIDE_STACK_SIZE];
+    uint32_t n_stack = 0;
+    struct stream_entry cur = {0, active};
+    for (;;) {
+        cur.rays &= ~done;
+        if (cur.rays && !(cur.ref & WIDE_LEAF)) {
+            const struct wide_node *node = &bvh->wide[cur.ref];
+            struct i8 child_rays = {_mm256_setzero_si256()};
+            for (uint32_t bits = cur.rays; bits; bits &= bits - 1) {
+                int i = lowest_bit(bits);
+                child_rays = i8_or_bit(child_rays, stream_box_hit(node, &sr[i]), 1u << i);
+            }
+            uint32_t hit = i8_nonzero(child_rays);
+            prefetch_hit_nodes(bvh->wide, node, hit);
+            if (hit) {
+                uint32_t child_mask[8];
+                i8_store(child_mask, child_rays);
+                int c0 = lowest_bit(hit);
+                assert(n_stack + 8 <= WIDE_STACK_SIZE);
+                for (hit &= hit - 1; hit; hit &= hit - 1) {
+                    int c = lowest_bit(hit);
+                    stack[n_stack++] = (struct stream_entry){node->child[c], child_mask[c]};
+                }
+                cur = (struct stream_entry){node->child[c0], child_mask[c0]};
+                continue;
+            }
+        } else if (cur.rays) {
+            uint32_t first = (cur.ref & ~WIDE_LEAF) >> 3;
+            uint32_t n_tris = (cur.ref & 7u) + 1;
+            for (uint32_t bits = cur.rays; bits; bits &= bits - 1) {
+                int i = lowest_bit(bits);
+                if (!(woop_ready >> i & 1u)) {
+                    ray_setup_woop(&rp[i]);
+                    woop_ready |= 1u << i;
+                }
+                /* what wide_leaf_hit reads of a single ray's struct wide_ray8 (wide_ray8_woop) */
+                struct wide_ray8 v;
+                v.k[0] = rp[i].kx;
+                v.k[1] = rp[i].ky;
+                v.k[2] = rp[i].kz;
+                for (int j = 0; j < 3; j++)
+                    v.o_k[j] = f8_set1(rp[i].o[v.k[j]]);
+                v.sx = f8_set1(rp[i].sx);
+                v.sy = f8_set1(rp[i].sy);
+                v.sz = f8_set1(rp[i].sz);
+                v.o_scale = f8_set1(rp[i].o_scale);
+                v.t_min = f8_set1(sr[i].t_min);
+                v.rp_t_min = sr[i].t_min;
+                v.rp = &rp[i];
+                v.from = from ? from[i] : BVH_NO_PRIM;
+                struct woop8_out out;
+                if (wide_leaf_hit(bvh, first, n_tris, &v, sr[i].t_max, &out)) {
+                    done |= 1u << i;
+                    occluded[i] = true;
+                }
+            }
+            if (done == active)
+                return;
+        }
+        if (n_stack == 0)
+            return;
+        cur = stack[--n_stack];
+    }
+}
+#endif
+
+void bvh_wide_occluded_stream(const struct bvh *bvh, const struct ray *rays, const uint32_t *from,
+                              size_t n, bool *occluded)
+{
+    for (size_t i = 0; i < n; i += BVH_STREAM_RAYS) {
+        uint32_t k = n - i < BVH_STREAM_RAYS ? (uint32_t)(n - i) : BVH_STREAM_RAYS;
+#if BVH_FUSED_SLABS
+        if (bvh->n_wide > 0) {
+            stream_any(bvh, rays + i, from ? from + i : NULL, k, occluded + i);
+            continue;
+        }
+#endif
+        for (uint32_t j = 0; j < k; j++)
+            occluded[i + j] = bvh_wide_occluded(bvh, &rays[i + j],
+                                                from ? from[i + j] : BVH_NO_PRIM);
+    }
+}
+
 /* ---- Brute force over the wide leaves ---------------------------------------------------------
  * bvh_intersect_brute (bvh.c) for a BVH without the binary layout: every leaf, depth first in
  * stored order (the order of the wide triangles, which is the binary order without the

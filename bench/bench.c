@@ -4,6 +4,7 @@
  * Orthonormal Basis, Revisited"; Fisher-Yates shuffle), checksums, timing and a thread pool. */
 #include "bench.h"
 
+#include <assert.h>
 #include <errno.h>
 #include <pthread.h>
 #include <stdatomic.h>
@@ -373,6 +374,17 @@ void bench_trace_range(void *trace, uint64_t begin, uint64_t end)
     const struct bench_trace *tr = trace;
     const struct ray *rays = tr->rays->rays;
     bool occlusion = tr->rays->kind == BENCH_KIND_OCCLUSION;
+    if (tr->method == BENCH_STREAM) {
+        assert(occlusion);
+        bool occluded[256];
+        for (uint64_t i = begin; i < end; i += 256) {
+            size_t n = end - i < 256 ? (size_t)(end - i) : 256;
+            bvh_occluded_stream(tr->bvh, rays + i, NULL, n, occluded);
+            for (size_t k = 0; k < n; k++)
+                tr->prim[i + k] = occluded[k] ? 0 : UINT32_MAX;
+        }
+        return;
+    }
     if (tr->method == BENCH_PACKET) {
         for (uint64_t i = begin; i < end; i += BVH_PACKET_SIZE) {
             struct bvh_packet p;

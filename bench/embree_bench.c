@@ -1,7 +1,7 @@
 /* embree_bench.c - mcpt's BVH against Embree 3 (Wald et al. 2014, "Embree: A Kernel Framework
  * for Efficient CPU Ray Tracing") on the same mesh and ray files, in one invocation: builds
  * (mcpt against RTC_BUILD_QUALITY_HIGH, on one thread and on all), then per ray file every
- * entry point of both: mcpt's single rays and 8-ray packets; Embree's rtcIntersect1 / 8 / 16
+ * entry point of both: mcpt's single rays, 8-ray packets and (occlusion files) streams; Embree's rtcIntersect1 / 8 / 16
  * and the stream rtcIntersect1M with the coherent and with the incoherent context flag (the
  * rtcOccluded* twins for occlusion files), runs interleaved so that all see the same load.
  * The headline is the best mcpt kernel against the best Embree entry point for that ray file,
@@ -466,7 +466,12 @@ int main(int argc, char **argv)
             status = 2;
             continue;
         }
-        enum { N_TRACERS = 2 + EMBREE_N_METHODS + 1 };
+        /* mcpt single and packets, Embree's entry points (the stream twice), mcpt streams */
+        enum {
+            N_EMBREE = EMBREE_N_METHODS + 1,
+            N_TRACERS = 2 + N_EMBREE + 1,
+            STREAM = N_TRACERS - 1
+        };
         uint32_t *prim[N_TRACERS];
         float *t[N_TRACERS];
         for (int k = 0; k < N_TRACERS; k++) {
@@ -476,15 +481,19 @@ int main(int argc, char **argv)
                 return 1;
         }
         bool occlusion = rays.kind == BENCH_KIND_OCCLUSION;
-        /* mcpt's two kernels, then every Embree entry point: the best of each side is compared
-         * (the stream twice, with the coherent and the incoherent context flag) */
+        /* mcpt's two kernels, then every Embree entry point, then mcpt's streams (occlusion
+         * files: bvh_occluded_stream has no closest-hit twin): the best of each side is compared
+         * (Embree's stream twice, with the coherent and the incoherent context flag) */
         struct bench_trace m1 = {bvh, &rays, BENCH_SINGLE, prim[0], t[0]};
         struct bench_trace m8 = {bvh, &rays, BENCH_PACKET, prim[1], t[1]};
+        struct bench_trace ms = {bvh, &rays, BENCH_STREAM, prim[STREAM], t[STREAM]};
+        int n_tr = occlusion ? N_TRACERS : N_TRACERS - 1;
         struct embree_trace e[EMBREE_N_METHODS + 1];
         struct tracer tr[N_TRACERS] = {
             {.name = "mcpt single", .fn = bench_trace_range, .ctx = &m1},
             {.name = "mcpt packets", .fn = bench_trace_range, .ctx = &m8},
         };
+        tr[STREAM] = (struct tracer){.name = "mcpt streams", .fn = bench_trace_range, .ctx = &ms};
         for (int k = 0; k <= EMBREE_N_METHODS; k++) {
             enum embree_method m = k < EMBREE_N_METHODS ? (enum embree_method)k : EMBREE_STREAM;
             e[k] = (struct embree_trace){emb.scene,          &rays,       m,
@@ -493,15 +502,15 @@ int main(int argc, char **argv)
                                         .fn = embree_trace_range,
                                         .ctx = &e[k]};
         }
-        measure_interleaved(tr, N_TRACERS, &rays, runs, n_threads, prim, t);
+        measure_interleaved(tr, n_tr, &rays, runs, n_threads, prim, t);
         printf("rays: %s: %llu %s rays; load average %.2f\n", argv[f], (unsigned long long)rays.n,
                occlusion ? "occlusion" : "closest-hit", bench_loadavg());
-        for (int k = 0; k < N_TRACERS; k++) {
+        for (int k = 0; k < n_tr; k++) {
             char name[64];
             snprintf(name, sizeof name, "%s%s", tr[k].name,
-                     k < 2 + EMBREE_STREAM    ? ""
-                     : k == 2 + EMBREE_STREAM ? " coherent"
-                                              : " incoherent");
+                     k < 2 + EMBREE_STREAM || k == STREAM ? ""
+                     : k == 2 + EMBREE_STREAM             ? " coherent"
+                                                          : " incoherent");
             printf("  %-33s %8.3f Mrays/s 1 thread (CPU time; %.3f wall), %8.3f on %d threads; "
                    "hits %llu",
                    name, tr[k].mrays_1t, tr[k].mrays_1t_wall, tr[k].mrays_mt, n_threads,
@@ -520,9 +529,13 @@ int main(int argc, char **argv)
          * point for this ray set, by wall clock and by CPU time (single thread each) */
         int best_m_wall = tr[1].mrays_1t_wall > tr[0].mrays_1t_wall ? 1 : 0;
         int best_m_cpu = tr[1].mrays_1t > tr[0].mrays_1t ? 1 : 0;
+        if (occlusion && tr[STREAM].mrays_1t_wall > tr[best_m_wall].mrays_1t_wall)
+            best_m_wall = STREAM;
+        if (occlusion && tr[STREAM].mrays_1t > tr[best_m_cpu].mrays_1t)
+            best_m_cpu = STREAM;
         int best_e_wall = 2;
         int best_e_cpu = 2;
-        for (int k = 3; k < N_TRACERS; k++) {
+        for (int k = 3; k < 2 + N_EMBREE; k++) {
             best_e_wall = tr[k].mrays_1t_wall > tr[best_e_wall].mrays_1t_wall ? k : best_e_wall;
             best_e_cpu = tr[k].mrays_1t > tr[best_e_cpu].mrays_1t ? k : best_e_cpu;
         }
@@ -558,8 +571,9 @@ int main(int argc, char **argv)
                                                     "embree8",
                                                     "embree16",
                                                     "embree_stream_coherent",
-                                                    "embree_stream_incoherent"};
-        for (int k = 0; k < N_TRACERS; k++)
+                                                    "embree_stream_incoherent",
+                                                    "mcpt_stream"};
+        for (int k = 0; k < n_tr; k++)
             printf("\"mrays_1t_wall_%s\":%.4f,\"mrays_1t_cpu_%s\":%.4f,\"mrays_mt_%s\":%.4f,",
                    keys[k], tr[k].mrays_1t_wall, keys[k], tr[k].mrays_1t, keys[k], tr[k].mrays_mt);
         printf("\"best_mcpt\":\"%s\",\"best_embree\":\"%s\",\"ratio_best\":%.4f,"

@@ -21,7 +21,8 @@ static const char usage[] =
     "  --threads N        threads of the all-threads figure and the build (default: all CPUs)\n"
     "  --runs R           timed runs after one warm-up; the median is reported (default 5)\n"
     "  --build-runs B     timed builds per thread count (default R)\n"
-    "  --packets          also trace in packets of 8 rays (mrays_1t_packet)\n"
+    "  --packets          also trace in packets of 8 rays (mrays_1t_packet), and occlusion files\n"
+    "                     in streams (mrays_1t_stream)\n"
     "  --layout L         wide (default) or binary: the traversal to time\n"
     "  --no-bvh           brute force on a subset of the rays, against the BVH on the same rays\n"
     "  --subset K         rays of the --no-bvh subset, evenly strided (default 1000)\n"
@@ -207,6 +208,10 @@ static bool run_set(const struct options *opt, const struct bench_mesh *mesh, co
         return false;
     if (opt->packets && !measure(bvh, rays, BENCH_PACKET, opt->runs, 0, &packet))
         return false;
+    bool streams = opt->packets && rays->kind == BENCH_KIND_OCCLUSION;
+    struct figures stream = {{0, 0.0, 0}, 0.0, 0.0, 0.0};
+    if (streams && !measure(bvh, rays, BENCH_STREAM, opt->runs, 0, &stream))
+        return false;
     if (rays->kind == BENCH_KIND_CLOSEST)
         printf("checksum: hits %llu t_sum %.6e prim_sum %llu\n",
                (unsigned long long)single.sum.hits, single.sum.t_sum,
@@ -220,6 +225,10 @@ static bool run_set(const struct options *opt, const struct bench_mesh *mesh, co
                packet.mrays_1t, packet.mrays_1t_wall,
                packet.sum.hits == single.sum.hits ? "" : "  CHECKSUM DIFFERS");
     }
+    if (streams)
+        printf("streams of %d: %.3f Mrays/s (CPU time; %.3f by wall clock)%s\n", BVH_STREAM_RAYS,
+               stream.mrays_1t, stream.mrays_1t_wall,
+               stream.sum.hits == single.sum.hits ? "" : "  CHECKSUM DIFFERS");
     printf("all threads (%d): %.3f Mrays/s (wall clock)\n", opt->threads, single.mrays_mt);
     printf("{\"model\":\"%s\",\"rays_file\":\"%s\",\"triangles\":%u,\"build_ms\":%.3f,"
            "\"build_ms_mt\":%.3f,\"bytes_per_tri\":%.2f,\"sah_cost\":%.4f,\"kind\":\"%s\","
@@ -235,6 +244,8 @@ static bool run_set(const struct options *opt, const struct bench_mesh *mesh, co
            single.mrays_1t_wall, single.mrays_mt);
     if (opt->packets)
         printf("\"mrays_1t_packet\":%.4f,", packet.mrays_1t);
+    if (streams)
+        printf("\"mrays_1t_stream\":%.4f,", stream.mrays_1t);
     printf("\"threads\":%d,\"layout\":\"%s\",\"simd\":\"%s\",\"load_avg\":%.2f}\n", opt->threads,
            opt->layout == BVH_LAYOUT_WIDE ? "wide" : "binary", bvh_simd_name(), bench_loadavg());
     fflush(stdout);

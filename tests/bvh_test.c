@@ -869,12 +869,7 @@ Test(bvh, spawned_rays_skip_their_triangle)
     struct rng r = {91};
     int n_rays = 0, n_hits = 0, n_own_first = 0;
     for (uint32_t prim = 0; prim < m.n_tris; prim += 3) {
-        vec3 q[3];
-        for (int k = 0; k < 3; k++)
-            q[k] = m.positions[m.indices[3 * prim + (uint32_t)k]];
-        float b1, b2;
-        rng_bary(&r, &b1, &b2);
-        struct surface sf = shape_triangle_surface(q, NULL, NULL, NULL, 0.0f, b1, b2, 0);
+        struct surface sf = random_surface(&m, prim, &r);
         for (int k = 0; k < 4; k++) {
             vec3 w = rng_dir(&r);
             if ((v3_dot(w, sf.ng) < 0.0f) != (k % 2 == 1))

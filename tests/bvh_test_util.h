@@ -11,6 +11,7 @@
 #include <string.h>
 
 #include "bvh.h"
+#include "shape.h"
 #include "vec.h"
 
 /* splitmix64: a small deterministic stream for test inputs */
@@ -122,6 +123,18 @@ static inline void rng_bary(struct rng *r, float *b1, float *b2)
     }
     *b1 = u;
     *b2 = v;
+}
+
+/* A random point of triangle prim (rng_bary) as the renderer forms it: position, error bound and
+ * normal for offset_ray_origin. */
+static inline struct surface random_surface(const struct mesh *m, uint32_t prim, struct rng *r)
+{
+    vec3 q[3];
+    for (int k = 0; k < 3; k++)
+        q[k] = m->positions[m->indices[3 * prim + (uint32_t)k]];
+    float b1, b2;
+    rng_bary(r, &b1, &b2);
+    return shape_triangle_surface(q, NULL, NULL, NULL, 0.0f, b1, b2, 0);
 }
 
 /* n random triangles in [-1, 1]^3, edge lengths from about 0.01 to 0.6 */

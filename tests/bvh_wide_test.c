@@ -5,7 +5,8 @@
  * 2013's test, which woop8 repeats on eight lanes).  Oversized binary leaves become small wide
  * subtrees; brute force over the wide leaves equals brute force over the binary triangles; tiny
  * triangles far from the origin check the biased constants of the fused slab test.  Every test
- * in tests/bvh_test.c runs the wide layout and packets too (bvh_test_util.h). */
+ * in tests/bvh_test.c runs the wide layout and packets too (bvh_test_util.h).  Ray streams
+ * (bvh_occluded_stream) give each ray what bvh_occluded_from gives it. */
 #include <criterion/criterion.h>
 #include <criterion/logging.h>
 #include <stdlib.h>
@@ -13,6 +14,7 @@
 
 #include "bvh.h"
 #include "bvh_test_util.h"
+#include "shape.h"
 #include "vec.h"
 
 /* ---- brute force over the wide leaves ----------------------------------------------------------- */
@@ -149,6 +151,104 @@ Test(bvh_wide, packets_match_single_rays)
     }
     cr_assert_eq(n_packets, 1500);
     bvh_free(bvh);
+    mesh_free(&m);
+}
+
+/* ---- streams -------------------------------------------------------------------------------------
+ * bvh.h: bvh_occluded_stream gives ray i what bvh_occluded_from(bvh, &rays[i], from[i]) gives. */
+
+/* Shadow rays spawned from the mesh's triangles toward an area light (with the triangle they
+ * leave, in the order of their points, as a renderer makes them), the same rays without it,
+ * rays aimed at the triangle they name (which the name skips),
+ * random rays with finite and infinite t_max, rays whose direction lies in an axis plane (the
+ * single ray's safe path), rays that miss the tree's box, and invalid rays (NaN origin, zero
+ * direction), in streams of 1 to 100 rays, on the wide layout and on the binary one. */
+Test(bvh_wide, streams_match_single_rays)
+{
+    struct mesh m = {0};
+    make_icosphere(&m, 3, v3(0.1f, 0.0f, -0.2f), 1.0f); /* first: it subdivides all of m */
+    make_soup(&m, 2000, 41);
+    struct bvh *wide = build(&m);
+    struct bvh_build_options opt = {1, BVH_LAYOUT_BINARY, BVH_QUALITY_DEFAULT};
+    struct bvh *binary = bvh_build_with(m.positions, m.indices, m.n_tris, &opt);
+    cr_assert(wide && binary);
+    enum { N = 6000 };
+    struct ray *rays = malloc(N * sizeof *rays);
+    uint32_t *from = malloc(N * sizeof *from);
+    bool *occluded = malloc(N * sizeof *occluded);
+    cr_assert(rays && from && occluded);
+    struct rng r = {43};
+    vec3 light = v3(0.0f, 3.0f, 0.0f);
+    for (uint32_t i = 0; i < N; i++) {
+        from[i] = BVH_NO_PRIM;
+        int kind = (int)(i / 500) % 6;
+        if (kind <= 1) { /* spawned shadow rays, triangle by triangle */
+            uint32_t prim = (i * 7u) % m.n_tris;
+            struct surface sf = random_surface(&m, prim, &r);
+            vec3 target = v3_add(light,
+                                 v3(rng_range(&r, -0.5f, 0.5f), 0.0f, rng_range(&r, -0.5f, 0.5f)));
+            vec3 w = v3_normalize(v3_sub(target, sf.p));
+            vec3 o = offset_ray_origin(sf.p, sf.p_error, sf.ng, w);
+            rays[i] = make_ray(o, w, 0.0f, 0.999f * v3_length(v3_sub(target, o)));
+            if (kind == 0)
+                from[i] = prim;
+            if (kind == 1 && i % 2) { /* aimed at its own triangle, which `from` skips */
+                vec3 above = v3_add(sf.p, v3_scale(sf.ng, 0.01f));
+                rays[i] = make_ray(above, v3_sub(sf.p, above), 0.0f, INFINITY);
+                from[i] = prim;
+            }
+        } else if (kind == 2) { /* random, finite and infinite */
+            rays[i] = make_ray(rng_in_box(&r, -2, 2), rng_dir(&r), 0.0f,
+                               i % 3 ? INFINITY : rng_range(&r, 0.2f, 3.0f));
+        } else if (kind == 3) { /* a zero component, both signs: the safe path */
+            vec3 d = rng_dir(&r);
+            if (i % 2)
+                d.x = i % 4 == 1 ? 0.0f : -0.0f;
+            else
+                d.y = 0.0f;
+            rays[i] = make_ray(rng_in_box(&r, -2, 2), v3_normalize(d), 0.0f, INFINITY);
+        } else if (kind == 4) { /* from far away: most miss the tree's box */
+            vec3 o = v3_scale(rng_dir(&r), 20.0f);
+            vec3 to = v3_sub(rng_in_box(&r, -3, 3), o);
+            rays[i] = make_ray(o, v3_normalize(to), 0.0f, INFINITY);
+        } else { /* some invalid among valid ones */
+            rays[i] = make_ray(rng_in_box(&r, -2, 2), rng_dir(&r), 0.0f, INFINITY);
+            if (i % 7 == 0)
+                rays[i].o.y = NAN;
+            if (i % 11 == 0)
+                rays[i].d = v3(0.0f, 0.0f, 0.0f);
+        }
+    }
+    const struct bvh *trees[2] = {wide, binary};
+    int n_occluded = 0;
+    for (int t = 0; t < 2; t++) {
+        size_t lengths[] = {1, 7, 32, 33, 64, 100};
+        size_t begin = 0;
+        for (int k = 0; begin < N; k++) {
+            size_t n = lengths[k % 6];
+            if (n > N - begin)
+                n = N - begin;
+            bool use_from = k % 5 != 4; /* and now and then from = NULL */
+            bvh_occluded_stream(trees[t], rays + begin, use_from ? from + begin : NULL, n,
+                                occluded + begin);
+            for (size_t i = begin; i < begin + n; i++) {
+                uint32_t f = use_from ? from[i] : BVH_NO_PRIM;
+                bool single = bvh_occluded_from(trees[t], &rays[i], f);
+                cr_assert_eq(occluded[i], single, "%s, ray %zu (stream of %zu at %zu)",
+                             t ? "binary" : "wide", i, n, begin);
+                n_occluded += t == 0 && single;
+            }
+            begin += n;
+        }
+    }
+    cr_log_info("streams: %d of %d rays occluded", n_occluded, N);
+    cr_assert_gt(n_occluded, N / 10);
+    cr_assert_lt(n_occluded, N - N / 10);
+    free(rays);
+    free(from);
+    free(occluded);
+    bvh_free(wide);
+    bvh_free(binary);
     mesh_free(&m);
 }
 
