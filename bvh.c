@@ -1707,6 +1707,17 @@ bool bvh_occluded_from(const struct bvh *bvh, const struct ray *ray, uint32_t fr
     return binary_occluded(bvh, ray, from);
 }
 
+void bvh_intersect_stream(const struct bvh *bvh, const struct ray *rays, const uint32_t *from,
+                          size_t n, struct bvh_hit *out, bool *is_hit)
+{
+    if (bvh->layouts & BVH_LAYOUT_WIDE) {
+        bvh_wide_intersect_stream(bvh, rays, from, n, out, is_hit);
+        return;
+    }
+    for (size_t i = 0; i < n; i++)
+        is_hit[i] = binary_intersect(bvh, &rays[i], from ? from[i] : BVH_NO_PRIM, &out[i]);
+}
+
 void bvh_occluded_stream(const struct bvh *bvh, const struct ray *rays, const uint32_t *from,
                          size_t n, bool *occluded)
 {

@@ -148,12 +148,15 @@ uint32_t bvh_occluded_packet(const struct bvh *bvh, const struct bvh_packet *pac
 /* Fills lane i of *packet with ray (for building packets from struct ray). */
 void bvh_packet_set(struct bvh_packet *packet, int lane, const struct ray *ray);
 
-/* Ray streams: any hit for n rays in one call, traversed BVH_STREAM_RAYS at a time (each node
- * visited once for the rays of the stream that entered it; docs/bvh.md, "Streams").  They pay
- * where neighbouring rays take the same way (shadow rays toward one light, in the order of the
- * points they leave).  occluded[i] is what bvh_occluded_from(bvh, &rays[i], from[i]) gives;
- * from may be NULL (no ray leaves a triangle). */
+/* Ray streams: closest hit or any hit for n rays in one call, traversed BVH_STREAM_RAYS at a
+ * time (each node visited once for the rays of the stream that entered it; docs/bvh.md,
+ * "Streams").  They pay where neighbouring rays take the same way: camera rays in pixel order,
+ * shadow rays toward one light in the order of the points they leave.  Ray i gets what
+ * bvh_intersect_from / bvh_occluded_from(bvh, &rays[i], from[i]) give it (the triangle up to
+ * exact ties); from may be NULL (no ray leaves a triangle); out[i] is filled where is_hit[i]. */
 #define BVH_STREAM_RAYS 32
+void bvh_intersect_stream(const struct bvh *bvh, const struct ray *rays, const uint32_t *from,
+                          size_t n, struct bvh_hit *out, bool *is_hit);
 void bvh_occluded_stream(const struct bvh *bvh, const struct ray *rays, const uint32_t *from,
                          size_t n, bool *occluded);
 

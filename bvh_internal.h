@@ -245,7 +245,9 @@ bool bvh_wide_convert(struct bvh *bvh, const vec3 *positions, const uint32_t *in
 bool bvh_wide_intersect(const struct bvh *bvh, const struct ray *ray, uint32_t from,
                         struct bvh_hit *hit);
 bool bvh_wide_occluded(const struct bvh *bvh, const struct ray *ray, uint32_t from);
-/* bvh_occluded_stream through the wide layout. */
+/* bvh_intersect_stream and bvh_occluded_stream through the wide layout. */
+void bvh_wide_intersect_stream(const struct bvh *bvh, const struct ray *rays, const uint32_t *from,
+                               size_t n, struct bvh_hit *out, bool *is_hit);
 void bvh_wide_occluded_stream(const struct bvh *bvh, const struct ray *rays, const uint32_t *from,
                               size_t n, bool *occluded);
 

@@ -1385,6 +1385,21 @@ struct wide_hit {
     uint32_t tri; /* wide triangle index, UINT32_MAX while none */
 };
 
+/* The nearest of a leaf's hits (lanes `hits` of *out, the leaf at wide triangle `first`); among
+ * equal t the lowest lane: the first in BVH order, as brute force. */
+static ALWAYS_INLINE struct wide_hit leaf_nearest(uint32_t first, uint32_t hits,
+                                                  const struct woop8_out *out)
+{
+    struct f8 t_hits = f8_select(m8_from_bits(hits), out->t, f8_set1(INFINITY));
+    float t_best = f8_hmin(t_hits);
+    int lane = lowest_bit(hits & m8_bits(f8_eq(t_hits, f8_set1(t_best))));
+    float u[8];
+    float uv_v[8];
+    f8_store(u, out->u);
+    f8_store(uv_v, out->v);
+    return (struct wide_hit){t_best, u[lane], uv_v[lane], first + (uint32_t)lane};
+}
+
 /* The hit children of a node (vector mask hit, entry distances t_entry), two or more of them,
  * onto the stack in the node's order for the ray's octant, nearest on top: the order's ranks
  * whose lane is hit are compressed into lanes 0 .. k - 1, farthest first, and references and
@@ -1476,17 +1491,8 @@ static ALWAYS_INLINE void wide_closest(const struct bvh *bvh, uint32_t root, str
             uint32_t n = (ref & 7u) + 1;
             struct woop8_out out;
             uint32_t hits = wide_leaf_hit(bvh, first, n, v, hit->t, &out);
-            if (hits) {
-                struct f8 t_hits = f8_select(m8_from_bits(hits), out.t, f8_set1(INFINITY));
-                float t_best = f8_hmin(t_hits);
-                /* among equal t the lowest lane: the first in BVH order, as brute force */
-                int lane = lowest_bit(hits & m8_bits(f8_eq(t_hits, f8_set1(t_best))));
-                float u[8];
-                float uv_v[8];
-                f8_store(u, out.u);
-                f8_store(uv_v, out.v);
-                *hit = (struct wide_hit){t_best, u[lane], uv_v[lane], first + (uint32_t)lane};
-            }
+            if (hits)
+                *hit = leaf_nearest(first, hits, &out);
         }
         /* pop the next pending node that still starts before the closest hit */
         do {
@@ -2319,17 +2325,21 @@ void bvh_packet_set(struct bvh_packet *packet, int lane, const struct ray *ray)
 }
 
 /* ---- Streams: many rays, one traversal ----------------------------------------------------------
- * Any hit for a batch of rays, BVH_STREAM_RAYS at a time (ray stream tracing: Tsakok 2009,
- * "Faster Incoherent Rays: Multi-BVH Ray Stream Tracing"; Embree's rtcOccluded1M).  The stream
+ * A batch of rays, BVH_STREAM_RAYS at a time (ray stream tracing: Tsakok 2009, "Faster Incoherent
+ * Rays: Multi-BVH Ray Stream Tracing"; Embree's rtcIntersect1M / rtcOccluded1M).  The stream
  * visits a node once for all of its rays that entered it; there each ray runs the single ray's
  * own slab test on the eight children (wide_box_hit's fused form, its constants broadcast from
  * memory) and adds its bit to the ray mask of every child it hits; a child some ray hit is
  * pushed with that mask.  A leaf is tested by each ray of its mask in turn (wide_leaf_hit, the
  * single ray's test).  What the rays share is the node's loads, the stack and the branches of
- * the traversal, which neighbouring shadow rays toward one light share.  Every ray gets what
- * bvh_occluded_from gives it: the same box tests and leaf tests decide, and an any-hit search
- * reports a hit iff some leaf its box tests reach holds one.  Rays without the fused constants
- * (a direction parallel to an axis plane) take bvh_wide_occluded. */
+ * the traversal, which neighbouring rays (camera rays, shadow rays toward one light) share.
+ * Any hit: children in stored order, a ray leaves the stream when occluded; it reports a hit iff
+ * some leaf its box tests reach holds one, as bvh_occluded_from.  Closest hit: children nearest
+ * first by the smallest entry distance among their rays, each ray's interval shortened by its
+ * own hits, and an entry dropped for the rays whose hit lies before it; every triangle a ray
+ * meets before its closest hit is in a box it enters, so it gets bvh_intersect_from's t (and
+ * triangle, up to exact ties).  Rays without the fused constants (a direction parallel to an
+ * axis plane) take the single-ray functions.  docs/bvh.md, "Streams", measures both. */
 #if BVH_FUSED_SLABS
 /* One ray's fused slab constants (wide_ray8_fast's lane 0), scalars broadcast at each test. */
 struct stream_ray {
@@ -2348,7 +2358,7 @@ static inline float f8_lane0(struct f8 a) { return _mm256_cvtss_f32(a.v); }
 
 /* wide_box_hit's fused form for ray *r: bit c set when child c is hit in [t_min, t_max]. */
 static ALWAYS_INLINE struct m8 stream_box_hit(const struct wide_node *node,
-                                              const struct stream_ray *r)
+                                              const struct stream_ray *r, struct f8 *t_entry)
 {
     struct f8 t_near[3];
     struct f8 t_far[3];
@@ -2363,6 +2373,7 @@ static ALWAYS_INLINE struct m8 stream_box_hit(const struct wide_node *node,
                               f8_max_num(t_near[1], t_near[0]));
     struct f8 t1 = f8_min_num(f8_min_num(f8_set1(r->t_max), t_far[2]),
                               f8_min_num(t_far[1], t_far[0]));
+    *t_entry = t0;
     return f8_le(t0, t1);
 }
 
@@ -2380,12 +2391,64 @@ static inline uint32_t i8_nonzero(struct i8 a)
     return ~(uint32_t)_mm256_movemask_ps(_mm256_castsi256_ps(zero)) & 0xffu;
 }
 
+/* wide_ray8_fast's constants of *ray into *r (and what Woop's setup reads into *rp); false
+ * where the fused form does not apply, else *is_miss says whether the ray misses the tree. */
+static inline bool stream_ray_setup(const struct bvh *bvh, const struct ray *ray,
+                                    struct ray_pre *rp, struct stream_ray *r, bool *is_miss)
+{
+    struct wide_ray8 v;
+    if (!wide_ray8_fast(bvh, ray, rp, &v, is_miss))
+        return false;
+    if (*is_miss)
+        return true;
+    rp->kz = 3; /* Woop's constants not yet computed (stream_leaf_hit) */
+    for (int j = 0; j < 3; j++) {
+        r->inv_d[j] = f8_lane0(v.inv_d[j]);
+        r->inv_d_far[j] = f8_lane0(v.inv_d_far[j]);
+        r->c_near[j] = f8_lane0(v.c_near[j]);
+        r->c_far[j] = f8_lane0(v.c_far[j]);
+        r->near_off[j] = (uint32_t)v.near_off[j];
+        r->far_off[j] = (uint32_t)v.far_off[j];
+    }
+    r->t_min = ray->t_min;
+    r->t_max = ray->t_max;
+    return true;
+}
+
+/* wide_leaf_hit for stream ray *r against the leaf at wide triangle `first` (n triangles) in
+ * [t_min, r->t_max], its Woop constants computed into *rp at its first leaf (ray_setup_woop
+ * leaves kz = 3 until then: struct ray_pre is set to that by stream_ray_setup) and broadcast as
+ * wide_ray8_woop broadcasts them. */
+static ALWAYS_INLINE uint32_t stream_leaf_hit(const struct bvh *bvh, uint32_t first, uint32_t n,
+                                              const struct stream_ray *r, struct ray_pre *rp,
+                                              uint32_t from, struct woop8_out *out)
+{
+    if (rp->kz == 3)
+        ray_setup_woop(rp);
+    struct wide_ray8 v;
+    v.k[0] = rp->kx;
+    v.k[1] = rp->ky;
+    v.k[2] = rp->kz;
+    for (int j = 0; j < 3; j++)
+        v.o_k[j] = f8_set1(rp->o[v.k[j]]);
+    v.sx = f8_set1(rp->sx);
+    v.sy = f8_set1(rp->sy);
+    v.sz = f8_set1(rp->sz);
+    v.o_scale = f8_set1(rp->o_scale);
+    v.t_min = f8_set1(r->t_min);
+    v.rp_t_min = r->t_min;
+    v.rp = rp;
+    v.from = from;
+    return wide_leaf_hit(bvh, first, n, &v, r->t_max, out);
+}
+
 struct stream_entry {
     uint32_t ref;  /* wide reference */
     uint32_t rays; /* the stream's rays that hit its box */
 };
 
-/* rays[0 .. n) (n <= BVH_STREAM_RAYS), from[i] or BVH_NO_PRIM: occluded[i]. */
+/* Any hit of rays[0 .. n) (n <= BVH_STREAM_RAYS), each leaving triangle from[i] (from may be
+ * NULL): occluded[i]. */
 static void stream_any(const struct bvh *bvh, const struct ray *rays, const uint32_t *from,
                        uint32_t n, bool *occluded)
 {
@@ -2393,30 +2456,14 @@ static void stream_any(const struct bvh *bvh, const struct ray *rays, const uint
     struct ray_pre rp[BVH_STREAM_RAYS];
     uint32_t active = 0;
     for (uint32_t i = 0; i < n; i++) {
-        struct wide_ray8 v;
         bool is_miss;
         occluded[i] = false;
-        if (!wide_ray8_fast(bvh, &rays[i], &rp[i], &v, &is_miss)) {
+        if (!stream_ray_setup(bvh, &rays[i], &rp[i], &sr[i], &is_miss))
             occluded[i] = bvh_wide_occluded(bvh, &rays[i], from ? from[i] : BVH_NO_PRIM);
-            continue;
-        }
-        if (is_miss)
-            continue;
-        struct stream_ray *r = &sr[i];
-        for (int j = 0; j < 3; j++) {
-            r->inv_d[j] = f8_lane0(v.inv_d[j]);
-            r->inv_d_far[j] = f8_lane0(v.inv_d_far[j]);
-            r->c_near[j] = f8_lane0(v.c_near[j]);
-            r->c_far[j] = f8_lane0(v.c_far[j]);
-            r->near_off[j] = (uint32_t)v.near_off[j];
-            r->far_off[j] = (uint32_t)v.far_off[j];
-        }
-        r->t_min = rays[i].t_min;
-        r->t_max = rays[i].t_max;
-        active |= 1u << i;
+        else if (!is_miss)
+            active |= 1u << i;
     }
-    uint32_t done = 0;       /* rays found occluded */
-    uint32_t woop_ready = 0; /* rays whose Woop constants are in rp */
+    uint32_t done = 0; /* rays found occluded */
     struct stream_entry stack[WIDE_STACK_SIZE];
     uint32_t n_stack = 0;
     struct stream_entry cur = {0, active};
@@ -2427,7 +2474,8 @@ static void stream_any(const struct bvh *bvh, const struct ray *rays, const uint
             struct i8 child_rays = {_mm256_setzero_si256()};
             for (uint32_t bits = cur.rays; bits; bits &= bits - 1) {
                 int i = lowest_bit(bits);
-                child_rays = i8_or_bit(child_rays, stream_box_hit(node, &sr[i]), 1u << i);
+                struct f8 t_entry;
+                child_rays = i8_or_bit(child_rays, stream_box_hit(node, &sr[i], &t_entry), 1u << i);
             }
             uint32_t hit = i8_nonzero(child_rays);
             prefetch_hit_nodes(bvh->wide, node, hit);
@@ -2448,27 +2496,9 @@ static void stream_any(const struct bvh *bvh, const struct ray *rays, const uint
             uint32_t n_tris = (cur.ref & 7u) + 1;
             for (uint32_t bits = cur.rays; bits; bits &= bits - 1) {
                 int i = lowest_bit(bits);
-                if (!(woop_ready >> i & 1u)) {
-                    ray_setup_woop(&rp[i]);
-                    woop_ready |= 1u << i;
-                }
-                /* what wide_leaf_hit reads of a single ray's struct wide_ray8 (wide_ray8_woop) */
-                struct wide_ray8 v;
-                v.k[0] = rp[i].kx;
-                v.k[1] = rp[i].ky;
-                v.k[2] = rp[i].kz;
-                for (int j = 0; j < 3; j++)
-                    v.o_k[j] = f8_set1(rp[i].o[v.k[j]]);
-                v.sx = f8_set1(rp[i].sx);
-                v.sy = f8_set1(rp[i].sy);
-                v.sz = f8_set1(rp[i].sz);
-                v.o_scale = f8_set1(rp[i].o_scale);
-                v.t_min = f8_set1(sr[i].t_min);
-                v.rp_t_min = sr[i].t_min;
-                v.rp = &rp[i];
-                v.from = from ? from[i] : BVH_NO_PRIM;
                 struct woop8_out out;
-                if (wide_leaf_hit(bvh, first, n_tris, &v, sr[i].t_max, &out)) {
+                if (stream_leaf_hit(bvh, first, n_tris, &sr[i], &rp[i],
+                                    from ? from[i] : BVH_NO_PRIM, &out)) {
                     done |= 1u << i;
                     occluded[i] = true;
                 }
@@ -2481,7 +2511,128 @@ static void stream_any(const struct bvh *bvh, const struct ray *rays, const uint
         cur = stack[--n_stack];
     }
 }
+
+struct stream_centry {
+    uint32_t ref;  /* wide reference */
+    uint32_t rays; /* the stream's rays that hit its box */
+    float dist;    /* the smallest entry distance among them */
+};
+
+/* Closest hit of rays[0 .. n) (n <= BVH_STREAM_RAYS), each leaving triangle from[i] (from may be
+ * NULL): is_hit[i], and out[i] where it hit. */
+static void stream_closest(const struct bvh *bvh, const struct ray *rays, const uint32_t *from,
+                           uint32_t n, struct bvh_hit *out, bool *is_hit)
+{
+    struct stream_ray sr[BVH_STREAM_RAYS];
+    struct ray_pre rp[BVH_STREAM_RAYS];
+    struct wide_hit h[BVH_STREAM_RAYS];
+    uint32_t active = 0;
+    uint32_t single = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        bool is_miss;
+        h[i] = (struct wide_hit){rays[i].t_max, 0.0f, 0.0f, UINT32_MAX};
+        if (!stream_ray_setup(bvh, &rays[i], &rp[i], &sr[i], &is_miss)) {
+            is_hit[i] = bvh_wide_intersect(bvh, &rays[i], from ? from[i] : BVH_NO_PRIM, &out[i]);
+            single |= 1u << i;
+        } else if (!is_miss) {
+            active |= 1u << i;
+        }
+    }
+    struct stream_centry stack[WIDE_STACK_SIZE];
+    uint32_t n_stack = 0;
+    struct stream_centry cur = {0, active, -INFINITY};
+    while (cur.rays) {
+        if (!(cur.ref & WIDE_LEAF)) {
+            const struct wide_node *node = &bvh->wide[cur.ref];
+            struct i8 child_rays = {_mm256_setzero_si256()};
+            struct f8 dist = f8_set1(INFINITY);
+            for (uint32_t bits = cur.rays; bits; bits &= bits - 1) {
+                int i = lowest_bit(bits);
+                struct f8 t_entry;
+                struct m8 m = stream_box_hit(node, &sr[i], &t_entry);
+                child_rays = i8_or_bit(child_rays, m, 1u << i);
+                dist = f8_min_num(dist, f8_select(m, t_entry, f8_set1(INFINITY)));
+            }
+            uint32_t hit = i8_nonzero(child_rays);
+            prefetch_hit_nodes(bvh->wide, node, hit);
+            if (hit) {
+                uint32_t child_mask[8];
+                float d[8];
+                i8_store(child_mask, child_rays);
+                f8_store(d, dist);
+                /* farthest first onto the stack, the nearest taken now */
+                uint32_t base = n_stack;
+                for (; hit; hit &= hit - 1) {
+                    int c = lowest_bit(hit);
+                    struct stream_centry e = {node->child[c], child_mask[c], d[c]};
+                    uint32_t k = n_stack++;
+                    while (k > base && stack[k - 1].dist < e.dist) {
+                        stack[k] = stack[k - 1];
+                        k--;
+                    }
+                    stack[k] = e;
+                }
+                cur = stack[--n_stack];
+                continue;
+            }
+        } else {
+            uint32_t first = (cur.ref & ~WIDE_LEAF) >> 3;
+            uint32_t n_tris = (cur.ref & 7u) + 1;
+            for (uint32_t bits = cur.rays; bits; bits &= bits - 1) {
+                int i = lowest_bit(bits);
+                struct woop8_out out;
+                uint32_t hits = stream_leaf_hit(bvh, first, n_tris, &sr[i], &rp[i],
+                                                from ? from[i] : BVH_NO_PRIM, &out);
+                if (hits) {
+                    h[i] = leaf_nearest(first, hits, &out);
+                    sr[i].t_max = h[i].t;
+                }
+            }
+        }
+        /* the next entry some of whose rays may still need it */
+        for (;;) {
+            if (n_stack == 0) {
+                cur.rays = 0;
+                break;
+            }
+            cur = stack[--n_stack];
+            uint32_t keep = 0;
+            for (uint32_t bits = cur.rays; bits; bits &= bits - 1) {
+                int i = lowest_bit(bits);
+                if (!(cur.dist > sr[i].t_max))
+                    keep |= 1u << i;
+            }
+            cur.rays = keep;
+            if (keep)
+                break;
+        }
+    }
+    for (uint32_t i = 0; i < n; i++) {
+        if (single >> i & 1u)
+            continue;
+        is_hit[i] = h[i].tri != UINT32_MAX;
+        if (is_hit[i])
+            out[i] = (struct bvh_hit){h[i].t, h[i].u, h[i].v, bvh->wide_prim_idx[h[i].tri]};
+    }
+}
 #endif
+
+void bvh_wide_intersect_stream(const struct bvh *bvh, const struct ray *rays, const uint32_t *from,
+                               size_t n, struct bvh_hit *out, bool *is_hit)
+{
+    for (size_t i = 0; i < n; i += BVH_STREAM_RAYS) {
+        uint32_t k = n - i < BVH_STREAM_RAYS ? (uint32_t)(n - i) : BVH_STREAM_RAYS;
+#if BVH_FUSED_SLABS
+        if (bvh->n_wide > 0) {
+            stream_closest(bvh, rays + i, from ? from + i : NULL, k, out + i, is_hit + i);
+            continue;
+        }
+#endif
+        for (uint32_t j = 0; j < k; j++)
+            is_hit[i + j] = bvh_wide_intersect(bvh, &rays[i + j], from ? from[i + j] : BVH_NO_PRIM,
+                                               &out[i + j]);
+    }
+}
 
 void bvh_wide_occluded_stream(const struct bvh *bvh, const struct ray *rays, const uint32_t *from,
                               size_t n, bool *occluded)

@@ -4,7 +4,6 @@
  * Orthonormal Basis, Revisited"; Fisher-Yates shuffle), checksums, timing and a thread pool. */
 #include "bench.h"
 
-#include <assert.h>
 #include <errno.h>
 #include <pthread.h>
 #include <stdatomic.h>
@@ -374,14 +373,19 @@ void bench_trace_range(void *trace, uint64_t begin, uint64_t end)
     const struct bench_trace *tr = trace;
     const struct ray *rays = tr->rays->rays;
     bool occlusion = tr->rays->kind == BENCH_KIND_OCCLUSION;
-    if (tr->method == BENCH_STREAM) {
-        assert(occlusion);
-        bool occluded[256];
+    if (tr->method == BENCH_STREAM) { /* 256 rays a call, as embree_bench's rtc*1M */
+        struct bvh_hit hit[256];
+        bool is_hit[256];
         for (uint64_t i = begin; i < end; i += 256) {
             size_t n = end - i < 256 ? (size_t)(end - i) : 256;
-            bvh_occluded_stream(tr->bvh, rays + i, NULL, n, occluded);
-            for (size_t k = 0; k < n; k++)
-                tr->prim[i + k] = occluded[k] ? 0 : UINT32_MAX;
+            if (occlusion)
+                bvh_occluded_stream(tr->bvh, rays + i, NULL, n, is_hit);
+            else
+                bvh_intersect_stream(tr->bvh, rays + i, NULL, n, hit, is_hit);
+            for (size_t k = 0; k < n; k++) {
+                tr->prim[i + k] = !is_hit[k] ? UINT32_MAX : occlusion ? 0 : hit[k].prim_idx;
+                tr->t[i + k] = is_hit[k] && !occlusion ? hit[k].t : 0.0f;
+            }
         }
         return;
     }

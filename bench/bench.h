@@ -74,7 +74,7 @@ vec3 bench_tri_normal(const struct bench_mesh *mesh, uint32_t prim_idx);
 enum bench_method {
     BENCH_SINGLE, /* bvh_intersect / bvh_occluded, ray by ray */
     BENCH_PACKET, /* bvh_intersect_packet / bvh_occluded_packet, 8 consecutive rays a packet */
-    BENCH_STREAM, /* bvh_occluded_stream over the rays in order (occlusion files only) */
+    BENCH_STREAM, /* bvh_intersect_stream / bvh_occluded_stream, 256 consecutive rays a call */
     BENCH_BRUTE,  /* bvh_intersect_brute (every triangle) */
 };
 

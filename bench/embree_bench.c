@@ -1,9 +1,10 @@
 /* embree_bench.c - mcpt's BVH against Embree 3 (Wald et al. 2014, "Embree: A Kernel Framework
  * for Efficient CPU Ray Tracing") on the same mesh and ray files, in one invocation: builds
  * (mcpt against RTC_BUILD_QUALITY_HIGH, on one thread and on all), then per ray file every
- * entry point of both: mcpt's single rays, 8-ray packets and (occlusion files) streams; Embree's rtcIntersect1 / 8 / 16
- * and the stream rtcIntersect1M with the coherent and with the incoherent context flag (the
- * rtcOccluded* twins for occlusion files), runs interleaved so that all see the same load.
+ * entry point of both: mcpt's single rays, 8-ray packets and 32-ray streams; Embree's
+ * rtcIntersect1 / 8 / 16 and the stream rtcIntersect1M with the coherent and with the
+ * incoherent context flag (the rtcOccluded* twins for occlusion files), runs interleaved so
+ * that all see the same load.
  * The headline is the best mcpt kernel against the best Embree entry point for that ray file,
  * single thread, by wall clock and by CPU time; both checksums; one JSON line per ray file.
  * Built only when Embree 3 is installed (`make bench-embree`); nothing else in mcpt uses it. */
@@ -481,13 +482,12 @@ int main(int argc, char **argv)
                 return 1;
         }
         bool occlusion = rays.kind == BENCH_KIND_OCCLUSION;
-        /* mcpt's two kernels, then every Embree entry point, then mcpt's streams (occlusion
-         * files: bvh_occluded_stream has no closest-hit twin): the best of each side is compared
-         * (Embree's stream twice, with the coherent and the incoherent context flag) */
+        /* mcpt's single rays and packets, then every Embree entry point, then mcpt's streams:
+         * the best of each side is compared (Embree's stream twice, with the coherent and the
+         * incoherent context flag) */
         struct bench_trace m1 = {bvh, &rays, BENCH_SINGLE, prim[0], t[0]};
         struct bench_trace m8 = {bvh, &rays, BENCH_PACKET, prim[1], t[1]};
         struct bench_trace ms = {bvh, &rays, BENCH_STREAM, prim[STREAM], t[STREAM]};
-        int n_tr = occlusion ? N_TRACERS : N_TRACERS - 1;
         struct embree_trace e[EMBREE_N_METHODS + 1];
         struct tracer tr[N_TRACERS] = {
             {.name = "mcpt single", .fn = bench_trace_range, .ctx = &m1},
@@ -502,10 +502,10 @@ int main(int argc, char **argv)
                                         .fn = embree_trace_range,
                                         .ctx = &e[k]};
         }
-        measure_interleaved(tr, n_tr, &rays, runs, n_threads, prim, t);
+        measure_interleaved(tr, N_TRACERS, &rays, runs, n_threads, prim, t);
         printf("rays: %s: %llu %s rays; load average %.2f\n", argv[f], (unsigned long long)rays.n,
                occlusion ? "occlusion" : "closest-hit", bench_loadavg());
-        for (int k = 0; k < n_tr; k++) {
+        for (int k = 0; k < N_TRACERS; k++) {
             char name[64];
             snprintf(name, sizeof name, "%s%s", tr[k].name,
                      k < 2 + EMBREE_STREAM || k == STREAM ? ""
@@ -529,9 +529,9 @@ int main(int argc, char **argv)
          * point for this ray set, by wall clock and by CPU time (single thread each) */
         int best_m_wall = tr[1].mrays_1t_wall > tr[0].mrays_1t_wall ? 1 : 0;
         int best_m_cpu = tr[1].mrays_1t > tr[0].mrays_1t ? 1 : 0;
-        if (occlusion && tr[STREAM].mrays_1t_wall > tr[best_m_wall].mrays_1t_wall)
+        if (tr[STREAM].mrays_1t_wall > tr[best_m_wall].mrays_1t_wall)
             best_m_wall = STREAM;
-        if (occlusion && tr[STREAM].mrays_1t > tr[best_m_cpu].mrays_1t)
+        if (tr[STREAM].mrays_1t > tr[best_m_cpu].mrays_1t)
             best_m_cpu = STREAM;
         int best_e_wall = 2;
         int best_e_cpu = 2;
@@ -573,7 +573,7 @@ int main(int argc, char **argv)
                                                     "embree_stream_coherent",
                                                     "embree_stream_incoherent",
                                                     "mcpt_stream"};
-        for (int k = 0; k < n_tr; k++)
+        for (int k = 0; k < N_TRACERS; k++)
             printf("\"mrays_1t_wall_%s\":%.4f,\"mrays_1t_cpu_%s\":%.4f,\"mrays_mt_%s\":%.4f,",
                    keys[k], tr[k].mrays_1t_wall, keys[k], tr[k].mrays_1t, keys[k], tr[k].mrays_mt);
         printf("\"best_mcpt\":\"%s\",\"best_embree\":\"%s\",\"ratio_best\":%.4f,"

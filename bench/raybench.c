@@ -21,8 +21,8 @@ static const char usage[] =
     "  --threads N        threads of the all-threads figure and the build (default: all CPUs)\n"
     "  --runs R           timed runs after one warm-up; the median is reported (default 5)\n"
     "  --build-runs B     timed builds per thread count (default R)\n"
-    "  --packets          also trace in packets of 8 rays (mrays_1t_packet), and occlusion files\n"
-    "                     in streams (mrays_1t_stream)\n"
+    "  --packets          also trace in packets of 8 rays (mrays_1t_packet) and in streams of 32\n"
+    "                     (mrays_1t_stream)\n"
     "  --layout L         wide (default) or binary: the traversal to time\n"
     "  --no-bvh           brute force on a subset of the rays, against the BVH on the same rays\n"
     "  --subset K         rays of the --no-bvh subset, evenly strided (default 1000)\n"
@@ -208,7 +208,7 @@ static bool run_set(const struct options *opt, const struct bench_mesh *mesh, co
         return false;
     if (opt->packets && !measure(bvh, rays, BENCH_PACKET, opt->runs, 0, &packet))
         return false;
-    bool streams = opt->packets && rays->kind == BENCH_KIND_OCCLUSION;
+    bool streams = opt->packets; /* and streams */
     struct figures stream = {{0, 0.0, 0}, 0.0, 0.0, 0.0};
     if (streams && !measure(bvh, rays, BENCH_STREAM, opt->runs, 0, &stream))
         return false;

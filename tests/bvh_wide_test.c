@@ -155,7 +155,8 @@ Test(bvh_wide, packets_match_single_rays)
 }
 
 /* ---- streams -------------------------------------------------------------------------------------
- * bvh.h: bvh_occluded_stream gives ray i what bvh_occluded_from(bvh, &rays[i], from[i]) gives. */
+ * bvh.h: bvh_intersect_stream and bvh_occluded_stream give ray i what bvh_intersect_from and
+ * bvh_occluded_from(bvh, &rays[i], from[i]) give it (t to the bit, the triangle up to exact ties). */
 
 /* Shadow rays spawned from the mesh's triangles toward an area light (with the triangle they
  * leave, in the order of their points, as a renderer makes them), the same rays without it,
@@ -176,7 +177,9 @@ Test(bvh_wide, streams_match_single_rays)
     struct ray *rays = malloc(N * sizeof *rays);
     uint32_t *from = malloc(N * sizeof *from);
     bool *occluded = malloc(N * sizeof *occluded);
-    cr_assert(rays && from && occluded);
+    bool *is_hit = malloc(N * sizeof *is_hit);
+    struct bvh_hit *hits = malloc(N * sizeof *hits);
+    cr_assert(rays && from && occluded && is_hit && hits);
     struct rng r = {43};
     vec3 light = v3(0.0f, 3.0f, 0.0f);
     for (uint32_t i = 0; i < N; i++) {
@@ -231,12 +234,24 @@ Test(bvh_wide, streams_match_single_rays)
             bool use_from = k % 5 != 4; /* and now and then from = NULL */
             bvh_occluded_stream(trees[t], rays + begin, use_from ? from + begin : NULL, n,
                                 occluded + begin);
+            bvh_intersect_stream(trees[t], rays + begin, use_from ? from + begin : NULL, n,
+                                 hits + begin, is_hit + begin);
             for (size_t i = begin; i < begin + n; i++) {
                 uint32_t f = use_from ? from[i] : BVH_NO_PRIM;
                 bool single = bvh_occluded_from(trees[t], &rays[i], f);
                 cr_assert_eq(occluded[i], single, "%s, ray %zu (stream of %zu at %zu)",
                              t ? "binary" : "wide", i, n, begin);
                 n_occluded += t == 0 && single;
+                struct bvh_hit h;
+                bool hit = bvh_intersect_from(trees[t], &rays[i], f, &h);
+                cr_assert_eq(is_hit[i], hit, "%s, ray %zu: closest", t ? "binary" : "wide", i);
+                if (!hit)
+                    continue;
+                cr_assert(same_bits(hits[i].t, h.t), "ray %zu: t %a vs %a", i, hits[i].t, h.t);
+                if (hits[i].prim_idx == h.prim_idx)
+                    cr_assert(same_bits(hits[i].u, h.u) && same_bits(hits[i].v, h.v));
+                else
+                    cr_assert(single_tri_hits_at(&m, hits[i].prim_idx, &rays[i], hits[i].t));
             }
             begin += n;
         }
@@ -247,6 +262,8 @@ Test(bvh_wide, streams_match_single_rays)
     free(rays);
     free(from);
     free(occluded);
+    free(is_hit);
+    free(hits);
     bvh_free(wide);
     bvh_free(binary);
     mesh_free(&m);
