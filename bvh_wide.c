@@ -1614,8 +1614,27 @@ static inline bool wide_ray_begin(const struct bvh *bvh, const struct ray *ray, 
  * infinite (the NaN-aware form is needed); otherwise *is_miss says whether the ray misses the
  * tree's box, and if not *v is ready for wide_closest_fast / wide_any_fast. */
 #if BVH_FUSED_SLABS
-static inline bool wide_ray8_fast(const struct bvh *bvh, const struct ray *ray, struct ray_pre *rp,
-                                  struct wide_ray8 *v, bool *is_miss)
+/* The fused constants on four SSE lanes (lane 3 unused), as wide_ray8_fast and stream_ray_setup
+ * take them from ray_fast_consts. */
+struct fast_consts {
+    __m128 o, inv_d, inv_d_far, c_near, c_far;
+    int neg; /* bit a: inv_d[a] < 0 */
+};
+
+/* What Woop's setup at the first leaf reads. */
+static ALWAYS_INLINE void ray_pre_od(const struct ray *ray, struct ray_pre *rp)
+{
+    rp->o[0] = ray->o.x;
+    rp->o[1] = ray->o.y;
+    rp->o[2] = ray->o.z;
+    rp->d[0] = ray->d.x;
+    rp->d[1] = ray->d.y;
+    rp->d[2] = ray->d.z;
+}
+
+/* wide_ray8_fast's first part: its constants into *fc and the test against the tree's box. */
+static ALWAYS_INLINE bool ray_fast_consts(const struct bvh *bvh, const struct ray *ray,
+                                          struct fast_consts *fc, bool *is_miss)
 {
     const float far_scale = 1.0f + 4.0f * mcpt_gamma(3); /* wide_ray_setup's */
     const __m128 zero = _mm_setzero_ps();
@@ -1661,15 +1680,25 @@ static inline bool wide_ray8_fast(const struct bvh *bvh, const struct ray *ray, 
     t_far = _mm_min_ps(t_far, _mm_shuffle_ps(t_far, t_far, _MM_SHUFFLE(1, 0, 3, 2)));
     t_far = _mm_min_ps(t_far, _mm_shuffle_ps(t_far, t_far, _MM_SHUFFLE(2, 3, 0, 1)));
     *is_miss = !(_mm_cvtss_f32(t_near) <= _mm_cvtss_f32(t_far));
+    *fc = (struct fast_consts){o, inv_d, inv_d_far, c_near, c_far, _mm_movemask_ps(is_neg) & 7};
+    return true;
+}
+
+static inline bool wide_ray8_fast(const struct bvh *bvh, const struct ray *ray, struct ray_pre *rp,
+                                  struct wide_ray8 *v, bool *is_miss)
+{
+    struct fast_consts fc;
+    if (!ray_fast_consts(bvh, ray, &fc, is_miss))
+        return false;
     if (*is_miss)
         return true;
     /* wide_ray8_box: one constant per register */
-    int neg = _mm_movemask_ps(is_neg) & 7;
-    __m256 o8 = _mm256_castps128_ps256(o);
-    __m256 inv_d8 = _mm256_castps128_ps256(inv_d);
-    __m256 inv_d_far8 = _mm256_castps128_ps256(inv_d_far);
-    __m256 c_near8 = _mm256_castps128_ps256(c_near);
-    __m256 c_far8 = _mm256_castps128_ps256(c_far);
+    int neg = fc.neg;
+    __m256 o8 = _mm256_castps128_ps256(fc.o);
+    __m256 inv_d8 = _mm256_castps128_ps256(fc.inv_d);
+    __m256 inv_d_far8 = _mm256_castps128_ps256(fc.inv_d_far);
+    __m256 c_near8 = _mm256_castps128_ps256(fc.c_near);
+    __m256 c_far8 = _mm256_castps128_ps256(fc.c_far);
     for (int a = 0; a < 3; a++) {
         __m256i lane = _mm256_set1_epi32(a);
         v->o[a].v = _mm256_permutevar8x32_ps(o8, lane);
@@ -1685,13 +1714,7 @@ static inline bool wide_ray8_fast(const struct bvh *bvh, const struct ray *ray, 
     v->rp_t_min = ray->t_min;
     v->order_shift = 3 * neg;
     v->wide = bvh->wide;
-    /* what Woop's setup at the first leaf reads */
-    rp->o[0] = ray->o.x;
-    rp->o[1] = ray->o.y;
-    rp->o[2] = ray->o.z;
-    rp->d[0] = ray->d.x;
-    rp->d[1] = ray->d.y;
-    rp->d[2] = ray->d.z;
+    ray_pre_od(ray, rp);
     v->rp = rp;
     v->from = BVH_NO_PRIM;
     return true;
@@ -2343,18 +2366,17 @@ void bvh_packet_set(struct bvh_packet *packet, int lane, const struct ray *ray)
 #if BVH_FUSED_SLABS
 /* One ray's fused slab constants (wide_ray8_fast's lane 0), scalars broadcast at each test. */
 struct stream_ray {
-    float inv_d_far[3];
-    float inv_d[3];
-    float c_near[3];
-    float c_far[3];
+    float inv_d_far[4]; /* x, y, z and an unused lane: stored from struct fast_consts */
+    float inv_d[4];
+    float c_near[4];
+    float c_far[4];
     float t_min;
     float t_max;
     uint32_t near_off[3]; /* byte offsets of the near and far bounds rows */
     uint32_t far_off[3];
-}; /* 80 bytes */
+}; /* 96 bytes */
 
 /* (BVH_FUSED_SLABS implies AVX2: the helpers below have no scalar form) */
-static inline float f8_lane0(struct f8 a) { return _mm256_cvtss_f32(a.v); }
 
 /* wide_box_hit's fused form for ray *r: bit c set when child c is hit in [t_min, t_max]. */
 static ALWAYS_INLINE struct m8 stream_box_hit(const struct wide_node *node,
@@ -2391,27 +2413,30 @@ static inline uint32_t i8_nonzero(struct i8 a)
     return ~(uint32_t)_mm256_movemask_ps(_mm256_castsi256_ps(zero)) & 0xffu;
 }
 
-/* wide_ray8_fast's constants of *ray into *r (and what Woop's setup reads into *rp); false
- * where the fused form does not apply, else *is_miss says whether the ray misses the tree. */
+/* wide_ray8_fast's constants of *ray into *r, unbroadcast (and what Woop's setup reads into
+ * *rp); false where the fused form does not apply, else *is_miss says whether the ray misses the
+ * tree. */
 static inline bool stream_ray_setup(const struct bvh *bvh, const struct ray *ray,
                                     struct ray_pre *rp, struct stream_ray *r, bool *is_miss)
 {
-    struct wide_ray8 v;
-    if (!wide_ray8_fast(bvh, ray, rp, &v, is_miss))
+    struct fast_consts fc;
+    if (!ray_fast_consts(bvh, ray, &fc, is_miss))
         return false;
     if (*is_miss)
         return true;
-    rp->kz = 3; /* Woop's constants not yet computed (stream_leaf_hit) */
-    for (int j = 0; j < 3; j++) {
-        r->inv_d[j] = f8_lane0(v.inv_d[j]);
-        r->inv_d_far[j] = f8_lane0(v.inv_d_far[j]);
-        r->c_near[j] = f8_lane0(v.c_near[j]);
-        r->c_far[j] = f8_lane0(v.c_far[j]);
-        r->near_off[j] = (uint32_t)v.near_off[j];
-        r->far_off[j] = (uint32_t)v.far_off[j];
+    _mm_storeu_ps(r->inv_d, fc.inv_d);
+    _mm_storeu_ps(r->inv_d_far, fc.inv_d_far);
+    _mm_storeu_ps(r->c_near, fc.c_near);
+    _mm_storeu_ps(r->c_far, fc.c_far);
+    for (int a = 0; a < 3; a++) {
+        uint32_t is_neg_a = (uint32_t)fc.neg >> a & 1u;
+        r->near_off[a] = (2u * (uint32_t)a + is_neg_a) * sizeof(float) * BVH_WIDTH;
+        r->far_off[a] = (2u * (uint32_t)a + 1u - is_neg_a) * sizeof(float) * BVH_WIDTH;
     }
     r->t_min = ray->t_min;
     r->t_max = ray->t_max;
+    ray_pre_od(ray, rp);
+    rp->kz = 3; /* Woop's constants not yet computed (stream_leaf_hit) */
     return true;
 }
 
