@@ -134,19 +134,22 @@ static inline void ray_setup_box(const struct ray *ray, struct ray_pre *rp)
 }
 
 /* Woop et al. 2013, ray preparation: the dimension where |d| is largest becomes z; kx, ky are
- * swapped when d[kz] < 0 to keep the triangles' winding; then the shear constants. */
+ * swapped when d[kz] < 0 to keep the triangles' winding; then the shear constants.  The choices
+ * are arithmetic, not branches: an incoherent ray's largest axis and sign are coin flips, which
+ * a branch predictor loses (docs/bvh.md, "Levers measured"). */
 static inline void ray_setup_woop(struct ray_pre *rp)
 {
     const float *d = rp->d;
     float ad[3] = {fabsf(d[0]), fabsf(d[1]), fabsf(d[2])};
-    int kz = ad[0] >= ad[1] ? (ad[0] >= ad[2] ? 0 : 2) : (ad[1] >= ad[2] ? 1 : 2);
-    int kx = kz == 2 ? 0 : kz + 1;
-    int ky = kx == 2 ? 0 : kx + 1;
-    if (d[kz] < 0.0f) {
-        int tmp = kx;
-        kx = ky;
-        ky = tmp;
-    }
+    int x_first = ad[0] >= ad[1];
+    int is_x = x_first & (ad[0] >= ad[2]);
+    int is_y = (x_first ^ 1) & (ad[1] >= ad[2]);
+    int kz = 2 - 2 * is_x - is_y; /* x, y or z: the first largest, as the comparisons above */
+    int kx = 0x9 >> 2 * kz & 3;   /* (kz + 1) mod 3: the 2-bit entries 1, 2, 0 */
+    int ky = 0x12 >> 2 * kz & 3;  /* (kz + 2) mod 3: 2, 0, 1 */
+    int swap = (kx ^ ky) & -(int)(d[kz] < 0.0f);
+    kx ^= swap;
+    ky ^= swap;
     rp->kx = kx;
     rp->ky = ky;
     rp->kz = kz;

@@ -924,6 +924,18 @@ static inline struct i8 i8_compress(struct i8 a, uint32_t bits)
     return i8_load(out);
 #endif
 }
+/* bit i: the top bit of lane i */
+static inline uint32_t i8_top_bits(struct i8 a)
+{
+#if BVH_AVX2
+    return (uint32_t)_mm256_movemask_ps(_mm256_castsi256_ps(a.v));
+#else
+    uint32_t bits = 0;
+    for (int i = 0; i < 8; i++)
+        bits |= (a.v[i] >> 31) << i;
+    return bits;
+#endif
+}
 /* lane i of a */
 static inline uint32_t i8_lane(struct i8 a, int i)
 {
@@ -1429,13 +1441,13 @@ static inline uint32_t push_ordered(uint32_t *stack_ref, float *stack_t, uint32_
 static inline void prefetch_hit_nodes(const struct wide_node *wide, const struct wide_node *node,
                                       uint32_t mask)
 {
+    /* the interior children, from the references' top bits (WIDE_LEAF) at once: a test per
+     * child would be a branch that incoherent rays mispredict */
+    mask &= ~i8_top_bits(i8_load(node->child));
     for (; mask; mask &= mask - 1) {
-        uint32_t c = node->child[lowest_bit(mask)];
-        if (!(c & WIDE_LEAF)) {
-            const char *p = (const char *)&wide[c];
-            for (int line = 0; line < 4; line++)
-                __builtin_prefetch(p + 64 * line);
-        }
+        const char *p = (const char *)&wide[node->child[lowest_bit(mask)]];
+        for (int line = 0; line < 4; line++)
+            __builtin_prefetch(p + 64 * line);
     }
 }
 
@@ -1467,11 +1479,10 @@ static ALWAYS_INLINE void wide_closest(const struct bvh *bvh, uint32_t root, str
                     float dist[8];
                     f8_store(dist, t_entry);
                     int c1 = lowest_bit(rest);
-                    if (dist[c1] < dist[c0]) {
-                        int tmp = c0;
-                        c0 = c1;
-                        c1 = tmp;
-                    }
+                    /* nearer first, by a select rather than a branch (unpredictable here) */
+                    int swap = (c0 ^ c1) & -(int)(dist[c1] < dist[c0]);
+                    c0 ^= swap;
+                    c1 ^= swap;
                     stack_ref[n_stack] = node->child[c1];
                     stack_t[n_stack++] = dist[c1];
                     ref = node->child[c0];
@@ -1522,9 +1533,12 @@ static ALWAYS_INLINE bool wide_any(const struct bvh *bvh, uint32_t root, struct 
             prefetch_hit_nodes(v->wide, node, mask);
             if (mask) {
                 ref = node->child[lowest_bit(mask)];
+                /* the others in lane order, compressed into one store: a loop over them would
+                 * end at a count that incoherent rays make unpredictable */
+                uint32_t rest = mask & (mask - 1);
                 assert(n_stack + 8 <= WIDE_STACK_SIZE);
-                for (mask &= mask - 1; mask; mask &= mask - 1)
-                    stack[n_stack++] = node->child[lowest_bit(mask)];
+                i8_store(stack + n_stack, i8_compress(i8_load(node->child), rest));
+                n_stack += (uint32_t)__builtin_popcount(rest);
                 continue;
             }
         } else {
