@@ -134,22 +134,36 @@ static inline void ray_setup_box(const struct ray *ray, struct ray_pre *rp)
 }
 
 /* Woop et al. 2013, ray preparation: the dimension where |d| is largest becomes z; kx, ky are
- * swapped when d[kz] < 0 to keep the triangles' winding; then the shear constants.  The choices
- * are arithmetic, not branches: an incoherent ray's largest axis and sign are coin flips, which
- * a branch predictor loses (docs/bvh.md, "Levers measured"). */
-static inline void ray_setup_woop(struct ray_pre *rp)
+ * swapped when d[kz] < 0 to keep the triangles' winding; then the shear constants.
+ * branch_free makes the choices arithmetic: an incoherent ray's largest axis and sign are coin
+ * tosses, which a branch mispredicts, while branches let a predictor that guesses right (rays
+ * of one direction: packets, streams) start the divisions at once instead of after the
+ * selection (docs/bvh.md, "Branches").  Both give the same constants. */
+static ALWAYS_INLINE void ray_setup_woop_as(struct ray_pre *rp, const bool branch_free)
 {
     const float *d = rp->d;
     float ad[3] = {fabsf(d[0]), fabsf(d[1]), fabsf(d[2])};
-    int x_first = ad[0] >= ad[1];
-    int is_x = x_first & (ad[0] >= ad[2]);
-    int is_y = (x_first ^ 1) & (ad[1] >= ad[2]);
-    int kz = 2 - 2 * is_x - is_y; /* x, y or z: the first largest, as the comparisons above */
-    int kx = 0x9 >> 2 * kz & 3;   /* (kz + 1) mod 3: the 2-bit entries 1, 2, 0 */
-    int ky = 0x12 >> 2 * kz & 3;  /* (kz + 2) mod 3: 2, 0, 1 */
-    int swap = (kx ^ ky) & -(int)(d[kz] < 0.0f);
-    kx ^= swap;
-    ky ^= swap;
+    int kx, ky, kz;
+    if (branch_free) {
+        int x_first = ad[0] >= ad[1];
+        int is_x = x_first & (ad[0] >= ad[2]);
+        int is_y = (x_first ^ 1) & (ad[1] >= ad[2]);
+        kz = 2 - 2 * is_x - is_y; /* as the comparisons below */
+        kx = 0x9 >> 2 * kz & 3;   /* (kz + 1) mod 3: the 2-bit entries 1, 2, 0 */
+        ky = 0x12 >> 2 * kz & 3;  /* (kz + 2) mod 3: 2, 0, 1 */
+        int swap = (kx ^ ky) & -(int)(d[kz] < 0.0f);
+        kx ^= swap;
+        ky ^= swap;
+    } else {
+        kz = ad[0] >= ad[1] ? (ad[0] >= ad[2] ? 0 : 2) : (ad[1] >= ad[2] ? 1 : 2);
+        kx = kz == 2 ? 0 : kz + 1;
+        ky = kx == 2 ? 0 : kx + 1;
+        if (d[kz] < 0.0f) {
+            int tmp = kx;
+            kx = ky;
+            ky = tmp;
+        }
+    }
     rp->kx = kx;
     rp->ky = ky;
     rp->kz = kz;
@@ -158,6 +172,7 @@ static inline void ray_setup_woop(struct ray_pre *rp)
     rp->sz = 1.0f / d[kz];
     rp->o_scale = max_f(fabsf(rp->o[0]), max_f(fabsf(rp->o[1]), fabsf(rp->o[2]))) * fabsf(rp->sz);
 }
+static inline void ray_setup_woop(struct ray_pre *rp) { ray_setup_woop_as(rp, false); }
 
 /* Slab test (Kay, Kajiya 1986, "Ray Tracing Complex Scenes") in the (min - o) * inv_d form of
  * PBRT 4e, ch. 6, "Conservative Ray-Bounds Intersections":

@@ -1259,7 +1259,7 @@ static inline void wide_ray8_box(const struct bvh *bvh, const struct wide_ray *w
 static inline void wide_ray8_woop(struct wide_ray8 *v)
 {
     struct ray_pre *rp = v->rp;
-    ray_setup_woop(rp);
+    ray_setup_woop_as(rp, true); /* single rays: incoherent ones gain (docs/bvh.md) */
     v->k[0] = rp->kx;
     v->k[1] = rp->ky;
     v->k[2] = rp->kz;
