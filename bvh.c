@@ -453,10 +453,25 @@ static void slab_grid_init(struct slab_grid *g, const struct box *bounds)
     }
 }
 
+/* Clamped in float before the conversion: a vertex of a clipped ref can lie farther from the
+ * node than an int can count slabs (and NaN goes to 0), so the slab is defined and monotone in x. */
 static int slab_of(const struct slab_grid *g, int a, float x)
 {
-    int k = (int)((x - g->lo[a]) * g->inv_step[a]);
-    return k < 0 ? 0 : k >= BVH_N_SPATIAL_BINS ? BVH_N_SPATIAL_BINS - 1 : k;
+    float t = (x - g->lo[a]) * g->inv_step[a];
+    t = t > 0.0f ? t : 0.0f;
+    return (int)(t < (float)(BVH_N_SPATIAL_BINS - 1) ? t : (float)(BVH_N_SPATIAL_BINS - 1));
+}
+
+/* slab_of on the three axes at once (lane a: axis a; lane 3 unused): the same operations, so the
+ * same slabs.  lo and inv are g's lo and inv_step as vectors. */
+static inline v4i slabs_of(v4f lo, v4f inv, v4f x)
+{
+    v4f t = (x - lo) * inv;
+    for (int i = 0; i < 4; i++) {
+        t[i] = t[i] > 0.0f ? t[i] : 0.0f;
+        t[i] = t[i] < (float)(BVH_N_SPATIAL_BINS - 1) ? t[i] : (float)(BVH_N_SPATIAL_BINS - 1);
+    }
+    return __builtin_convertvector(t, v4i);
 }
 
 /* The plane between slabs k - 1 and k of axis a. */
@@ -538,7 +553,7 @@ static void spatial_bins_clear(struct spatial_bins *sb)
  * float without widening: these boxes only estimate the SAH; the refs themselves are clipped
  * conservatively by split_tri_box. */
 static void chop_into_bins(struct spatial_bin *bins, const struct slab_grid *g, int a, int first,
-                           int last, const v4f v[3], v4f lo, v4f hi)
+                           int last, const v4f v[3], const v4i v_slab[3], v4f lo, v4f hi)
 {
     int ia = 0;
     int ib = 1;
@@ -560,40 +575,40 @@ static void chop_into_bins(struct spatial_bin *bins, const struct slab_grid *g, 
     const v4f A = v[ia];
     const v4f B = v[ib];
     const v4f C = v[ic];
-    v4f part_lo[BVH_N_SPATIAL_BINS];
-    v4f part_hi[BVH_N_SPATIAL_BINS];
+    /* the slabs from first to last in one pass: slab k's part is bounded by the crossings on
+     * planes k and k + 1 (the previous step's and this one's) and by the vertices inside it,
+     * which, sorted along a, fall into slabs in order (slab_of is monotone) */
+    const v4f *vert[3] = {&v[ia], &v[ib], &v[ic]};
+    const int vert_slab[3] = {v_slab[ia][a], v_slab[ib][a], v_slab[ic][a]};
+    int next_vert = 0;
+    v4f cross_lo = {INFINITY, INFINITY, INFINITY, 0.0f}; /* plane k's crossings, none at first */
+    v4f cross_hi = {-INFINITY, -INFINITY, -INFINITY, 0.0f};
     for (int k = first; k <= last; k++) {
-        part_lo[k] = (v4f){INFINITY, INFINITY, INFINITY, 0.0f};
-        part_hi[k] = (v4f){-INFINITY, -INFINITY, -INFINITY, 0.0f};
-    }
-    /* each plane's two crossings bound the slabs on both sides of it */
-    for (int k = first + 1; k <= last; k++) {
-        float p = slab_plane(g, a, k);
-        float s_ac = C[a] > A[a] ? (p - A[a]) / (C[a] - A[a]) : 0.0f;
-        s_ac = s_ac < 0.0f ? 0.0f : s_ac > 1.0f ? 1.0f : s_ac;
-        v4f x = A + (C - A) * s_ac;
-        const v4f U = p <= B[a] ? A : B; /* the other edge crossed: AB or BC */
-        const v4f W = p <= B[a] ? B : C;
-        float s_uw = W[a] > U[a] ? (p - U[a]) / (W[a] - U[a]) : 0.0f;
-        s_uw = s_uw < 0.0f ? 0.0f : s_uw > 1.0f ? 1.0f : s_uw;
-        v4f y = U + (W - U) * s_uw;
-        v4f p_lo = v4_min(x, y);
-        v4f p_hi = v4_max(x, y);
-        part_lo[k - 1] = v4_min(part_lo[k - 1], p_lo);
-        part_hi[k - 1] = v4_max(part_hi[k - 1], p_hi);
-        part_lo[k] = v4_min(part_lo[k], p_lo);
-        part_hi[k] = v4_max(part_hi[k], p_hi);
-    }
-    /* each vertex bounds its own slab */
-    for (int j = 0; j < 3; j++) {
-        int k = slab_of(g, a, v[j][a]);
-        k = k < first ? first : k > last ? last : k;
-        part_lo[k] = v4_min(part_lo[k], v[j]);
-        part_hi[k] = v4_max(part_hi[k], v[j]);
-    }
-    for (int k = first; k <= last; k++) {
-        v4f l = v4_max(part_lo[k], lo); /* cut to the ref's box */
-        v4f h = v4_min(part_hi[k], hi);
+        v4f part_lo = cross_lo;
+        v4f part_hi = cross_hi;
+        for (; next_vert < 3; next_vert++) {
+            if (vert_slab[next_vert] > k && k < last)
+                break;
+            part_lo = v4_min(part_lo, *vert[next_vert]);
+            part_hi = v4_max(part_hi, *vert[next_vert]);
+        }
+        if (k < last) { /* plane k + 1's two crossings bound slabs k and k + 1 */
+            float p = slab_plane(g, a, k + 1);
+            float s_ac = C[a] > A[a] ? (p - A[a]) / (C[a] - A[a]) : 0.0f;
+            s_ac = s_ac < 0.0f ? 0.0f : s_ac > 1.0f ? 1.0f : s_ac;
+            v4f x = A + (C - A) * s_ac;
+            const v4f U = p <= B[a] ? A : B; /* the other edge crossed: AB or BC */
+            const v4f W = p <= B[a] ? B : C;
+            float s_uw = W[a] > U[a] ? (p - U[a]) / (W[a] - U[a]) : 0.0f;
+            s_uw = s_uw < 0.0f ? 0.0f : s_uw > 1.0f ? 1.0f : s_uw;
+            v4f y = U + (W - U) * s_uw;
+            cross_lo = v4_min(x, y);
+            cross_hi = v4_max(x, y);
+            part_lo = v4_min(part_lo, cross_lo);
+            part_hi = v4_max(part_hi, cross_hi);
+        }
+        v4f l = v4_max(part_lo, lo); /* cut to the ref's box */
+        v4f h = v4_min(part_hi, hi);
         if (l[0] <= h[0] && l[1] <= h[1] && l[2] <= h[2]) {
             struct box *b = &bins[k].box;
             v4_store(b->min, v4_min(l, v4_load(b->min)));
@@ -606,17 +621,22 @@ static void chop_into_bins(struct spatial_bin *bins, const struct slab_grid *g, 
 static void spatial_bins_fill(struct spatial_bins *sb, const struct build_ctx *ctx, uint32_t begin,
                               uint32_t end, const struct slab_grid *g)
 {
+    const v4f g_lo = {g->lo[0], g->lo[1], g->lo[2], 0.0f};
+    const v4f g_inv = {g->inv_step[0], g->inv_step[1], g->inv_step[2], 0.0f};
     for (uint32_t i = begin; i < end; i++) {
         const struct prim_ref *r = &ctx->refs[i];
         const v4f lo = ref_lo(r);
         const v4f hi = ref_hi(r);
+        const v4i first_v = slabs_of(g_lo, g_inv, lo);
+        const v4i last_v = slabs_of(g_lo, g_inv, hi);
         bool have_tri = false;
         v4f v[3];
+        v4i v_slab[3];
         for (int a = 0; a < 3; a++) {
             if (g->inv_step[a] == 0.0f)
                 continue;
-            int first = slab_of(g, a, r->min[a]);
-            int last = slab_of(g, a, r->max[a]);
+            int first = first_v[a];
+            int last = last_v[a];
             sb->b[a][first].enter++;
             sb->b[a][last].exit++;
             if (first == last) {
@@ -629,10 +649,11 @@ static void spatial_bins_fill(struct spatial_bins *sb, const struct build_ctx *c
                 for (int k = 0; k < 3; k++) {
                     vec3 p = ctx->positions[ctx->indices[3 * (size_t)r->prim_idx + (size_t)k]];
                     v[k] = (v4f){p.x, p.y, p.z, 0.0f};
+                    v_slab[k] = slabs_of(g_lo, g_inv, v[k]);
                 }
                 have_tri = true;
             }
-            chop_into_bins(sb->b[a], g, a, first, last, v, lo, hi);
+            chop_into_bins(sb->b[a], g, a, first, last, v, v_slab, lo, hi);
         }
     }
 }
