@@ -555,23 +555,13 @@ static void spatial_bins_clear(struct spatial_bins *sb)
 static void chop_into_bins(struct spatial_bin *bins, const struct slab_grid *g, int a, int first,
                            int last, const v4f v[3], const v4i v_slab[3], v4f lo, v4f hi)
 {
-    int ia = 0;
-    int ib = 1;
-    int ic = 2;
-    if (v[ib][a] < v[ia][a]) {
-        ia = 1;
-        ib = 0;
-    }
-    if (v[ic][a] < v[ib][a]) {
-        int t = ic;
-        ic = ib;
-        ib = t;
-        if (v[ib][a] < v[ia][a]) {
-            t = ib;
-            ib = ia;
-            ia = t;
-        }
-    }
+    /* the vertices sorted along a, stably, by their ranks (no branches: the order is random) */
+    const float x0 = v[0][a], x1 = v[1][a], x2 = v[2][a];
+    int order[3];
+    order[(x1 < x0) + (x2 < x0)] = 0;
+    order[(x0 <= x1) + (x2 < x1)] = 1;
+    order[(x0 <= x2) + (x1 <= x2)] = 2;
+    const int ia = order[0], ib = order[1], ic = order[2];
     const v4f A = v[ia];
     const v4f B = v[ib];
     const v4f C = v[ic];
@@ -609,7 +599,10 @@ static void chop_into_bins(struct spatial_bin *bins, const struct slab_grid *g, 
         }
         v4f l = v4_max(part_lo, lo); /* cut to the ref's box */
         v4f h = v4_min(part_hi, hi);
-        if (l[0] <= h[0] && l[1] <= h[1] && l[2] <= h[2]) {
+        v4i nonempty = l <= h; /* lane 3: 0 <= 0 */
+        uint64_t half[2];
+        memcpy(half, &nonempty, sizeof half);
+        if ((half[0] & half[1]) == UINT64_MAX) { /* all four lanes: one test, not three */
             struct box *b = &bins[k].box;
             v4_store(b->min, v4_min(l, v4_load(b->min)));
             v4_store(b->max, v4_max(h, v4_load(b->max)));
