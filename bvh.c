@@ -2142,6 +2142,32 @@ static void compute_stats(struct bvh *bvh)
 
 struct bvh_stats bvh_get_stats(const struct bvh *bvh) { return bvh->stats; }
 
+uint64_t bvh_hash_bytes(uint64_t h, const void *p, size_t n)
+{
+    const unsigned char *c = p;
+    for (size_t i = 0; i < n; i += 8) {
+        uint64_t w = 0;
+        memcpy(&w, c + i, n - i < 8 ? n - i : 8);
+        h = (h ^ w) * 0x9fb21c651e98df25ull; /* a multiply-xorshift mix per word */
+        h ^= h >> 29;
+    }
+    return h;
+}
+
+uint64_t bvh_layout_hash(const struct bvh *bvh)
+{
+    uint64_t h = bvh_hash_bytes(0x9e3779b97f4a7c15ull, &bvh->n_tris, sizeof bvh->n_tris);
+    if (bvh->nodes && bvh->n_nodes > 0) { /* the binary layout; nodes[1] is never written */
+        h = bvh_hash_bytes(h, &bvh->nodes[0], sizeof *bvh->nodes);
+        if (bvh->n_nodes > 2)
+            h = bvh_hash_bytes(h, &bvh->nodes[2], sizeof *bvh->nodes * (bvh->n_nodes - 2));
+        if (bvh->tris)
+            h = bvh_hash_bytes(h, bvh->tris, sizeof *bvh->tris * bvh->n_refs);
+        h = bvh_hash_bytes(h, bvh->prim_idx, sizeof *bvh->prim_idx * bvh->n_refs);
+    }
+    return bvh_wide_hash(bvh, h);
+}
+
 void bvh_free(struct bvh *bvh)
 {
     if (!bvh)

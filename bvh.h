@@ -162,6 +162,11 @@ void bvh_occluded_stream(const struct bvh *bvh, const struct ray *rays, const ui
 
 struct bvh_stats bvh_get_stats(const struct bvh *bvh);
 
+/* A 64-bit hash of every byte of the layouts the BVH carries (nodes, triangles, indices), which
+ * two builds share only when they made the same trees: how a change to the build shows it kept
+ * them (bench/raybench --build-only prints it).  Not a checksum against corruption. */
+uint64_t bvh_layout_hash(const struct bvh *bvh);
+
 /* "avx2" or "scalar": the kernels bvh_wide.c was compiled with. */
 const char *bvh_simd_name(void);
 

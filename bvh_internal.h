@@ -269,6 +269,11 @@ void bvh_wide_intersect_stream(const struct bvh *bvh, const struct ray *rays, co
 void bvh_wide_occluded_stream(const struct bvh *bvh, const struct ray *rays, const uint32_t *from,
                               size_t n, bool *occluded);
 
+/* h with n bytes of p mixed in, 8 at a time (the last word zero-padded), for bvh_layout_hash. */
+uint64_t bvh_hash_bytes(uint64_t h, const void *p, size_t n);
+/* h with the wide layout mixed in (bvh_layout_hash): nodes, leaf rows and indices. */
+uint64_t bvh_wide_hash(const struct bvh *bvh, uint64_t h);
+
 /* Brute force over the wide leaves (bvh_brute_step on each triangle, in stored order), for a
  * BVH that did not keep the binary layout. */
 void bvh_wide_brute(const struct bvh *bvh, const struct ray_pre *rp, float t_min, uint32_t from,

@@ -2720,3 +2720,14 @@ void bvh_wide_brute(const struct bvh *bvh, const struct ray_pre *rp, float t_min
         }
     }
 }
+
+uint64_t bvh_wide_hash(const struct bvh *bvh, uint64_t h)
+{
+    if (!bvh->wide)
+        return h;
+    h = bvh_hash_bytes(h, bvh->wide, sizeof *bvh->wide * bvh->n_wide);
+    /* the leaf rows without the 8 floats of padding after them */
+    h = bvh_hash_bytes(h, bvh->leaf_tris, 9 * sizeof *bvh->leaf_tris * bvh->n_wide_tris);
+    h = bvh_hash_bytes(h, bvh->wide_prim_idx, sizeof *bvh->wide_prim_idx * bvh->n_wide_tris);
+    return bvh_hash_bytes(h, &bvh->bounds, sizeof bvh->bounds);
+}

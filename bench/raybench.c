@@ -425,10 +425,10 @@ int main(int argc, char **argv)
         struct bvh_stats bs = bvh_get_stats(bvh);
         printf("{\"model\":\"%s\",\"triangles\":%u,\"threads\":%d,\"build_ms\":%.3f,"
                "\"convert_ms\":%.3f,\"build_runs\":%d,\"bytes_per_tri\":%.2f,\"sah_cost\":%.4f,"
-               "\"peak_rss_mib\":%.1f}\n",
+               "\"layout_hash\":\"%016llx\",\"peak_rss_mib\":%.1f}\n",
                opt.model, mesh.n_tris, opt.threads, ms, bs.convert_ms, opt.build_runs,
                mesh.n_tris ? (double)bs.bytes / (double)mesh.n_tris : 0.0, bs.sah_cost,
-               (double)bench_peak_rss_kib() / 1024.0);
+               (unsigned long long)bvh_layout_hash(bvh), (double)bench_peak_rss_kib() / 1024.0);
         status = 0;
         goto done;
     }

@@ -1158,6 +1158,8 @@ Test(bvh, build_is_independent_of_thread_count)
         cr_assert_eq(st.n_wide_nodes, st_ref.n_wide_nodes);
         cr_assert_eq(st.n_wide_leaves, st_ref.n_wide_leaves);
         cr_assert_eq(st.bytes, st_ref.bytes);
+        cr_assert_eq(bvh_layout_hash(bvh), bvh_layout_hash(ref), "%d threads: every byte",
+                     n_threads);
         /* rays aimed at every 5th triangle: the wide layout, which the threads write by
          * subtrees, gives the same hits as the one written by one thread */
         for (uint32_t k = 0; k < m.n_tris; k += 5) {
@@ -1187,6 +1189,31 @@ Test(bvh, build_is_independent_of_thread_count)
         bvh_free(bvh);
     }
     bvh_free(ref);
+    mesh_free(&m);
+}
+
+/* bvh_layout_hash, which the test above and bench/raybench rely on to say two builds made the
+ * same trees: the same build gives the same hash, and a BVH without the binary layout, or a wide
+ * layout that differs by one vertex, another. */
+Test(bvh, layout_hash_tells_trees_apart)
+{
+    struct mesh m = {0};
+    make_soup(&m, 3000, 7);
+    struct bvh *a = build(&m);
+    struct bvh *b = build(&m);
+    cr_assert_eq(bvh_layout_hash(a), bvh_layout_hash(b));
+    struct bvh_build_options wide_only = {1, BVH_LAYOUT_WIDE, BVH_QUALITY_DEFAULT};
+    struct bvh *c = bvh_build_with(m.positions, m.indices, m.n_tris, &wide_only);
+    cr_assert_not_null(c);
+    cr_assert_neq(bvh_layout_hash(c), bvh_layout_hash(a));
+    m.positions[m.indices[0]].x = nextafterf(m.positions[m.indices[0]].x, INFINITY);
+    struct bvh *d = bvh_build_with(m.positions, m.indices, m.n_tris, &wide_only);
+    cr_assert_not_null(d);
+    cr_assert_neq(bvh_layout_hash(d), bvh_layout_hash(c), "one vertex moved by one float step");
+    bvh_free(a);
+    bvh_free(b);
+    bvh_free(c);
+    bvh_free(d);
     mesh_free(&m);
 }
 
