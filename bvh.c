@@ -2157,7 +2157,8 @@ uint64_t bvh_hash_bytes(uint64_t h, const void *p, size_t n)
 uint64_t bvh_layout_hash(const struct bvh *bvh)
 {
     uint64_t h = bvh_hash_bytes(0x9e3779b97f4a7c15ull, &bvh->n_tris, sizeof bvh->n_tris);
-    if (bvh->nodes && bvh->n_nodes > 0) { /* the binary layout; nodes[1] is never written */
+    /* the binary layout; nodes[1], unused, holds whatever aligned_alloc left there */
+    if (bvh->nodes && bvh->n_nodes > 0) {
         h = bvh_hash_bytes(h, &bvh->nodes[0], sizeof *bvh->nodes);
         if (bvh->n_nodes > 2)
             h = bvh_hash_bytes(h, &bvh->nodes[2], sizeof *bvh->nodes * (bvh->n_nodes - 2));
