@@ -458,11 +458,15 @@ static void slab_grid_init(struct slab_grid *g, const struct box *bounds)
 
 /* Clamped in float before the conversion: a vertex of a clipped ref can lie farther from the
  * node than an int can count slabs (and NaN goes to 0), so the slab is defined and monotone in x. */
+static inline float slab_clamp(float t)
+{
+    t = t > 0.0f ? t : 0.0f;
+    return t < (float)(BVH_N_SPATIAL_BINS - 1) ? t : (float)(BVH_N_SPATIAL_BINS - 1);
+}
+
 static int slab_of(const struct slab_grid *g, int a, float x)
 {
-    float t = (x - g->lo[a]) * g->inv_step[a];
-    t = t > 0.0f ? t : 0.0f;
-    return (int)(t < (float)(BVH_N_SPATIAL_BINS - 1) ? t : (float)(BVH_N_SPATIAL_BINS - 1));
+    return (int)slab_clamp((x - g->lo[a]) * g->inv_step[a]);
 }
 
 /* slab_of on the three axes at once (lane a: axis a; lane 3 unused): the same operations, so the
@@ -470,10 +474,8 @@ static int slab_of(const struct slab_grid *g, int a, float x)
 static inline v4i slabs_of(v4f lo, v4f inv, v4f x)
 {
     v4f t = (x - lo) * inv;
-    for (int i = 0; i < 4; i++) {
-        t[i] = t[i] > 0.0f ? t[i] : 0.0f;
-        t[i] = t[i] < (float)(BVH_N_SPATIAL_BINS - 1) ? t[i] : (float)(BVH_N_SPATIAL_BINS - 1);
-    }
+    for (int i = 0; i < 4; i++)
+        t[i] = slab_clamp(t[i]);
     return __builtin_convertvector(t, v4i);
 }
 
