@@ -147,10 +147,9 @@ _Static_assert(__builtin_popcount(SAMPLE_BLOCK_REQUESTS) == SAMPLE_REQUESTS_PER_
  * Sobol': stateless hashes of (seed, pixel_idx, sample_idx, dim, set_spp).  What the samples of
  * one pixel share (the hashes of the pixel's seeds) is computed once by sample_start_pixel; each
  * sample then starts with sample_start_index, which for Sobol' also computes the whole joint
- * point at once (a lane per dimension) and the first padding fill (the first three bounces'
- * requests, their BSDF directions from the path point), so that reading those dimensions is a
- * load.  A sampler holds no pointer: copying
- * one copies the sample. */
+ * point and the path point at once (a lane per dimension) and the first padding fill (the first
+ * three bounces' requests, their BSDF directions from the path point), so that reading those
+ * dimensions is a load.  A sampler holds no pointer: copying one copies the sample. */
 struct sampler {
     enum sampler_kind kind;
     uint64_t seed;
@@ -176,10 +175,11 @@ struct sampler {
     /* Sobol', per sample */
     uint32_t sample_idx_rev;                 /* sample_idx bit-reversed: the padding's input */
     float joint_u[SAMPLE_SOBOL_JOINT_LANES]; /* the joint point, a value per dimension */
+    float path_u[SAMPLE_PAD_LANES];          /* the path point, likewise */
     uint32_t pad_dim0;                       /* first dimension held, or SAMPLE_PAD_NONE */
     float pad_x[SAMPLE_PAD_SPAN_STORED];     /* the padding request at pad_dim0 + k, where */
     float pad_y[SAMPLE_PAD_SPAN_STORED];     /* sample_pad_holds: x, and y of a 2D request */
-};                                           /* 744 bytes */
+};                                           /* 776 bytes */
 
 /* Starts the sample sample_idx of pixel pixel_idx at dimension 0, with set_spp = 0: the
  * stratified sampler then has no strata to fill and gives independent hashed uniforms. */

@@ -16,9 +16,11 @@
 #if defined(__GNUC__)
 #define ALWAYS_INLINE inline __attribute__((always_inline))
 #define COLD __attribute__((noinline, cold))
+#define NOINLINE __attribute__((noinline))
 #else
 #define ALWAYS_INLINE inline
 #define COLD
+#define NOINLINE
 #endif
 
 #define MCPT_PI 3.14159265358979323846f
