@@ -758,6 +758,19 @@ vec2 sample_2d_compute(struct sampler *s, uint32_t dim)
     return (vec2){x, y};
 }
 
+vec2 sample_ahead_compute(struct sampler *s, uint32_t dim, bool is_2d)
+{
+    if (s->kind == SAMPLER_INDEPENDENT) {
+        /* the stream from the current dimension on, one value per dimension */
+        struct pcg32 ahead = s->rng;
+        sample_pcg32_advance(&ahead, dim - s->dim);
+        float x = sample_pcg32_float(&ahead);
+        return (vec2){x, is_2d ? sample_pcg32_float(&ahead) : 0.0f};
+    }
+    /* stratified and Sobol' values are functions of the dimension alone */
+    return is_2d ? sample_2d_compute(s, dim) : (vec2){sample_1d_compute(s, dim), 0.0f};
+}
+
 /* ---- warps ---- */
 
 /* cos and sin of phi in [-pi/4, pi/4] by the minimax polynomials of the Cephes library's cosf

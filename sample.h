@@ -247,6 +247,28 @@ static inline vec2 sample_2d(struct sampler *s)
     return sample_2d_compute(s, dim);
 }
 
+/* sample_1d_ahead and sample_2d_ahead's out-of-line part. */
+vec2 sample_ahead_compute(struct sampler *s, uint32_t dim, bool is_2d);
+
+/* The value(s) that sample_1d / sample_2d will return at dimension dim >= the current one,
+ * read ahead: the current dimension does not move, so the reads before dim give what they
+ * would have.  A path reads its BSDF sample this way before its light sample, whose dimensions
+ * come first, so that the core overlaps the two (trace.c).  The independent sampler jumps a copy
+ * of its stream ahead (sample_pcg32_advance); the others compute any dimension directly. */
+static inline float sample_1d_ahead(struct sampler *s, uint32_t dim)
+{
+    if (s->kind == SAMPLER_SOBOL && dim >= SAMPLE_SOBOL_JOINT_DIMS && sample_pad_holds(s, dim))
+        return s->pad_x[dim - s->pad_dim0];
+    return sample_ahead_compute(s, dim, false).x;
+}
+
+static inline vec2 sample_2d_ahead(struct sampler *s, uint32_t dim)
+{
+    if (s->kind == SAMPLER_SOBOL && dim >= SAMPLE_SOBOL_JOINT_DIMS && sample_pad_holds(s, dim))
+        return (vec2){s->pad_x[dim - s->pad_dim0], s->pad_y[dim - s->pad_dim0]};
+    return sample_ahead_compute(s, dim, true);
+}
+
 /* 64-bit mixing hash (SplitMix64 finaliser, Steele et al. 2014). */
 uint64_t sample_hash64(uint64_t x);
 

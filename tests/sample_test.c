@@ -212,6 +212,44 @@ Test(sample, pixel_start_matches_sample_start)
     }
 }
 
+/* Reading ahead (sample_1d_ahead, sample_2d_ahead: the path loop's BSDF sample before its light
+ * sample) gives the values the reads in dimension order give, and leaves the reads before it,
+ * and after a jump past it, as they were: bounce after bounce, for every sampler, with a sample
+ * that ends its path at a deep bounce (Sobol' fills past the kept ones) and one stratified set
+ * size. */
+Test(sample, reads_ahead_match_reads_in_order)
+{
+    static const uint32_t samples[] = {0, 3, 255, 4099};
+    for (int k = 0; k < SAMPLER_COUNT; k++) {
+        for (size_t i = 0; i < sizeof samples / sizeof samples[0]; i++) {
+            struct sampler ahead, in_order;
+            sample_start_spp(&ahead, KINDS[k], 7u, 1234u, samples[i], 16u);
+            sample_start_spp(&in_order, KINDS[k], 7u, 1234u, samples[i], 16u);
+            for (uint32_t b = 0; b < 20; b++) {
+                uint32_t dim0 = SAMPLE_DIM_BOUNCE0 + b * SAMPLE_DIMS_PER_BOUNCE;
+                float lobe = sample_1d_ahead(&ahead, dim0 + SAMPLE_BOUNCE_BSDF_LOBE);
+                vec2 dir = sample_2d_ahead(&ahead, dim0 + SAMPLE_BOUNCE_BSDF_DIR);
+                sample_set_dim(&ahead, dim0 + SAMPLE_BOUNCE_LIGHT_CHOICE);
+                sample_set_dim(&in_order, dim0 + SAMPLE_BOUNCE_LIGHT_CHOICE);
+                float choice_a = sample_1d(&ahead), choice_b = sample_1d(&in_order);
+                vec2 light_a = sample_2d(&ahead), light_b = sample_2d(&in_order);
+                float lobe_b = sample_1d(&in_order);
+                vec2 dir_b = sample_2d(&in_order);
+                sample_set_dim(&ahead, dim0 + SAMPLE_BOUNCE_BSDF_DIR + 2);
+                float rr_a = sample_1d(&ahead), rr_b = sample_1d(&in_order);
+                const char *name = sample_sampler_name(KINDS[k]);
+                cr_assert(choice_a == choice_b && light_a.x == light_b.x && light_a.y == light_b.y,
+                          "%s sample %u bounce %u: the light sample", name, samples[i], b);
+                cr_assert(lobe == lobe_b && dir.x == dir_b.x && dir.y == dir_b.y,
+                          "%s sample %u bounce %u: the BSDF sample read ahead", name, samples[i],
+                          b);
+                cr_assert(rr_a == rr_b, "%s sample %u bounce %u: the roulette", name, samples[i],
+                          b);
+            }
+        }
+    }
+}
+
 /* The Sobol' sampler computes its padded requests many at a time (sample.c, pad_block: three
  * bounce blocks' requests a fill, as lanes placed by shuffles), and per pixel keeps the seeds
  * of the first fills.  Whatever the order of reads (every bounce block in turn, 1D and 2D reads
