@@ -512,7 +512,8 @@ static void sobol_path_point(const struct sampler *s, float u[SAMPLE_PAD_LANES])
 /* The joint point: SAMPLE_SOBOL_JOINT_DIMS dimensions (rounded up to whole vectors), and the
  * path point beside it for the first fill: two independent chains of dependent multiplies and
  * table loads that the core overlaps, where the path point computed in the fill was the fill's
- * longest chain (the sampler 5.5% of a Cornell profile with it there, 4.5% here). */
+ * longest chain (the sampler 5.5% of a Cornell profile with it there, 4.4% here: medians of 5,
+ * docs/performance.md). */
 static void sobol_joint_point(struct sampler *s)
 {
     s->sample_idx_rev = reverse_bits32(s->sample_idx);
