@@ -902,6 +902,12 @@ static ALWAYS_INLINE void triangle_plane(const vec3 p[3], struct triangle_plane 
     tp->e2 = d3_sub(d3(p[2]), d3(p[0]));
     tp->c = d3_cross(tp->e1, tp->e2);
     tp->ng = plane_normal_c(tp->e1, tp->e2, tp->c, &tp->area2, &tp->eta);
+    /* surely_inside's bound per unit of E: 7 sqrt(3) max |v_i,k| / |c|, raised by 2^-18 past
+     * its own roundings and the product with E (a few units of 2^-53) */
+    double k = (EDGE_MARGIN_E + EDGE_MARGIN_N) * 1.7320508075688774 * (1.0 + 0x1p-18) / tp->area2;
+    tp->inside_k[0] = k * d3_max(d3_abs(d3_sub(tp->e2, tp->e1)));
+    tp->inside_k[1] = k * d3_max(d3_abs(tp->e2));
+    tp->inside_k[2] = k * d3_max(d3_abs(tp->e1));
 }
 
 void shape_triangle_plane(const vec3 p[3], struct triangle_plane *tp) { triangle_plane(p, tp); }
@@ -917,14 +923,13 @@ static void triangle_margins(const struct triangle_plane *tp, struct dvec3 e, do
 }
 
 /* b_i >= eps_i for every i, decided from bounds alone (most points are far from every edge):
- * m . e and n . e are at most E = sum e_k (rounded_error_sum), and |v| <= sqrt(3) max |v_k|, so
- * eps_i <= 7 sqrt(3) E max |v_i,k| / |c|.  False says only that triangle_margins must decide. */
+ * m . e and n . e are at most E = sum e_k (rounded_error_sum), and |v| <= sqrt(3) max |v_i,k|,
+ * so eps_i <= 7 sqrt(3) E max |v_i,k| / |c| = E inside_k[i] (triangle_plane keeps the factors,
+ * so that no division waits here).  False says only that triangle_margins must decide. */
 static bool surely_inside(const struct triangle_plane *tp, double E, const double b[3])
 {
-    double k = (EDGE_MARGIN_E + EDGE_MARGIN_N) * 1.7320508075688774 * E / tp->area2 *
-               (1.0 + 0x1p-18);
-    return b[0] >= k * d3_max(d3_abs(d3_sub(tp->e2, tp->e1))) &&
-           b[1] >= k * d3_max(d3_abs(tp->e2)) && b[2] >= k * d3_max(d3_abs(tp->e1));
+    return b[0] >= E * tp->inside_k[0] && b[1] >= E * tp->inside_k[1] &&
+           b[2] >= E * tp->inside_k[2];
 }
 
 /* Barycentrics b moved the least way into b_i >= eps_i (sum eps < 1): each b_i below its margin

@@ -84,7 +84,7 @@ struct shape_sample {
 };
 
 /* What every point of a triangle shares, computed in double once (shape_triangle_plane) for a
- * triangle that emits (the light table keeps one per emitting triangle, 120 bytes): sampling
+ * triangle that emits (the light table keeps one per emitting triangle, 144 bytes): sampling
  * then skips a cross product, a square root and a division per sample, and gives the same bits
  * as shape_triangle_sample and shape_triangle_pdf.  trace.c keeps one per triangle of a small
  * scene for its hits (shape_triangle_plane_surface). */
@@ -96,6 +96,7 @@ struct triangle_plane {
     vec3 ng;         /* unit normal, c / |c| rounded to float; 0 when degenerate */
     double area2;    /* |c|, twice the area */
     double eta;      /* bound on the error of each component of ng */
+    double inside_k[3]; /* surely_inside's factors (shape.c), per edge opposite corner i */
 };
 void shape_triangle_plane(const vec3 p[3], struct triangle_plane *tp);
 /* shape_triangle_surface of the triangle whose plane is *tp: the same bits. */
