@@ -191,7 +191,7 @@ struct light_table *light_table_build(const struct scene *scene, struct mcpt_err
             lt->tri_light[l->prim_idx] = i;
             vec3 p[3];
             triangle_corners(scene, l->prim_idx, p);
-            shape_triangle_plane(p, &lt->planes[i]);
+            shape_triangle_plane(p, scene_tri_groove(scene, l->prim_idx), &lt->planes[i]);
         } else if (l->kind == LIGHT_QUAD)
             lt->quad_light[l->prim_idx] = i;
         else if (l->kind == LIGHT_SPHERE)

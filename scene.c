@@ -1958,6 +1958,238 @@ static bool parse_line(struct parser *ps, char *line)
     return do_statement(ps, &st);
 }
 
+/* ---- grooves: the margins of edges at acute concave angles ---------------------------------- */
+
+/* A point near an edge is pulled inside its triangle by a margin (shape.c, edge_margin) that keeps
+ * the spawned origin in front of a neighbour meeting the edge at 80 to 100 degrees; at a sharper
+ * groove the origin's push along the normal heads into the neighbour, and a closed wedge of 30
+ * degrees let sky in (docs/theory.md, "Self-intersection").  The margin's normal term needs a
+ * factor g > 5 cot(phi) there; an edge shared by two triangles of one mesh (the same two vertex
+ * indices) knows its angle, so the load gives each such edge g = 6 cot(phi), at most
+ * GROOVE_MAX_FACTOR.  Faces folded onto each other (phi below GROOVE_MIN_ANGLE) close no
+ * groove. */
+#define GROOVE_MAX_FACTOR 1e4
+#define GROOVE_MIN_ANGLE 1e-7 /* radians */
+
+static double groove_factor(double phi)
+{
+    if (!(phi > GROOVE_MIN_ANGLE))
+        return 1.0;
+    double g = 6.0 / tan(phi); /* phi >= pi / 2: <= 0 */
+    return g > GROOVE_MAX_FACTOR ? GROOVE_MAX_FACTOR : g > 1.0 ? g : 1.0;
+}
+
+/* The part of corner c's position perpendicular to the edge from a to b (double). */
+static void groove_arm(const vec3 *pos, uint32_t a, uint32_t b, uint32_t c, double w[3])
+{
+    double d[3] = {(double)pos[b].x - pos[a].x, (double)pos[b].y - pos[a].y,
+                   (double)pos[b].z - pos[a].z};
+    double q[3] = {(double)pos[c].x - pos[a].x, (double)pos[c].y - pos[a].y,
+                   (double)pos[c].z - pos[a].z};
+    double dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    double s = (q[0] * d[0] + q[1] * d[1] + q[2] * d[2]) / dd;
+    for (int k = 0; k < 3; k++)
+        w[k] = q[k] - s * d[k];
+}
+
+static bool set_groove(struct scene *sc, uint32_t e, double g)
+{
+    if (!(g > 1.0))
+        return true;
+    if (!sc->tri_groove) {
+        sc->tri_groove = malloc((size_t)sc->n_tris * sizeof *sc->tri_groove);
+        if (!sc->tri_groove)
+            return false;
+        for (uint32_t i = 0; i < sc->n_tris; i++)
+            sc->tri_groove[i][0] = sc->tri_groove[i][1] = sc->tri_groove[i][2] = 1.0f;
+    }
+    float *slot = &sc->tri_groove[e / 3][e % 3];
+    float gf = (float)g * (1.0f + 0x1p-20f); /* not below g after the rounding */
+    if (gf > *slot)
+        *slot = gf;
+    return true;
+}
+
+struct groove_arm {
+    double angle; /* about the edge, from the first arm */
+    uint32_t e;   /* triangle * 3 + the corner opposite the edge */
+};
+
+static int groove_arm_cmp(const void *x, const void *y)
+{
+    double a = ((const struct groove_arm *)x)->angle, b = ((const struct groove_arm *)y)->angle;
+    return (a > b) - (a < b);
+}
+
+/* An edge's other vertex and the triangle edge it is (triangle * 3 + the opposite corner). */
+struct groove_ent {
+    uint32_t hi;
+    uint32_t e;
+};
+
+static int groove_ent_cmp(const void *x, const void *y)
+{
+    uint32_t a = ((const struct groove_ent *)x)->hi, b = ((const struct groove_ent *)y)->hi;
+    return (a > b) - (a < b);
+}
+
+/* The faces around one edge (lo, ent[0].hi), ent[0 .. n_ent): each pair of faces that are
+ * neighbours in angle about the edge closes a groove of the angle between them. */
+static bool edge_grooves(struct scene *sc, uint32_t lo, const struct groove_ent *ent, size_t n_ent,
+                         struct groove_arm **arms, size_t *cap)
+{
+    const vec3 *pos = sc->positions;
+    uint32_t hi = ent[0].hi;
+    if (n_ent == 2) { /* the usual edge: cot(phi) = (w1 . w2) / |w1 x w2| */
+        double w1[3], w2[3];
+        groove_arm(pos, lo, hi, sc->tris[ent[0].e / 3].v[ent[0].e % 3], w1);
+        groove_arm(pos, lo, hi, sc->tris[ent[1].e / 3].v[ent[1].e % 3], w2);
+        double dot = w1[0] * w2[0] + w1[1] * w2[1] + w1[2] * w2[2];
+        if (!(dot > 0.0))
+            return true; /* 90 degrees or more (or no area): the margin as it is */
+        double cx[3] = {w1[1] * w2[2] - w1[2] * w2[1], w1[2] * w2[0] - w1[0] * w2[2],
+                        w1[0] * w2[1] - w1[1] * w2[0]};
+        double phi = atan2(sqrt(cx[0] * cx[0] + cx[1] * cx[1] + cx[2] * cx[2]), dot);
+        double g = groove_factor(phi);
+        return set_groove(sc, ent[0].e, g) && set_groove(sc, ent[1].e, g);
+    }
+    size_t n = 0;
+    double u[3] = {0.0, 0.0, 0.0}, v[3] = {0.0, 0.0, 0.0};
+    for (size_t j = 0; j < n_ent; j++) {
+        uint32_t e = ent[j].e;
+        double w[3];
+        groove_arm(pos, lo, hi, sc->tris[e / 3].v[e % 3], w);
+        double len = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+        if (!(len > 0.0) || !isfinite(len))
+            continue; /* a face without area along this edge */
+        if (n == 0) {
+            /* the frame about the edge: u along the first arm, v = d x u (d the unit edge) */
+            double d[3] = {(double)pos[hi].x - pos[lo].x, (double)pos[hi].y - pos[lo].y,
+                           (double)pos[hi].z - pos[lo].z};
+            double d_len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+            for (int k = 0; k < 3; k++) {
+                u[k] = w[k] / len;
+                d[k] /= d_len;
+            }
+            v[0] = d[1] * u[2] - d[2] * u[1];
+            v[1] = d[2] * u[0] - d[0] * u[2];
+            v[2] = d[0] * u[1] - d[1] * u[0];
+        }
+        if (n == *cap) {
+            size_t c = *cap ? 2 * *cap : 8;
+            struct groove_arm *grown = realloc(*arms, c * sizeof *grown);
+            if (!grown)
+                return false;
+            *arms = grown;
+            *cap = c;
+        }
+        (*arms)[n++] = (struct groove_arm){atan2(w[0] * v[0] + w[1] * v[1] + w[2] * v[2],
+                                                 w[0] * u[0] + w[1] * u[1] + w[2] * u[2]),
+                                           e};
+    }
+    if (n < 2)
+        return true;
+    qsort(*arms, n, sizeof **arms, groove_arm_cmp);
+    for (size_t k = 0; k < n; k++) {
+        /* the gap to the next arm counter-clockwise (the last one's wraps round) */
+        const struct groove_arm *a = &(*arms)[k], *b = &(*arms)[(k + 1) % n];
+        double gap = k + 1 < n ? b->angle - a->angle : b->angle + 2.0 * M_PI - a->angle;
+        if (n == 2 && k == 1)
+            break; /* two faces: the other side of the same two half-planes */
+        if (n == 2)
+            gap = gap > M_PI ? 2.0 * M_PI - gap : gap;
+        double g = groove_factor(gap);
+        if (!set_groove(sc, a->e, g) || !set_groove(sc, b->e, g))
+            return false;
+    }
+    return true;
+}
+
+/* sc->tri_groove from the edges the scene's triangles share (their vertex indices; a mesh's
+ * vertices are its own, so only triangles of one mesh meet): each edge listed under its lower
+ * vertex (a counting sort), each vertex's list sorted by the other vertex. */
+static bool grooves(struct parser *ps)
+{
+    struct scene *sc = ps->scene;
+    uint64_t n_e = 3 * (uint64_t)sc->n_tris;
+    if (n_e == 0)
+        return true;
+    if (n_e >= UINT32_MAX)
+        return true; /* beyond the indices' range: every factor stays 1 */
+    uint32_t n_v = sc->n_positions;
+    uint32_t *start = calloc((size_t)n_v + 1, sizeof *start);
+    struct groove_ent *ent = malloc((size_t)n_e * sizeof *ent);
+    struct groove_arm *arms = NULL;
+    size_t arms_cap = 0;
+    bool ok = start && ent;
+    for (uint32_t e = 0; ok && e < (uint32_t)n_e; e++) {
+        const struct scene_tri *t = &sc->tris[e / 3];
+        uint32_t a = t->v[(e % 3 + 1) % 3], b = t->v[(e % 3 + 2) % 3];
+        if (a != b)
+            start[(a < b ? a : b) + 1]++;
+    }
+    for (uint32_t v = 0; ok && v < n_v; v++)
+        start[v + 1] += start[v];
+    for (uint32_t e = 0; ok && e < (uint32_t)n_e; e++) {
+        const struct scene_tri *t = &sc->tris[e / 3];
+        uint32_t a = t->v[(e % 3 + 1) % 3], b = t->v[(e % 3 + 2) % 3];
+        if (a != b) /* start[lo] counts up to the next list's start as it fills */
+            ent[start[a < b ? a : b]++] = (struct groove_ent){a < b ? b : a, e};
+    }
+    for (uint32_t v = 0; ok && v < n_v; v++) {
+        /* start[v] is now where v + 1's list begins; v's began at start[v - 1] (0 for v = 0) */
+        uint32_t begin = v > 0 ? start[v - 1] : 0, end = start[v];
+        if (end - begin < 2)
+            continue;
+        if (end - begin <= 16) { /* the usual handful: insertion sort */
+            for (uint32_t j = begin + 1; j < end; j++)
+                for (uint32_t k = j; k > begin && ent[k - 1].hi > ent[k].hi; k--) {
+                    struct groove_ent tmp = ent[k];
+                    ent[k] = ent[k - 1];
+                    ent[k - 1] = tmp;
+                }
+        } else {
+            qsort(ent + begin, end - begin, sizeof *ent, groove_ent_cmp);
+        }
+        for (uint32_t j = begin; ok && j < end;) {
+            uint32_t k = j + 1;
+            while (k < end && ent[k].hi == ent[j].hi)
+                k++;
+            if (k - j >= 2)
+                ok = edge_grooves(sc, v, ent + j, k - j, &arms, &arms_cap);
+            j = k;
+        }
+    }
+    free(start);
+    free(ent);
+    free(arms);
+    if (ok && sc->tri_groove) {
+        /* a groove's factor also for the other edges at its two vertices: a triangle that only
+         * touches the groove's edge at a corner (a quad's other half) has points as near the
+         * neighbour's plane there, and its own edges are the ones that keep them away */
+        float *at_v = calloc(sc->n_positions, sizeof *at_v);
+        ok = at_v != NULL;
+        for (uint32_t e = 0; ok && e < (uint32_t)n_e; e++) {
+            const struct scene_tri *t = &sc->tris[e / 3];
+            float g = sc->tri_groove[e / 3][e % 3];
+            for (int k = 1; k <= 2; k++) {
+                uint32_t v = t->v[(e % 3 + k) % 3];
+                at_v[v] = at_v[v] > g ? at_v[v] : g;
+            }
+        }
+        for (uint32_t e = 0; ok && e < (uint32_t)n_e; e++) {
+            const struct scene_tri *t = &sc->tris[e / 3];
+            float *g = &sc->tri_groove[e / 3][e % 3];
+            for (int k = 1; k <= 2; k++)
+                *g = at_v[t->v[(e % 3 + k) % 3]] > *g ? at_v[t->v[(e % 3 + k) % 3]] : *g;
+        }
+        free(at_v);
+    }
+    if (!ok)
+        return fail_oom(ps, 0);
+    return true;
+}
+
 /* ---- the light list ----------------------------------------------------------------------- */
 
 /* Every emissive triangle of nonzero area, then emissive quads and spheres, then point lights
@@ -2067,7 +2299,7 @@ static bool load(int fd, const char *path, size_t n_dir, struct scene *scene,
         mcpt_error_set(ps.err, path, 0, 0, "expected a 'camera' statement, got none");
         goto done;
     }
-    ok = build_lights(&ps);
+    ok = grooves(&ps) && build_lights(&ps);
 done:
     if (ps.fd >= 0 && is_opened)
         close(ps.fd);
@@ -2100,6 +2332,7 @@ void scene_free(struct scene *scene)
     free(scene->normals);
     free(scene->uvs);
     free(scene->tris);
+    free(scene->tri_groove);
     free(scene->spheres);
     free(scene->quads);
     free(scene->planes);

@@ -156,6 +156,10 @@ struct scene {
     uint32_t n_uvs;
     struct scene_tri *tris;
     uint32_t n_tris;
+    /* per triangle, the factor of each edge's margin (edge opposite corner i; shape.h, struct
+     * triangle_plane) where the edge is shared with a triangle of the same mesh at a groove
+     * sharper than 80 degrees, 1 elsewhere; NULL when every factor is 1 (scene.c, grooves) */
+    float (*tri_groove)[3];
 
     struct sphere *spheres;
     uint32_t n_spheres;
@@ -180,6 +184,12 @@ struct scene {
                              folder): inputs no output may overwrite */
     uint32_t n_loaded;
 };
+
+/* scene->tri_groove's factors of triangle i, or NULL where the scene has none. */
+static inline const float *scene_tri_groove(const struct scene *scene, uint32_t i)
+{
+    return scene->tri_groove ? scene->tri_groove[i] : NULL;
+}
 
 /* Parses the scene file at path (and the OBJ/MTL files it names, relative to its folder).
  * The scene file may be a regular file or a pipe; meshes and MTL files must be regular files.

@@ -651,15 +651,26 @@ static bool plane_t(struct dvec3 q, struct dvec3 n, struct dvec3 n_abs, const st
 #define EDGE_MARGIN_E 6.0
 #define EDGE_MARGIN_N 1.0
 
+/* edge_margin with the normal term's factor g >= EDGE_MARGIN_N: an edge where the triangle
+ * meets another at a groove of angle phi < 90 degrees (scene.c, tri_groove) needs M sin(phi)
+ * to exceed the origin's move towards the neighbour, 4 (m . e) sin(phi) + 5 (n . e) cos(phi):
+ * the push along n, which at 90 degrees runs parallel to the neighbour, heads into it, so
+ * g = 6 cot(phi) (rounded up by a fifth) keeps the origin in front of it. */
+static double edge_margin_groove(struct dvec3 c, double cc, struct dvec3 v, struct dvec3 e,
+                                 double g)
+{
+    double in_plane = d3_dot(d3_abs(d3_cross(c, v)), e) / cc;
+    double normal = d3_dot(d3_abs(c), e) * sqrt(d3_dot(v, v)) / cc;
+    return (EDGE_MARGIN_E * in_plane + g * normal) * (1.0 + 0x1p-20);
+}
+
 /* The margin M / h of the edge of direction v of a plane with normal c = e1 x e2 (cc = c . c),
  * h = |c| / |v| the height over that edge: the distance M in units of the coordinate that is 0
  * on the edge and 1 at the height h, (M |v| / |c|).  |c x v| = |c| |v| since v lies in the
  * plane, so m = (c x v) / (|c| |v|). */
 static double edge_margin(struct dvec3 c, double cc, struct dvec3 v, struct dvec3 e)
 {
-    double in_plane = d3_dot(d3_abs(d3_cross(c, v)), e) / cc;
-    double normal = d3_dot(d3_abs(c), e) * sqrt(d3_dot(v, v)) / cc;
-    return (EDGE_MARGIN_E * in_plane + EDGE_MARGIN_N * normal) * (1.0 + 0x1p-20);
+    return edge_margin_groove(c, cc, v, e, EDGE_MARGIN_N);
 }
 
 /* ---- quad ---- */
@@ -895,37 +906,44 @@ struct surface shape_plane_surface(const struct plane *pl, const struct ray *ray
 /* What every point of triangle p[3] shares (shape.h): a hit computes it for its triangle, the
  * light table once per emitting triangle, by these same operations, so a light's sampled points
  * are the bits a fresh computation would give. */
-static ALWAYS_INLINE void triangle_plane(const vec3 p[3], struct triangle_plane *tp)
+static ALWAYS_INLINE void triangle_plane(const vec3 p[3], const float *groove,
+                                         struct triangle_plane *tp)
 {
     tp->p0 = p[0];
     tp->e1 = d3_sub(d3(p[1]), d3(p[0]));
     tp->e2 = d3_sub(d3(p[2]), d3(p[0]));
     tp->c = d3_cross(tp->e1, tp->e2);
     tp->ng = plane_normal_c(tp->e1, tp->e2, tp->c, &tp->area2, &tp->eta);
-    /* surely_inside's bound per unit of E: 7 sqrt(3) max |v_i,k| / |c|, raised by 2^-18 past
-     * its own roundings and the product with E (a few units of 2^-53) */
-    double k = (EDGE_MARGIN_E + EDGE_MARGIN_N) * 1.7320508075688774 * (1.0 + 0x1p-18) / tp->area2;
-    tp->inside_k[0] = k * d3_max(d3_abs(d3_sub(tp->e2, tp->e1)));
-    tp->inside_k[1] = k * d3_max(d3_abs(tp->e2));
-    tp->inside_k[2] = k * d3_max(d3_abs(tp->e1));
+    for (int i = 0; i < 3; i++)
+        tp->groove[i] = groove && groove[i] > EDGE_MARGIN_N ? groove[i] : (float)EDGE_MARGIN_N;
+    /* surely_inside's bound per unit of E: (6 + g_i) sqrt(3) max |v_i,k| / |c|, raised by 2^-18
+     * past its own roundings and the product with E (a few units of 2^-53) */
+    double k = 1.7320508075688774 * (1.0 + 0x1p-18) / tp->area2;
+    tp->inside_k[0] = (EDGE_MARGIN_E + tp->groove[0]) * k * d3_max(d3_abs(d3_sub(tp->e2, tp->e1)));
+    tp->inside_k[1] = (EDGE_MARGIN_E + tp->groove[1]) * k * d3_max(d3_abs(tp->e2));
+    tp->inside_k[2] = (EDGE_MARGIN_E + tp->groove[2]) * k * d3_max(d3_abs(tp->e1));
 }
 
-void shape_triangle_plane(const vec3 p[3], struct triangle_plane *tp) { triangle_plane(p, tp); }
+void shape_triangle_plane(const vec3 p[3], const float *groove, struct triangle_plane *tp)
+{
+    triangle_plane(p, groove, tp);
+}
 
 /* triangle_point's margins for a point with per-component error bounds e (edge_margin): eps_i
  * for barycentric b_i (b0 = 1 - b1 - b2), 0 on the edge opposite corner i: p2 - p1, e2, e1. */
 static void triangle_margins(const struct triangle_plane *tp, struct dvec3 e, double eps[3])
 {
     double cc = d3_dot(tp->c, tp->c);
-    eps[0] = edge_margin(tp->c, cc, d3_sub(tp->e2, tp->e1), e);
-    eps[1] = edge_margin(tp->c, cc, tp->e2, e);
-    eps[2] = edge_margin(tp->c, cc, tp->e1, e);
+    eps[0] = edge_margin_groove(tp->c, cc, d3_sub(tp->e2, tp->e1), e, tp->groove[0]);
+    eps[1] = edge_margin_groove(tp->c, cc, tp->e2, e, tp->groove[1]);
+    eps[2] = edge_margin_groove(tp->c, cc, tp->e1, e, tp->groove[2]);
 }
 
 /* b_i >= eps_i for every i, decided from bounds alone (most points are far from every edge):
  * m . e and n . e are at most E = sum e_k (rounded_error_sum), and |v| <= sqrt(3) max |v_i,k|,
- * so eps_i <= 7 sqrt(3) E max |v_i,k| / |c| = E inside_k[i] (triangle_plane keeps the factors,
- * so that no division waits here).  False says only that triangle_margins must decide. */
+ * so eps_i <= (6 + g_i) sqrt(3) E max |v_i,k| / |c| = E inside_k[i] (g_i the edge's groove
+ * factor; triangle_plane keeps the factors, so that no division waits here).  False says only
+ * that triangle_margins must decide. */
 static bool surely_inside(const struct triangle_plane *tp, double E, const double b[3])
 {
     return b[0] >= E * tp->inside_k[0] && b[1] >= E * tp->inside_k[1] &&
@@ -1064,12 +1082,12 @@ static ALWAYS_INLINE struct surface triangle_surface(const struct triangle_plane
     return sf;
 }
 
-struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec2 *uv,
-                                      const struct ray *ray, float t_hit, float b1, float b2,
-                                      uint32_t mat_idx)
+struct surface shape_triangle_surface(const vec3 p[3], const float *groove, const vec3 *ns,
+                                      const vec2 *uv, const struct ray *ray, float t_hit, float b1,
+                                      float b2, uint32_t mat_idx)
 {
     struct triangle_plane tp;
-    triangle_plane(p, &tp);
+    triangle_plane(p, groove, &tp);
     return triangle_surface(&tp, ns, uv, ray, t_hit, b1, b2, mat_idx);
 }
 
@@ -1124,7 +1142,7 @@ bool shape_triangle_sample(const vec3 p[3], const struct surface *ref, vec2 u,
                            struct shape_sample *ss)
 {
     struct triangle_plane tp;
-    triangle_plane(p, &tp);
+    triangle_plane(p, NULL, &tp);
     return shape_triangle_plane_sample(&tp, ref, u, ss);
 }
 
@@ -1132,7 +1150,7 @@ float shape_triangle_pdf(const vec3 p[3], const struct surface *ref, const struc
                          vec3 wi)
 {
     struct triangle_plane tp;
-    triangle_plane(p, &tp);
+    triangle_plane(p, NULL, &tp);
     return shape_triangle_plane_pdf(&tp, ref, on, wi);
 }
 
@@ -1185,7 +1203,7 @@ bool shape_triangle_sample_solid_angle(const vec3 p[3], const struct surface *re
         b2 /= sum;
     }
     struct triangle_plane tp;
-    triangle_plane(p, &tp);
+    triangle_plane(p, NULL, &tp);
     ss->p = triangle_point(&tp, b1, b2, &ss->p_error);
     ss->n = tp.ng;
     struct dvec3 x_err;

@@ -58,10 +58,12 @@ struct surface shape_plane_surface(const struct plane *pl, const struct ray *ray
 /* Surface of the triangle with corners p[3] at barycentrics (1 - b1 - b2, b1, b2) of a hit of
  * ray at t_hit; ns[3] and uv[3] are the corners' shading normals and uvs, each NULL when the
  * mesh has none.  For a triangle larger than the hit distance the point is that of the ray at
- * t_hit (float barycentrics are the less precise there); ray NULL: from b1, b2 alone. */
-struct surface shape_triangle_surface(const vec3 p[3], const vec3 *ns, const vec2 *uv,
-                                      const struct ray *ray, float t_hit, float b1, float b2,
-                                      uint32_t mat_idx);
+ * t_hit (float barycentrics are the less precise there); ray NULL: from b1, b2 alone.  groove[3]
+ * (NULL: 1, 1, 1) are the factors of the edges' margins at acute grooves (struct
+ * triangle_plane). */
+struct surface shape_triangle_surface(const vec3 p[3], const float *groove, const vec3 *ns,
+                                      const vec2 *uv, const struct ray *ray, float t_hit, float b1,
+                                      float b2, uint32_t mat_idx);
 /* Area of the triangle with corners p[3] (computed in double, so it neither overflows nor
  * underflows on the way); *ng (may be NULL) receives its unit normal (p1 - p0) x (p2 - p0), or
  * 0 when the triangle is degenerate. */
@@ -97,8 +99,12 @@ struct triangle_plane {
     double area2;    /* |c|, twice the area */
     double eta;      /* bound on the error of each component of ng */
     double inside_k[3]; /* surely_inside's factors (shape.c), per edge opposite corner i */
+    float groove[3];    /* per edge opposite corner i, the factor of its margin's normal term where
+                        it meets another triangle at an acute groove (scene.h, tri_groove); 1
+                        elsewhere */
 };
-void shape_triangle_plane(const vec3 p[3], struct triangle_plane *tp);
+/* groove: the three factors, or NULL for 1, 1, 1. */
+void shape_triangle_plane(const vec3 p[3], const float *groove, struct triangle_plane *tp);
 /* shape_triangle_surface of the triangle whose plane is *tp: the same bits. */
 struct surface shape_triangle_plane_surface(const struct triangle_plane *tp, const vec3 *ns,
                                             const vec2 *uv, const struct ray *ray, float t_hit,

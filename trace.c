@@ -753,7 +753,7 @@ struct trace_scene *trace_prepare(const struct scene *scene, int n_threads, stru
             vec3 p[3];
             for (int k = 0; k < 3; k++)
                 p[k] = scene->positions[scene->tris[i].v[k]];
-            shape_triangle_plane(p, &ts->planes[i]);
+            shape_triangle_plane(p, scene_tri_groove(scene, i), &ts->planes[i]);
         }
     }
     free(indices);
@@ -936,8 +936,8 @@ static struct surface triangle_surface(const struct trace_scene *ts, uint32_t tr
                                             has_uv ? uv : NULL, ray, t_hit, b1, b2, tri->mat_idx);
     for (int k = 0; k < 3; k++)
         p[k] = scene->positions[tri->v[k]];
-    return shape_triangle_surface(p, has_ns ? ns : NULL, has_uv ? uv : NULL, ray, t_hit, b1, b2,
-                                  tri->mat_idx);
+    return shape_triangle_surface(p, scene_tri_groove(scene, tri_idx), has_ns ? ns : NULL,
+                                  has_uv ? uv : NULL, ray, t_hit, b1, b2, tri->mat_idx);
 }
 
 enum hit_kind { HIT_NONE, HIT_TRI, HIT_SPHERE, HIT_QUAD, HIT_PLANE };

@@ -9,6 +9,10 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
            must be exactly 0.  --cells N cuts each face into an N x N grid whose faces share
            their edges' vertices; --strips N into N strips, as tests/extremes_test.c does, whose
            ends are T-junctions on the next face's edge.
+  wedges   a closed wedge (a triangular prism of 8 triangles sharing vertices, its apex edge a
+           groove of 0.5..45 degrees seen from inside) under a random rotation, scale 1e-8..1e8
+           and offset up to 1e4 sizes, wound either way, the camera inside; every pixel must be
+           exactly 0 (scene.c, grooves).
   spheres  a closed analytic sphere (camera inside, diffuse walls, white sky) of radius 1e-15..1e15
            moved up to 2^20 radii from the origin in a random direction (down to the smallest
            radius scene.c accepts there); every pixel must be exactly 0.
@@ -28,6 +32,7 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
 
   python3 scripts/probe_leaks.py cubes --cells 10 --cases 50 --seed 22
   python3 scripts/probe_leaks.py cubes --strips 30 --cases 50 --seed 21
+  python3 scripts/probe_leaks.py wedges --cases 60 --seed 1
   python3 scripts/probe_leaks.py spheres --cases 50 --seed 3
   python3 scripts/probe_leaks.py planes --cases 30 --decade 5 --seed 1
   python3 scripts/probe_leaks.py quads --cases 100 --seed 2
@@ -172,6 +177,39 @@ def probe_cubes(args, tmp):
             leaks += 1
             print("leak: case %d, scale %.3g, brightest pixel %.3g" % (it, s, b))
     print("cubes: %d of %d let sky in" % (leaks, ran))
+    return leaks == 0
+
+
+def probe_wedges(args, tmp):
+    rng = random.Random(args.seed)
+    leaks = 0
+    faces = [(1, 2, 3), (4, 6, 5), (1, 4, 5), (1, 5, 2), (1, 3, 6), (1, 6, 4), (2, 5, 6), (2, 6, 3)]
+    for it in range(args.cases):
+        deg = rng.choice([0.5, 2, 5, 10, 20, 30, 45])
+        h = 2 * math.tan(math.radians(deg / 2))
+        local = [(0, 0, -1), (2, h, -1), (2, -h, -1), (0, 0, 1), (2, h, 1), (2, -h, 1)]
+        rot = rotation(normalize([rng.gauss(0, 1) for _ in range(3)]), rng.uniform(0, 360))
+        s = 10 ** rng.uniform(-8, 8)
+        t = [rng.uniform(-1, 1) * 10 ** rng.uniform(0, 4) * s * rng.choice([0, 1]) for _ in range(3)]
+
+        def place(p):
+            return [v * s + o for v, o in zip(rot(p), t)]
+        flip = rng.random() < 0.5
+        obj = os.path.join(tmp, "wedge.obj")
+        with open(obj, "w") as f:
+            f.write("".join("v %s\n" % fmt(place(p)).replace(",", " ") for p in local))
+            f.write("".join("f %d %d %d\n" % ((a, c, b) if flip else (a, b, c)) for a, b, c in faces))
+        x = rng.uniform(0.6, 1.9)
+        eye, at = place((x, 0, rng.uniform(-0.5, 0.5))), place((0, 0, rng.uniform(-0.5, 0.5)))
+        up = [a - b for a, b in zip(place((0, 1, 0)), place((0, 0, 0)))]
+        scene = os.path.join(tmp, "wedge.txt")
+        closed_scene(scene, "eye=%s look-at=%s up=%s fov=70" % (fmt(eye), fmt(at), fmt(up)),
+                     ["mesh file=%s material=m" % obj])
+        b = brightest(args, scene)
+        if b != 0:
+            leaks += 1
+            print("leak: case %d, %g degrees, scale %.3g, brightest pixel %.3g" % (it, deg, s, b))
+    print("wedges: %d of %d let sky in" % (leaks, args.cases))
     return leaks == 0
 
 
@@ -401,7 +439,7 @@ def probe_scene(args, tmp):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("mode", choices=["cubes", "spheres", "planes", "quads", "offset", "scales",
+    ap.add_argument("mode", choices=["cubes", "wedges", "spheres", "planes", "quads", "offset", "scales",
                                      "scene"])
     ap.add_argument("--mcpt", default=os.path.join(ROOT, "mcpt"))
     ap.add_argument("--cases", type=int, default=50)
@@ -419,7 +457,7 @@ def main():
     ap.add_argument("--move", action="store_true", help="scene: move along x instead of scaling")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        ok = {"cubes": probe_cubes, "spheres": probe_spheres, "planes": probe_planes,
+        ok = {"cubes": probe_cubes, "wedges": probe_wedges, "spheres": probe_spheres, "planes": probe_planes,
               "quads": probe_quads, "offset": probe_offset,
               "scales": probe_scales, "scene": probe_scene}[args.mode](args, tmp)
     sys.exit(0 if ok else 1)

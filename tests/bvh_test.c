@@ -815,7 +815,8 @@ Test(bvh, reintersect_pbrt)
             if (!is_hit || j > 0)
                 continue;
             /* rays leaving the hit, 1000 into each hemisphere of the geometric normal */
-            struct surface sf = shape_triangle_surface(q, NULL, NULL, &ray, hit.t, hit.u, hit.v, 0);
+            struct surface sf = shape_triangle_surface(q, NULL, NULL, NULL, &ray, hit.t, hit.u,
+                                                       hit.v, 0);
             for (int k = 0; k < 2000; k++) {
                 vec3 w = rng_dir(&r);
                 if ((v3_dot(w, sf.ng) < 0.0f) != (k % 2 == 1))

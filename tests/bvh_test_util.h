@@ -134,7 +134,7 @@ static inline struct surface random_surface(const struct mesh *m, uint32_t prim,
         q[k] = m->positions[m->indices[3 * prim + (uint32_t)k]];
     float b1, b2;
     rng_bary(r, &b1, &b2);
-    return shape_triangle_surface(q, NULL, NULL, NULL, 0.0f, b1, b2, 0);
+    return shape_triangle_surface(q, NULL, NULL, NULL, NULL, 0.0f, b1, b2, 0);
 }
 
 /* n random triangles in [-1, 1]^3, edge lengths from about 0.01 to 0.6 */

@@ -252,7 +252,7 @@ Test(shape, triangle_surface_interpolates)
     const vec2 uv[3] = {{0, 0}, {1, 0}, {0, 1}};
     const float b1 = 0.3f, b2 = 0.45f;
     const double b[3] = {1.0 - b1 - b2, b1, b2};
-    struct surface sf = shape_triangle_surface(p, ns, uv, NULL, 0.0f, b1, b2, 7);
+    struct surface sf = shape_triangle_surface(p, NULL, ns, uv, NULL, 0.0f, b1, b2, 7);
     double e1[3], e2[3], q[3];
     for (int k = 0; k < 3; k++) {
         e1[k] = (double)v3_get(p[1], k) - v3_get(p[0], k);
@@ -281,7 +281,7 @@ Test(shape, triangle_surface_interpolates)
     cr_assert_float_eq(sf.uv.x, b1, 1e-6f);
     cr_assert_float_eq(sf.uv.y, b2, 1e-6f);
     cr_assert_eq(sf.mat_idx, 7u);
-    struct surface flat = shape_triangle_surface(p, NULL, NULL, NULL, 0.0f, b1, b2, 0);
+    struct surface flat = shape_triangle_surface(p, NULL, NULL, NULL, NULL, 0.0f, b1, b2, 0);
     cr_assert(v3_length(v3_sub(flat.ns, flat.ng)) == 0.0f);
     vec3 ng;
     float area = shape_triangle_area(p, &ng);
@@ -328,12 +328,13 @@ Test(shape, triangle_plane_surface_equals_triangle_surface)
         else
             n_rebuilt++;
         struct triangle_plane tp;
-        shape_triangle_plane(p, &tp);
+        shape_triangle_plane(p, NULL, &tp);
         for (int variant = 0; variant < 3; variant++) {
             const struct ray *ray = variant == 2 ? NULL : &r;
             const vec3 *n = variant == 1 ? ns : NULL;
             const vec2 *t = variant == 1 ? uv : NULL;
-            struct surface a = shape_triangle_surface(p, n, t, ray, ray ? dist : 0.0f, b1, b2, 3);
+            struct surface a = shape_triangle_surface(p, NULL, n, t, ray, ray ? dist : 0.0f, b1, b2,
+                                                      3);
             struct surface b = shape_triangle_plane_surface(&tp, n, t, ray, ray ? dist : 0.0f, b1,
                                                             b2, 3);
             cr_assert(memcmp(&a.p, &b.p, sizeof a.p) == 0 &&
@@ -467,8 +468,8 @@ static int origins_past_right_angled_neighbour(const struct quad *q, int edge, i
         struct shape_sample ss;
         cr_assert(shape_quad_sample(q, &ref, edge == 0 ? (vec2){1.0f, t} : (vec2){t, 1.0f}, &ss));
         struct surface faces[2] = {{.p = ss.p, .p_error = ss.p_error, .ng = ss.n},
-                                   shape_triangle_surface(tri, NULL, NULL, NULL, 0.0f, 1.0f - t, t,
-                                                          0)};
+                                   shape_triangle_surface(tri, NULL, NULL, NULL, NULL, 0.0f,
+                                                          1.0f - t, t, 0)};
         for (int f = 0; f < (edge == 0 ? 2 : 1); f++)
             for (int d = 0; d < 8; d++) {
                 vec3 dir;
