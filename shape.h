@@ -86,7 +86,7 @@ struct shape_sample {
 };
 
 /* What every point of a triangle shares, computed in double once (shape_triangle_plane) for a
- * triangle that emits (the light table keeps one per emitting triangle, 144 bytes): sampling
+ * triangle that emits (the light table keeps one per emitting triangle, 160 bytes): sampling
  * then skips a cross product, a square root and a division per sample, and gives the same bits
  * as shape_triangle_sample and shape_triangle_pdf.  trace.c keeps one per triangle of a small
  * scene for its hits (shape_triangle_plane_surface). */

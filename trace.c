@@ -36,7 +36,7 @@
 #define TRACE_PACKET_MIN 2
 
 /* A scene of at most this many triangles keeps each one's plane for its hits (trace_prepare):
- * 8192 of 144 bytes, 1.1 MiB. */
+ * 8192 of 160 bytes, 1.25 MiB. */
 #define TRACE_PLANE_CACHE_TRIS 8192u
 
 /* PBRT 4e, ch. 6, "Robust Spawned Ray Origins": shadow rays stop this fraction short of the
@@ -743,7 +743,7 @@ struct trace_scene *trace_prepare(const struct scene *scene, int n_threads, stru
         goto fail;
     /* a small scene keeps each triangle's plane, so that a hit does not recompute it (edges,
      * normal, its square root and division, in double): a Cornell box renders 3-4% faster.  A
-     * large mesh would pay 144 bytes a triangle, more than its BVH, for a gain within the noise
+     * large mesh would pay 160 bytes a triangle, more than its BVH, for a gain within the noise
      * (docs/performance.md, "Latency levers") */
     if (scene->n_tris <= TRACE_PLANE_CACHE_TRIS && scene->n_tris > 0) {
         ts->planes = malloc(sizeof *ts->planes * scene->n_tris);
