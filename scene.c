@@ -1960,13 +1960,13 @@ static bool parse_line(struct parser *ps, char *line)
 
 /* ---- grooves: the margins of edges at acute concave angles ---------------------------------- */
 
-/* A point near an edge is pulled inside its triangle by a margin (shape.c, edge_margin) that keeps
- * the spawned origin in front of a neighbour meeting the edge at 80 to 100 degrees; at a sharper
- * groove the origin's push along the normal heads into the neighbour, and a closed wedge of 30
- * degrees let sky in (docs/theory.md, "Self-intersection").  The margin's normal term needs a
- * factor g > 5 cot(phi) there; an edge shared by two triangles of one mesh (the same two vertex
- * indices) knows its angle, so the load gives each such edge g = 6 cot(phi), at most
- * GROOVE_MAX_FACTOR.  Faces folded onto each other (phi below GROOVE_MIN_ANGLE) close no
+/* A point near an edge is pulled inside its triangle by a margin (shape.c, edge_margin_groove)
+ * that keeps the spawned origin in front of a neighbour meeting the edge at 80 to 100 degrees;
+ * at a sharper groove the origin's push along the normal heads into the neighbour, and a closed
+ * wedge of 30 degrees let sky in (docs/theory.md, "Self-intersection").  The margin's normal
+ * term needs a factor g > 5 cot(phi) there; an edge shared by two triangles of one mesh (the
+ * same two vertex indices) knows its angle, so the load gives each such edge g = 6 cot(phi), at
+ * most GROOVE_MAX_FACTOR.  Faces folded onto each other (phi below GROOVE_MIN_ANGLE) close no
  * groove. */
 #define GROOVE_MAX_FACTOR 1e4
 #define GROOVE_MIN_ANGLE 1e-7 /* radians */
@@ -2105,12 +2105,136 @@ static bool edge_grooves(struct scene *sc, uint32_t lo, const struct groove_ent 
     return true;
 }
 
+/* Quads are separate statements, so no index says which meet: each pair is tested, up to
+ * GROOVE_MAX_QUADS quads (beyond, every factor stays 1), pairs whose boxes do not meet set
+ * aside.  Quad b meets an edge of quad a where both of the edge's ends lie in b, within
+ * GROOVE_QUAD_TOL of the ends' coordinates and the edge's length (the file writes each quad's
+ * corner and edges apart, to the digits it prints); the groove's angle is that between the two
+ * quads' arms away from the edge (the acute one of the two, where the edge crosses b's inside
+ * rather than lying on its border).  A quad takes the largest factor of its four edges for all
+ * of them. */
+#define GROOVE_MAX_QUADS 1024
+#define GROOVE_QUAD_TOL 1e-6
+
+/* Where p lies in quad q: its coordinates (alpha along e1, beta along e2) and distance from the
+ * plane, in double. */
+static void quad_locate(const struct quad *q, const double p[3], double *alpha, double *beta,
+                        double *dist)
+{
+    const double e1[3] = {q->e1.x, q->e1.y, q->e1.z}, e2[3] = {q->e2.x, q->e2.y, q->e2.z};
+    double c[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                   e1[0] * e2[1] - e1[1] * e2[0]};
+    double cc = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
+    double d[3] = {p[0] - q->corner.x, p[1] - q->corner.y, p[2] - q->corner.z};
+    double dx2[3] = {d[1] * e2[2] - d[2] * e2[1], d[2] * e2[0] - d[0] * e2[2],
+                     d[0] * e2[1] - d[1] * e2[0]};
+    double e1xd[3] = {e1[1] * d[2] - e1[2] * d[1], e1[2] * d[0] - e1[0] * d[2],
+                      e1[0] * d[1] - e1[1] * d[0]};
+    *alpha = (dx2[0] * c[0] + dx2[1] * c[1] + dx2[2] * c[2]) / cc;
+    *beta = (e1xd[0] * c[0] + e1xd[1] * c[1] + e1xd[2] * c[2]) / cc;
+    *dist = fabs(d[0] * c[0] + d[1] * c[1] + d[2] * c[2]) / sqrt(cc);
+}
+
+static double d3_len(const double v[3]) { return sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]); }
+
+/* The factor quad b's meeting edge k of quad a (0: corner to + e1, 1: + e1 to + e1 + e2, 2: + e2
+ * to + e1 + e2, 3: corner to + e2) calls for, 1 where it does not meet it. */
+static double quad_edge_groove(const struct quad *a, int k, const struct quad *b)
+{
+    const double o[3] = {a->corner.x, a->corner.y, a->corner.z};
+    const double e1[3] = {a->e1.x, a->e1.y, a->e1.z}, e2[3] = {a->e2.x, a->e2.y, a->e2.z};
+    double p0[3], p1[3], ca[3], cb[3];
+    for (int i = 0; i < 3; i++) {
+        p0[i] = o[i] + (k == 1 ? e1[i] : k == 2 ? e2[i] : 0.0);
+        p1[i] = o[i] + (k == 0 ? e1[i] : k == 3 ? e2[i] : e1[i] + e2[i]);
+        ca[i] = o[i] + 0.5 * (e1[i] + e2[i]);
+        cb[i] = (&b->corner.x)[i] + 0.5 * ((&b->e1.x)[i] + (&b->e2.x)[i]);
+    }
+    double u[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
+    double len = d3_len(u);
+    if (!(len > 0.0))
+        return 1.0;
+    double mag = 0.0;
+    for (int i = 0; i < 3; i++)
+        mag = fmax(mag, fmax(fabs(p0[i]), fabs(p1[i])));
+    double tol = GROOVE_QUAD_TOL * (mag + len);
+    double b_len = fmax(sqrt(b->e1.x * b->e1.x + b->e1.y * b->e1.y + b->e1.z * b->e1.z),
+                        sqrt(b->e2.x * b->e2.x + b->e2.y * b->e2.y + b->e2.z * b->e2.z));
+    double t = tol / b_len; /* the tolerance in b's coordinates, about */
+    double al[2], be[2], dist[2];
+    quad_locate(b, p0, &al[0], &be[0], &dist[0]);
+    quad_locate(b, p1, &al[1], &be[1], &dist[1]);
+    for (int j = 0; j < 2; j++)
+        if (!(dist[j] <= tol && al[j] >= -t && al[j] <= 1.0 + t && be[j] >= -t && be[j] <= 1.0 + t))
+            return 1.0;
+    bool on_border = (fabs(al[0]) <= t && fabs(al[1]) <= t) ||
+                     (fabs(al[0] - 1.0) <= t && fabs(al[1] - 1.0) <= t) ||
+                     (fabs(be[0]) <= t && fabs(be[1]) <= t) ||
+                     (fabs(be[0] - 1.0) <= t && fabs(be[1] - 1.0) <= t);
+    /* the arms: each centre's part perpendicular to the edge */
+    double wa[3], wb[3], sa = 0.0, sb = 0.0;
+    for (int i = 0; i < 3; i++) {
+        sa += (ca[i] - p0[i]) * u[i];
+        sb += (cb[i] - p0[i]) * u[i];
+    }
+    for (int i = 0; i < 3; i++) {
+        wa[i] = ca[i] - p0[i] - sa / (len * len) * u[i];
+        wb[i] = cb[i] - p0[i] - sb / (len * len) * u[i];
+    }
+    double x[3] = {wa[1] * wb[2] - wa[2] * wb[1], wa[2] * wb[0] - wa[0] * wb[2],
+                   wa[0] * wb[1] - wa[1] * wb[0]};
+    double phi = atan2(d3_len(x), wa[0] * wb[0] + wa[1] * wb[1] + wa[2] * wb[2]);
+    if (!on_border && phi > 0.5 * M_PI)
+        phi = M_PI - phi; /* b goes on past the edge: the other side's groove */
+    return groove_factor(phi);
+}
+
+/* Quad q's box, grown by a millionth of its coordinates and size: pairs whose boxes do not
+ * overlap cannot share an edge. */
+static void quad_box(const struct quad *q, double lo[3], double hi[3])
+{
+    for (int i = 0; i < 3; i++) {
+        double c = (&q->corner.x)[i], u = (&q->e1.x)[i], v = (&q->e2.x)[i];
+        double l = c + fmin(0.0, u) + fmin(0.0, v), h = c + fmax(0.0, u) + fmax(0.0, v);
+        double pad = 2.0 * GROOVE_QUAD_TOL * (fmax(fabs(l), fabs(h)) + (h - l) + fabs(u) + fabs(v));
+        lo[i] = l - pad;
+        hi[i] = h + pad;
+    }
+}
+
+static bool quad_grooves(struct scene *sc)
+{
+    if (sc->n_quads < 2 || sc->n_quads > GROOVE_MAX_QUADS)
+        return true;
+    double(*box)[2][3] = malloc((size_t)sc->n_quads * sizeof *box);
+    if (!box)
+        return false;
+    for (uint32_t i = 0; i < sc->n_quads; i++)
+        quad_box(&sc->quads[i], box[i][0], box[i][1]);
+    for (uint32_t i = 0; i < sc->n_quads; i++)
+        for (uint32_t j = 0; j < sc->n_quads; j++) {
+            bool meet = i != j;
+            for (int a = 0; meet && a < 3; a++)
+                meet = box[i][0][a] <= box[j][1][a] && box[j][0][a] <= box[i][1][a];
+            for (int k = 0; meet && k < 4; k++) {
+                double g = quad_edge_groove(&sc->quads[i], k, &sc->quads[j]);
+                float gf = (float)g * (1.0f + 0x1p-20f);
+                if (g > 1.0 && gf > sc->quads[i].groove)
+                    sc->quads[i].groove = gf;
+            }
+        }
+    free(box);
+    return true;
+}
+
 /* sc->tri_groove from the edges the scene's triangles share (their vertex indices; a mesh's
  * vertices are its own, so only triangles of one mesh meet): each edge listed under its lower
  * vertex (a counting sort), each vertex's list sorted by the other vertex. */
 static bool grooves(struct parser *ps)
 {
     struct scene *sc = ps->scene;
+    if (!quad_grooves(sc))
+        return fail_oom(ps, 0);
     uint64_t n_e = 3 * (uint64_t)sc->n_tris;
     if (n_e == 0)
         return true;

@@ -651,26 +651,20 @@ static bool plane_t(struct dvec3 q, struct dvec3 n, struct dvec3 n_abs, const st
 #define EDGE_MARGIN_E 6.0
 #define EDGE_MARGIN_N 1.0
 
-/* edge_margin with the normal term's factor g >= EDGE_MARGIN_N: an edge where the triangle
- * meets another at a groove of angle phi < 90 degrees (scene.c, tri_groove) needs M sin(phi)
- * to exceed the origin's move towards the neighbour, 4 (m . e) sin(phi) + 5 (n . e) cos(phi):
- * the push along n, which at 90 degrees runs parallel to the neighbour, heads into it, so
- * g = 6 cot(phi) (rounded up by a fifth) keeps the origin in front of it. */
+/* The margin M / h of the edge of direction v of a plane with normal c = e1 x e2 (cc = c . c),
+ * h = |c| / |v| the height over that edge: the distance M in units of the coordinate that is 0
+ * on the edge and 1 at the height h, (M |v| / |c|).  |c x v| = |c| |v| since v lies in the
+ * plane, so m = (c x v) / (|c| |v|).  g >= EDGE_MARGIN_N is the normal term's factor: an edge
+ * where the shape meets another at a groove of angle phi < 90 degrees (scene.c, grooves) needs
+ * M sin(phi) to exceed the origin's move towards the neighbour, 4 (m . e) sin(phi) +
+ * 5 (n . e) cos(phi), since the push along n, parallel to a right-angled neighbour, heads into
+ * this one: g = 6 cot(phi) (5 cot(phi) and a fifth more) keeps the origin in front of it. */
 static double edge_margin_groove(struct dvec3 c, double cc, struct dvec3 v, struct dvec3 e,
                                  double g)
 {
     double in_plane = d3_dot(d3_abs(d3_cross(c, v)), e) / cc;
     double normal = d3_dot(d3_abs(c), e) * sqrt(d3_dot(v, v)) / cc;
     return (EDGE_MARGIN_E * in_plane + g * normal) * (1.0 + 0x1p-20);
-}
-
-/* The margin M / h of the edge of direction v of a plane with normal c = e1 x e2 (cc = c . c),
- * h = |c| / |v| the height over that edge: the distance M in units of the coordinate that is 0
- * on the edge and 1 at the height h, (M |v| / |c|).  |c x v| = |c| |v| since v lies in the
- * plane, so m = (c x v) / (|c| |v|). */
-static double edge_margin(struct dvec3 c, double cc, struct dvec3 v, struct dvec3 e)
-{
-    return edge_margin_groove(c, cc, v, e, EDGE_MARGIN_N);
 }
 
 /* ---- quad ---- */
@@ -703,14 +697,20 @@ bool shape_quad_intersect(const struct quad *q, const struct ray *ray, float *t_
     return alpha >= 0.0 && alpha <= 1.0 && beta >= 0.0 && beta <= 1.0;
 }
 
-/* quad_point's margins for a point with per-component error bounds e (edge_margin): in alpha,
- * across the edges alpha = 0, 1 (direction e2), and in beta (direction e1). */
+/* quad_point's margins for a point with per-component error bounds e (edge_margin_groove): in
+ * alpha, across the edges alpha = 0, 1 (direction e2), and in beta (direction e1), with the
+ * quad's groove factor on every edge. */
+static double quad_groove(const struct quad *q)
+{
+    return q->groove > EDGE_MARGIN_N ? q->groove : EDGE_MARGIN_N;
+}
+
 static void quad_margins(const struct quad *q, struct dvec3 e, double *eps_alpha, double *eps_beta)
 {
     struct dvec3 c = d3_cross(q->e1, q->e2);
     double cc = d3_dot(c, c);
-    *eps_alpha = edge_margin(c, cc, q->e2, e);
-    *eps_beta = edge_margin(c, cc, q->e1, e);
+    *eps_alpha = edge_margin_groove(c, cc, q->e2, e, quad_groove(q));
+    *eps_beta = edge_margin_groove(c, cc, q->e1, e, quad_groove(q));
 }
 
 /* The quad's point corner + alpha e1 + beta e2 with its error bound and unit normal, pulled
@@ -727,9 +727,9 @@ static vec3 quad_point(const struct quad *q, double alpha, double beta, vec3 *ng
     struct dvec3 p = plane_point_d(q->corner, e1, e2, alpha, beta, &err);
     double eps_alpha = 0.5, eps_beta = 0.5;
     if (area > 0.0) {
-        /* bounds first (edge_margin's terms are at most E = sum e_k each): most points are far
-         * from every edge */
-        double k = (EDGE_MARGIN_E + EDGE_MARGIN_N) * rounded_error_sum(p, err, eta) / area *
+        /* bounds first (edge_margin_groove's terms are at most E = sum e_k each): most points
+         * are far from every edge */
+        double k = (EDGE_MARGIN_E + quad_groove(q)) * rounded_error_sum(p, err, eta) / area *
                    (1.0 + 0x1p-18);
         eps_alpha = k * d3_length(e2);
         eps_beta = k * d3_length(e1);
@@ -929,8 +929,9 @@ void shape_triangle_plane(const vec3 p[3], const float *groove, struct triangle_
     triangle_plane(p, groove, tp);
 }
 
-/* triangle_point's margins for a point with per-component error bounds e (edge_margin): eps_i
- * for barycentric b_i (b0 = 1 - b1 - b2), 0 on the edge opposite corner i: p2 - p1, e2, e1. */
+/* triangle_point's margins for a point with per-component error bounds e (edge_margin_groove):
+ * eps_i for barycentric b_i (b0 = 1 - b1 - b2), 0 on the edge opposite corner i: p2 - p1, e2,
+ * e1, each with its groove factor. */
 static void triangle_margins(const struct triangle_plane *tp, struct dvec3 e, double eps[3])
 {
     double cc = d3_dot(tp->c, tp->c);

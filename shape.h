@@ -25,6 +25,8 @@ struct quad {
     struct dvec3 e1;
     struct dvec3 e2;
     uint32_t mat_idx;
+    float groove; /* the factor of its edges' margins where another quad meets one of them at an
+                     acute groove (scene.c, grooves); 0 or 1: none */
 };
 
 /* Infinite plane through point with unit normal n (front side). */

@@ -13,6 +13,9 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
            groove of 0.5..45 degrees seen from inside) under a random rotation, scale 1e-8..1e8
            and offset up to 1e4 sizes, wound either way, the camera inside; every pixel must be
            exactly 0 (scene.c, grooves).
+  sheared  a closed parallelepiped of six quads whose faces meet at 2..45 degrees along one edge,
+           turned, scaled 1e-6..1e6 and moved up to 1e4 sizes, corners and edges written to 17
+           digits, the camera inside near that edge; every pixel must be exactly 0.
   spheres  a closed analytic sphere (camera inside, diffuse walls, white sky) of radius 1e-15..1e15
            moved up to 2^20 radii from the origin in a random direction (down to the smallest
            radius scene.c accepts there); every pixel must be exactly 0.
@@ -33,6 +36,7 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
   python3 scripts/probe_leaks.py cubes --cells 10 --cases 50 --seed 22
   python3 scripts/probe_leaks.py cubes --strips 30 --cases 50 --seed 21
   python3 scripts/probe_leaks.py wedges --cases 60 --seed 1
+  python3 scripts/probe_leaks.py sheared --cases 70 --seed 1
   python3 scripts/probe_leaks.py spheres --cases 50 --seed 3
   python3 scripts/probe_leaks.py planes --cases 30 --decade 5 --seed 1
   python3 scripts/probe_leaks.py quads --cases 100 --seed 2
@@ -210,6 +214,38 @@ def probe_wedges(args, tmp):
             leaks += 1
             print("leak: case %d, %g degrees, scale %.3g, brightest pixel %.3g" % (it, deg, s, b))
     print("wedges: %d of %d let sky in" % (leaks, args.cases))
+    return leaks == 0
+
+
+def probe_sheared(args, tmp):
+    rng = random.Random(args.seed)
+    leaks = 0
+    for it in range(args.cases):
+        deg = rng.choice([2, 5, 10, 20, 30, 45])
+        a, b, c = (2, 0, 0), (2 * math.cos(math.radians(deg)), 2 * math.sin(math.radians(deg)), 0), (0, 0, 2)
+        rot = rotation(normalize([rng.gauss(0, 1) for _ in range(3)]), rng.uniform(0, 360))
+        s = 10 ** rng.uniform(-6, 6)
+        t = [rng.uniform(-1, 1) * 10 ** rng.uniform(0, 4) * s * rng.choice([0, 1]) for _ in range(3)]
+        vec = [[x * s for x in rot(e)] for e in (a, b, c)]
+        far = [o + sum(v[i] for v in vec) for i, o in enumerate(t)]
+        f17 = lambda v: ",".join("%.17g" % x for x in v)  # noqa: E731
+        quads = []
+        for corner, sign in ((t, 1), (far, -1)):
+            for i, j in ((0, 1), (1, 2), (2, 0)):
+                e1, e2 = [sign * x for x in vec[i]], [sign * x for x in vec[j]]
+                if rng.random() < 0.5:
+                    e1, e2 = e2, e1
+                quads.append("quad corner=%s edge1=%s edge2=%s material=m" % (f17(corner), f17(e1), f17(e2)))
+        u, w = rng.uniform(0.3, 0.9), rng.uniform(0.2, 0.8)
+        eye = [o + 0.55 * u * vec[0][i] + 0.45 * u * vec[1][i] + w * vec[2][i] for i, o in enumerate(t)]
+        at = [o + 0.01 * vec[0][i] + 0.01 * vec[1][i] + 0.5 * vec[2][i] for i, o in enumerate(t)]
+        scene = os.path.join(tmp, "sheared.txt")
+        closed_scene(scene, "eye=%s look-at=%s up=%s fov=70" % (f17(eye), f17(at), f17(vec[2])), quads)
+        bright = brightest(args, scene)
+        if bright != 0:
+            leaks += 1
+            print("leak: case %d, %g degrees, scale %.3g, brightest pixel %.3g" % (it, deg, s, bright))
+    print("sheared: %d of %d let sky in" % (leaks, args.cases))
     return leaks == 0
 
 
@@ -439,7 +475,7 @@ def probe_scene(args, tmp):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("mode", choices=["cubes", "wedges", "spheres", "planes", "quads", "offset", "scales",
+    ap.add_argument("mode", choices=["cubes", "wedges", "sheared", "spheres", "planes", "quads", "offset", "scales",
                                      "scene"])
     ap.add_argument("--mcpt", default=os.path.join(ROOT, "mcpt"))
     ap.add_argument("--cases", type=int, default=50)
@@ -457,7 +493,8 @@ def main():
     ap.add_argument("--move", action="store_true", help="scene: move along x instead of scaling")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        ok = {"cubes": probe_cubes, "wedges": probe_wedges, "spheres": probe_spheres, "planes": probe_planes,
+        ok = {"cubes": probe_cubes, "wedges": probe_wedges, "sheared": probe_sheared,
+              "spheres": probe_spheres, "planes": probe_planes,
               "quads": probe_quads, "offset": probe_offset,
               "scales": probe_scales, "scene": probe_scene}[args.mode](args, tmp)
     sys.exit(0 if ok else 1)

@@ -491,7 +491,7 @@ static int origins_past_right_angled_neighbour(const struct quad *q, int edge, i
 }
 
 /* A point on the edge of a face, pulled inside by shape.c's margin (EDGE_MARGIN_E times its
- * error projected on the edge's normal in the plane, edge_margin), spawns rays whose origins lie
+ * error projected on the edge's normal in the plane, edge_margin_groove), spawns rays whose origins lie
  * strictly in front of a neighbouring face at a right angle across that edge, whatever the
  * direction: the push along the face's normal is parallel to the neighbour, and only roundings
  * move the origin towards it, by less than the margin.  First the
