@@ -184,6 +184,14 @@ def probe_cubes(args, tmp):
     return leaks == 0
 
 
+def groove_leak(args, scene, it, deg, s):
+    """1 (and a line) where sky gets into the closed scene of case it, else 0."""
+    b = brightest(args, scene)
+    if b != 0:
+        print("leak: case %d, %g degrees, scale %.3g, brightest pixel %.3g" % (it, deg, s, b))
+    return int(b != 0)
+
+
 def probe_wedges(args, tmp):
     rng = random.Random(args.seed)
     leaks = 0
@@ -209,10 +217,7 @@ def probe_wedges(args, tmp):
         scene = os.path.join(tmp, "wedge.txt")
         closed_scene(scene, "eye=%s look-at=%s up=%s fov=70" % (fmt(eye), fmt(at), fmt(up)),
                      ["mesh file=%s material=m" % obj])
-        b = brightest(args, scene)
-        if b != 0:
-            leaks += 1
-            print("leak: case %d, %g degrees, scale %.3g, brightest pixel %.3g" % (it, deg, s, b))
+        leaks += groove_leak(args, scene, it, deg, s)
     print("wedges: %d of %d let sky in" % (leaks, args.cases))
     return leaks == 0
 
@@ -241,10 +246,7 @@ def probe_sheared(args, tmp):
         at = [o + 0.01 * vec[0][i] + 0.01 * vec[1][i] + 0.5 * vec[2][i] for i, o in enumerate(t)]
         scene = os.path.join(tmp, "sheared.txt")
         closed_scene(scene, "eye=%s look-at=%s up=%s fov=70" % (f17(eye), f17(at), f17(vec[2])), quads)
-        bright = brightest(args, scene)
-        if bright != 0:
-            leaks += 1
-            print("leak: case %d, %g degrees, scale %.3g, brightest pixel %.3g" % (it, deg, s, bright))
+        leaks += groove_leak(args, scene, it, deg, s)
     print("sheared: %d of %d let sky in" % (leaks, args.cases))
     return leaks == 0
 
