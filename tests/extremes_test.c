@@ -446,7 +446,7 @@ static void write_wedge(const char *dir, int k, double deg, const double m[4], b
     cr_assert_not_null(f);
     fprintf(f,
             "camera eye=%.9g,%.9g,%.9g look-at=%.9g,%.9g,%.9g up=%.9g,%.9g,%.9g fov=70\n"
-            "film width=32 height=32\nrender spp=128 sampler=independent\n"
+            "film width=24 height=24\nrender spp=32 sampler=independent\n"
             "material name=m type=diffuse albedo=0.9,0.9,0.9\n"
             "mesh file=%s material=m\nsky type=constant radiance=1,1,1\n",
             w[6][0], w[6][1], w[6][2], w[7][0], w[7][1], w[7][2], w[4][0] - w[5][0],
