@@ -2135,6 +2135,9 @@ static void quad_locate(const struct quad *q, const double p[3], double *alpha, 
     *dist = fabs(d[0] * c[0] + d[1] * c[1] + d[2] * c[2]) / sqrt(cc);
 }
 
+/* Component i of v (0: x, 1: y, 2: z). */
+static double d3_axis(struct dvec3 v, int i) { return i == 0 ? v.x : i == 1 ? v.y : v.z; }
+
 static double d3_len(const double v[3]) { return sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]); }
 
 /* The factor quad b's meeting edge k of quad a (0: corner to + e1, 1: + e1 to + e1 + e2, 2: + e2
@@ -2148,7 +2151,7 @@ static double quad_edge_groove(const struct quad *a, int k, const struct quad *b
         p0[i] = o[i] + (k == 1 ? e1[i] : k == 2 ? e2[i] : 0.0);
         p1[i] = o[i] + (k == 0 ? e1[i] : k == 3 ? e2[i] : e1[i] + e2[i]);
         ca[i] = o[i] + 0.5 * (e1[i] + e2[i]);
-        cb[i] = (&b->corner.x)[i] + 0.5 * ((&b->e1.x)[i] + (&b->e2.x)[i]);
+        cb[i] = d3_axis(b->corner, i) + 0.5 * (d3_axis(b->e1, i) + d3_axis(b->e2, i));
     }
     double u[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
     double len = d3_len(u);
@@ -2194,7 +2197,7 @@ static double quad_edge_groove(const struct quad *a, int k, const struct quad *b
 static void quad_box(const struct quad *q, double lo[3], double hi[3])
 {
     for (int i = 0; i < 3; i++) {
-        double c = (&q->corner.x)[i], u = (&q->e1.x)[i], v = (&q->e2.x)[i];
+        double c = d3_axis(q->corner, i), u = d3_axis(q->e1, i), v = d3_axis(q->e2, i);
         double l = c + fmin(0.0, u) + fmin(0.0, v), h = c + fmax(0.0, u) + fmax(0.0, v);
         double pad = 2.0 * GROOVE_QUAD_TOL * (fmax(fabs(l), fabs(h)) + (h - l) + fabs(u) + fabs(v));
         lo[i] = l - pad;
