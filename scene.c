@@ -1971,25 +1971,26 @@ static bool parse_line(struct parser *ps, char *line)
 #define GROOVE_MAX_FACTOR 1e4
 #define GROOVE_MIN_ANGLE 1e-7 /* radians */
 
+/* The factor for a groove of angle phi (radians); 1 from a right angle on, where there is no
+ * groove to cover (a gap beyond pi between two faces is the outside of an edge). */
 static double groove_factor(double phi)
 {
-    if (!(phi > GROOVE_MIN_ANGLE))
+    if (!(phi > GROOVE_MIN_ANGLE && phi < 0.5 * M_PI))
         return 1.0;
-    double g = 6.0 / tan(phi); /* phi >= pi / 2: <= 0 */
+    double g = 6.0 / tan(phi);
     return g > GROOVE_MAX_FACTOR ? GROOVE_MAX_FACTOR : g > 1.0 ? g : 1.0;
 }
 
-/* The part of corner c's position perpendicular to the edge from a to b (double). */
-static void groove_arm(const vec3 *pos, uint32_t a, uint32_t b, uint32_t c, double w[3])
+/* The part of q perpendicular to the line of direction d (both from a point on the line). */
+static struct dvec3 groove_arm(struct dvec3 q, struct dvec3 d)
 {
-    double d[3] = {(double)pos[b].x - pos[a].x, (double)pos[b].y - pos[a].y,
-                   (double)pos[b].z - pos[a].z};
-    double q[3] = {(double)pos[c].x - pos[a].x, (double)pos[c].y - pos[a].y,
-                   (double)pos[c].z - pos[a].z};
-    double dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-    double s = (q[0] * d[0] + q[1] * d[1] + q[2] * d[2]) / dd;
-    for (int k = 0; k < 3; k++)
-        w[k] = q[k] - s * d[k];
+    return d3_sub(q, d3_scale(d, d3_dot(q, d) / d3_dot(d, d)));
+}
+
+/* The angle between two arms, in [0, pi]. */
+static double arm_angle(struct dvec3 u, struct dvec3 w)
+{
+    return atan2(d3_length(d3_cross(u, w)), d3_dot(u, w));
 }
 
 static bool set_groove(struct scene *sc, uint32_t e, double g)
@@ -2039,41 +2040,24 @@ static bool edge_grooves(struct scene *sc, uint32_t lo, const struct groove_ent 
                          struct groove_arm **arms, size_t *cap)
 {
     const vec3 *pos = sc->positions;
-    uint32_t hi = ent[0].hi;
-    if (n_ent == 2) { /* the usual edge: cot(phi) = (w1 . w2) / |w1 x w2| */
-        double w1[3], w2[3];
-        groove_arm(pos, lo, hi, sc->tris[ent[0].e / 3].v[ent[0].e % 3], w1);
-        groove_arm(pos, lo, hi, sc->tris[ent[1].e / 3].v[ent[1].e % 3], w2);
-        double dot = w1[0] * w2[0] + w1[1] * w2[1] + w1[2] * w2[2];
-        if (!(dot > 0.0))
-            return true; /* 90 degrees or more (or no area): the margin as it is */
-        double cx[3] = {w1[1] * w2[2] - w1[2] * w2[1], w1[2] * w2[0] - w1[0] * w2[2],
-                        w1[0] * w2[1] - w1[1] * w2[0]};
-        double phi = atan2(sqrt(cx[0] * cx[0] + cx[1] * cx[1] + cx[2] * cx[2]), dot);
-        double g = groove_factor(phi);
+    struct dvec3 a = d3(pos[lo]), d = d3_sub(d3(pos[ent[0].hi]), a);
+    if (n_ent == 2) { /* the usual edge: one angle, no frame, no sort */
+        struct dvec3 w1 = groove_arm(d3_sub(d3(pos[sc->tris[ent[0].e / 3].v[ent[0].e % 3]]), a), d);
+        struct dvec3 w2 = groove_arm(d3_sub(d3(pos[sc->tris[ent[1].e / 3].v[ent[1].e % 3]]), a), d);
+        double g = groove_factor(arm_angle(w1, w2));
         return set_groove(sc, ent[0].e, g) && set_groove(sc, ent[1].e, g);
     }
     size_t n = 0;
-    double u[3] = {0.0, 0.0, 0.0}, v[3] = {0.0, 0.0, 0.0};
+    struct dvec3 u = {0.0, 0.0, 0.0}, v = {0.0, 0.0, 0.0};
     for (size_t j = 0; j < n_ent; j++) {
         uint32_t e = ent[j].e;
-        double w[3];
-        groove_arm(pos, lo, hi, sc->tris[e / 3].v[e % 3], w);
-        double len = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+        struct dvec3 w = groove_arm(d3_sub(d3(pos[sc->tris[e / 3].v[e % 3]]), a), d);
+        double len = d3_length(w);
         if (!(len > 0.0) || !isfinite(len))
             continue; /* a face without area along this edge */
-        if (n == 0) {
-            /* the frame about the edge: u along the first arm, v = d x u (d the unit edge) */
-            double d[3] = {(double)pos[hi].x - pos[lo].x, (double)pos[hi].y - pos[lo].y,
-                           (double)pos[hi].z - pos[lo].z};
-            double d_len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-            for (int k = 0; k < 3; k++) {
-                u[k] = w[k] / len;
-                d[k] /= d_len;
-            }
-            v[0] = d[1] * u[2] - d[2] * u[1];
-            v[1] = d[2] * u[0] - d[0] * u[2];
-            v[2] = d[0] * u[1] - d[1] * u[0];
+        if (n == 0) { /* the frame about the edge: u along the first arm, v = (d / |d|) x u */
+            u = d3_scale(w, 1.0 / len);
+            v = d3_cross(d3_scale(d, 1.0 / d3_length(d)), u);
         }
         if (n == *cap) {
             size_t c = *cap ? 2 * *cap : 8;
@@ -2083,23 +2067,17 @@ static bool edge_grooves(struct scene *sc, uint32_t lo, const struct groove_ent 
             *arms = grown;
             *cap = c;
         }
-        (*arms)[n++] = (struct groove_arm){atan2(w[0] * v[0] + w[1] * v[1] + w[2] * v[2],
-                                                 w[0] * u[0] + w[1] * u[1] + w[2] * u[2]),
-                                           e};
+        (*arms)[n++] = (struct groove_arm){atan2(d3_dot(w, v), d3_dot(w, u)), e};
     }
     if (n < 2)
         return true;
     qsort(*arms, n, sizeof **arms, groove_arm_cmp);
     for (size_t k = 0; k < n; k++) {
         /* the gap to the next arm counter-clockwise (the last one's wraps round) */
-        const struct groove_arm *a = &(*arms)[k], *b = &(*arms)[(k + 1) % n];
-        double gap = k + 1 < n ? b->angle - a->angle : b->angle + 2.0 * M_PI - a->angle;
-        if (n == 2 && k == 1)
-            break; /* two faces: the other side of the same two half-planes */
-        if (n == 2)
-            gap = gap > M_PI ? 2.0 * M_PI - gap : gap;
+        const struct groove_arm *p = &(*arms)[k], *q = &(*arms)[(k + 1) % n];
+        double gap = k + 1 < n ? q->angle - p->angle : q->angle + 2.0 * M_PI - p->angle;
         double g = groove_factor(gap);
-        if (!set_groove(sc, a->e, g) || !set_groove(sc, b->e, g))
+        if (!set_groove(sc, p->e, g) || !set_groove(sc, q->e, g))
             return false;
     }
     return true;
@@ -2118,52 +2096,34 @@ static bool edge_grooves(struct scene *sc, uint32_t lo, const struct groove_ent 
 
 /* Where p lies in quad q: its coordinates (alpha along e1, beta along e2) and distance from the
  * plane, in double. */
-static void quad_locate(const struct quad *q, const double p[3], double *alpha, double *beta,
+static void quad_locate(const struct quad *q, struct dvec3 p, double *alpha, double *beta,
                         double *dist)
 {
-    const double e1[3] = {q->e1.x, q->e1.y, q->e1.z}, e2[3] = {q->e2.x, q->e2.y, q->e2.z};
-    double c[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
-                   e1[0] * e2[1] - e1[1] * e2[0]};
-    double cc = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
-    double d[3] = {p[0] - q->corner.x, p[1] - q->corner.y, p[2] - q->corner.z};
-    double dx2[3] = {d[1] * e2[2] - d[2] * e2[1], d[2] * e2[0] - d[0] * e2[2],
-                     d[0] * e2[1] - d[1] * e2[0]};
-    double e1xd[3] = {e1[1] * d[2] - e1[2] * d[1], e1[2] * d[0] - e1[0] * d[2],
-                      e1[0] * d[1] - e1[1] * d[0]};
-    *alpha = (dx2[0] * c[0] + dx2[1] * c[1] + dx2[2] * c[2]) / cc;
-    *beta = (e1xd[0] * c[0] + e1xd[1] * c[1] + e1xd[2] * c[2]) / cc;
-    *dist = fabs(d[0] * c[0] + d[1] * c[1] + d[2] * c[2]) / sqrt(cc);
+    struct dvec3 c = d3_cross(q->e1, q->e2), d = d3_sub(p, q->corner);
+    double cc = d3_dot(c, c);
+    *alpha = d3_dot(d3_cross(d, q->e2), c) / cc;
+    *beta = d3_dot(d3_cross(q->e1, d), c) / cc;
+    *dist = fabs(d3_dot(d, c)) / sqrt(cc);
 }
 
-/* Component i of v (0: x, 1: y, 2: z). */
-static double d3_axis(struct dvec3 v, int i) { return i == 0 ? v.x : i == 1 ? v.y : v.z; }
-
-static double d3_len(const double v[3]) { return sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]); }
+static double d3_max_abs(struct dvec3 v) { return fmax(fabs(v.x), fmax(fabs(v.y), fabs(v.z))); }
 
 /* The factor quad b's meeting edge k of quad a (0: corner to + e1, 1: + e1 to + e1 + e2, 2: + e2
  * to + e1 + e2, 3: corner to + e2) calls for, 1 where it does not meet it. */
 static double quad_edge_groove(const struct quad *a, int k, const struct quad *b)
 {
-    const double o[3] = {a->corner.x, a->corner.y, a->corner.z};
-    const double e1[3] = {a->e1.x, a->e1.y, a->e1.z}, e2[3] = {a->e2.x, a->e2.y, a->e2.z};
-    double p0[3], p1[3], ca[3], cb[3];
-    for (int i = 0; i < 3; i++) {
-        p0[i] = o[i] + (k == 1 ? e1[i] : k == 2 ? e2[i] : 0.0);
-        p1[i] = o[i] + (k == 0 ? e1[i] : k == 3 ? e2[i] : e1[i] + e2[i]);
-        ca[i] = o[i] + 0.5 * (e1[i] + e2[i]);
-        cb[i] = d3_axis(b->corner, i) + 0.5 * (d3_axis(b->e1, i) + d3_axis(b->e2, i));
-    }
-    double u[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
-    double len = d3_len(u);
+    struct dvec3 p0 = k == 1   ? d3_add(a->corner, a->e1)
+                      : k == 2 ? d3_add(a->corner, a->e2)
+                               : a->corner;
+    struct dvec3 p1 = k == 0   ? d3_add(a->corner, a->e1)
+                      : k == 3 ? d3_add(a->corner, a->e2)
+                               : d3_add(d3_add(a->corner, a->e1), a->e2);
+    struct dvec3 u = d3_sub(p1, p0);
+    double len = d3_length(u);
     if (!(len > 0.0))
         return 1.0;
-    double mag = 0.0;
-    for (int i = 0; i < 3; i++)
-        mag = fmax(mag, fmax(fabs(p0[i]), fabs(p1[i])));
-    double tol = GROOVE_QUAD_TOL * (mag + len);
-    double b_len = fmax(sqrt(b->e1.x * b->e1.x + b->e1.y * b->e1.y + b->e1.z * b->e1.z),
-                        sqrt(b->e2.x * b->e2.x + b->e2.y * b->e2.y + b->e2.z * b->e2.z));
-    double t = tol / b_len; /* the tolerance in b's coordinates, about */
+    double tol = GROOVE_QUAD_TOL * (fmax(d3_max_abs(p0), d3_max_abs(p1)) + len);
+    double t = tol / fmax(d3_length(b->e1), d3_length(b->e2)); /* in b's coordinates, about */
     double al[2], be[2], dist[2];
     quad_locate(b, p0, &al[0], &be[0], &dist[0]);
     quad_locate(b, p1, &al[1], &be[1], &dist[1]);
@@ -2175,18 +2135,9 @@ static double quad_edge_groove(const struct quad *a, int k, const struct quad *b
                      (fabs(be[0]) <= t && fabs(be[1]) <= t) ||
                      (fabs(be[0] - 1.0) <= t && fabs(be[1] - 1.0) <= t);
     /* the arms: each centre's part perpendicular to the edge */
-    double wa[3], wb[3], sa = 0.0, sb = 0.0;
-    for (int i = 0; i < 3; i++) {
-        sa += (ca[i] - p0[i]) * u[i];
-        sb += (cb[i] - p0[i]) * u[i];
-    }
-    for (int i = 0; i < 3; i++) {
-        wa[i] = ca[i] - p0[i] - sa / (len * len) * u[i];
-        wb[i] = cb[i] - p0[i] - sb / (len * len) * u[i];
-    }
-    double x[3] = {wa[1] * wb[2] - wa[2] * wb[1], wa[2] * wb[0] - wa[0] * wb[2],
-                   wa[0] * wb[1] - wa[1] * wb[0]};
-    double phi = atan2(d3_len(x), wa[0] * wb[0] + wa[1] * wb[1] + wa[2] * wb[2]);
+    struct dvec3 ca = d3_add(a->corner, d3_scale(d3_add(a->e1, a->e2), 0.5));
+    struct dvec3 cb = d3_add(b->corner, d3_scale(d3_add(b->e1, b->e2), 0.5));
+    double phi = arm_angle(groove_arm(d3_sub(ca, p0), u), groove_arm(d3_sub(cb, p0), u));
     if (!on_border && phi > 0.5 * M_PI)
         phi = M_PI - phi; /* b goes on past the edge: the other side's groove */
     return groove_factor(phi);
@@ -2194,15 +2145,19 @@ static double quad_edge_groove(const struct quad *a, int k, const struct quad *b
 
 /* Quad q's box, grown by a millionth of its coordinates and size: pairs whose boxes do not
  * overlap cannot share an edge. */
+static void quad_span(double c, double u, double v, double *lo, double *hi)
+{
+    double l = c + fmin(0.0, u) + fmin(0.0, v), h = c + fmax(0.0, u) + fmax(0.0, v);
+    double pad = 2.0 * GROOVE_QUAD_TOL * (fmax(fabs(l), fabs(h)) + (h - l) + fabs(u) + fabs(v));
+    *lo = l - pad;
+    *hi = h + pad;
+}
+
 static void quad_box(const struct quad *q, double lo[3], double hi[3])
 {
-    for (int i = 0; i < 3; i++) {
-        double c = d3_axis(q->corner, i), u = d3_axis(q->e1, i), v = d3_axis(q->e2, i);
-        double l = c + fmin(0.0, u) + fmin(0.0, v), h = c + fmax(0.0, u) + fmax(0.0, v);
-        double pad = 2.0 * GROOVE_QUAD_TOL * (fmax(fabs(l), fabs(h)) + (h - l) + fabs(u) + fabs(v));
-        lo[i] = l - pad;
-        hi[i] = h + pad;
-    }
+    quad_span(q->corner.x, q->e1.x, q->e2.x, &lo[0], &hi[0]);
+    quad_span(q->corner.y, q->e1.y, q->e2.y, &lo[1], &hi[1]);
+    quad_span(q->corner.z, q->e1.z, q->e2.z, &lo[2], &hi[2]);
 }
 
 static bool quad_grooves(struct scene *sc)

@@ -22,35 +22,14 @@
  * absolute error term.  A quad's corner and edges are doubles (shape.h): their products round
  * once more, which each bound below allows for (one rounding per product).  gamma_d(n) =
  * n u / (1 - n u), u = 2^-53 (PBRT 4e, ch. 6, "Managing Rounding Error"). */
-static struct dvec3 d3_add(struct dvec3 a, struct dvec3 b)
-{
-    return (struct dvec3){a.x + b.x, a.y + b.y, a.z + b.z};
-}
-static struct dvec3 d3_sub(struct dvec3 a, struct dvec3 b)
-{
-    return (struct dvec3){a.x - b.x, a.y - b.y, a.z - b.z};
-}
-static struct dvec3 d3_scale(struct dvec3 a, double s)
-{
-    return (struct dvec3){a.x * s, a.y * s, a.z * s};
-}
-static struct dvec3 d3_abs(struct dvec3 a)
-{
-    return (struct dvec3){fabs(a.x), fabs(a.y), fabs(a.z)};
-}
-static double d3_dot(struct dvec3 a, struct dvec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+/* (d3_add, d3_sub, d3_dot, d3_cross and the others: vec.h) */
 static double d3_sum(struct dvec3 a) { return a.x + a.y + a.z; }
-static struct dvec3 d3_cross(struct dvec3 a, struct dvec3 b)
-{
-    return (struct dvec3){a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
-}
 /* |a_y b_z| + |a_z b_y|, ...: bounds each component of a x b and scales its rounding error */
 static struct dvec3 d3_cross_abs(struct dvec3 a, struct dvec3 b)
 {
     return (struct dvec3){fabs(a.y * b.z) + fabs(a.z * b.y), fabs(a.z * b.x) + fabs(a.x * b.z),
                           fabs(a.x * b.y) + fabs(a.y * b.x)};
 }
-static double d3_length(struct dvec3 a) { return sqrt(d3_dot(a, a)); }
 /* the greater of two finite values (a comparison: fmax is a library call) */
 static double max_d(double a, double b) { return a > b ? a : b; }
 static double d3_max(struct dvec3 a) { return max_d(a.x, max_d(a.y, a.z)); }

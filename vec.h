@@ -125,6 +125,31 @@ static inline vec3 d3_to_float(struct dvec3 a)
 {
     return (vec3){(float)a.x, (float)a.y, (float)a.z};
 }
+static inline struct dvec3 d3_add(struct dvec3 a, struct dvec3 b)
+{
+    return (struct dvec3){a.x + b.x, a.y + b.y, a.z + b.z};
+}
+static inline struct dvec3 d3_sub(struct dvec3 a, struct dvec3 b)
+{
+    return (struct dvec3){a.x - b.x, a.y - b.y, a.z - b.z};
+}
+static inline struct dvec3 d3_scale(struct dvec3 a, double s)
+{
+    return (struct dvec3){a.x * s, a.y * s, a.z * s};
+}
+static inline struct dvec3 d3_abs(struct dvec3 a)
+{
+    return (struct dvec3){fabs(a.x), fabs(a.y), fabs(a.z)};
+}
+static inline double d3_dot(struct dvec3 a, struct dvec3 b)
+{
+    return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+static inline struct dvec3 d3_cross(struct dvec3 a, struct dvec3 b)
+{
+    return (struct dvec3){a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+static inline double d3_length(struct dvec3 a) { return sqrt(d3_dot(a, a)); }
 
 /* fmaxf and fminf written out: gcc calls libm for them (their NaN rule, a NaN operand gives the
  * other, has no one-instruction form on x86), and they sit in the path loop.  Same results. */
