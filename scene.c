@@ -1964,9 +1964,9 @@ static bool parse_line(struct parser *ps, char *line)
  * that keeps the spawned origin in front of a neighbour meeting the edge at 80 to 100 degrees;
  * at a sharper groove the origin's push along the normal heads into the neighbour, and a closed
  * wedge of 30 degrees let sky in (docs/theory.md, "Self-intersection").  The margin's normal
- * term needs a factor g > 5 cot(phi) there; an edge shared by two triangles of one mesh (the
- * same two vertex indices) knows its angle, so the load gives each such edge g = 6 cot(phi), at
- * most GROOVE_MAX_FACTOR.  Faces folded onto each other (phi below GROOVE_MIN_ANGLE) close no
+ * term needs a factor g > 5 cot(phi) there; an edge shared by two triangles (the same two
+ * corners) knows its angle, so the load gives each such edge g = 6 cot(phi), at most
+ * GROOVE_MAX_FACTOR.  Faces folded onto each other (phi below GROOVE_MIN_ANGLE) close no
  * groove. */
 #define GROOVE_MAX_FACTOR 1e4
 #define GROOVE_MIN_ANGLE 1e-7 /* radians */
@@ -2185,9 +2185,54 @@ static bool quad_grooves(struct scene *sc)
     return true;
 }
 
-/* sc->tri_groove from the edges the scene's triangles share (their vertex indices; a mesh's
- * vertices are its own, so only triangles of one mesh meet): each edge listed under its lower
- * vertex (a counting sort), each vertex's list sorted by the other vertex. */
+/* The lowest index of a vertex at each vertex's position (exactly equal coordinates, -0 as +0):
+ * meshes keep their vertices apart, and a triangle soup (STL, some exporters) gives each
+ * triangle its own, yet faces that meet at a groove share their corners' coordinates.  An open
+ * hash of the positions, in a table of twice their number or more.  NULL where out of memory. */
+static uint32_t *weld_positions(const struct scene *sc)
+{
+    uint32_t n_v = sc->n_positions;
+    uint32_t *canon = malloc(((size_t)n_v + 1) * sizeof *canon);
+    size_t cap = 16;
+    while (cap < 2 * (size_t)n_v)
+        cap *= 2;
+    uint32_t *table = malloc(cap * sizeof *table);
+    if (!canon || !table) {
+        free(canon);
+        free(table);
+        return NULL;
+    }
+    memset(table, 0xff, cap * sizeof *table); /* UINT32_MAX: empty */
+    for (uint32_t v = 0; v < n_v; v++) {
+        const vec3 p = sc->positions[v];
+        uint32_t bits[3];
+        const float c[3] = {p.x + 0.0f, p.y + 0.0f, p.z + 0.0f}; /* -0 + 0 = +0 */
+        memcpy(bits, c, sizeof bits);
+        uint64_t h = (bits[0] * 0x9E3779B97F4A7C15ull) ^ (bits[1] * 0xC2B2AE3D27D4EB4Full) ^
+                     (bits[2] * 0x165667B19E3779F9ull);
+        size_t slot = (size_t)(h ^ h >> 29) & (cap - 1);
+        for (;; slot = (slot + 1) & (cap - 1)) {
+            uint32_t w = table[slot];
+            if (w == UINT32_MAX) {
+                table[slot] = v;
+                canon[v] = v;
+                break;
+            }
+            const vec3 q = sc->positions[w];
+            if (q.x == p.x && q.y == p.y && q.z == p.z) {
+                canon[v] = w;
+                break;
+            }
+        }
+    }
+    free(table);
+    return canon;
+}
+
+/* sc->tri_groove from the edges the scene's triangles share: edges with the same two corners
+ * (vertices at the same coordinates, weld_positions, so triangles of two meshes or of a soup
+ * meet as those of one mesh do), each listed under its lower vertex (a counting sort), each
+ * vertex's list sorted by the other vertex. */
 static bool grooves(struct parser *ps)
 {
     struct scene *sc = ps->scene;
@@ -2196,17 +2241,18 @@ static bool grooves(struct parser *ps)
     uint64_t n_e = 3 * (uint64_t)sc->n_tris;
     if (n_e == 0)
         return true;
-    if (n_e >= UINT32_MAX)
+    if (n_e >= UINT32_MAX || sc->n_positions >= UINT32_MAX / 4)
         return true; /* beyond the indices' range: every factor stays 1 */
     uint32_t n_v = sc->n_positions;
+    uint32_t *canon = weld_positions(sc);
     uint32_t *start = calloc((size_t)n_v + 1, sizeof *start);
     struct groove_ent *ent = malloc((size_t)n_e * sizeof *ent);
     struct groove_arm *arms = NULL;
     size_t arms_cap = 0;
-    bool ok = start && ent;
+    bool ok = canon && start && ent;
     for (uint32_t e = 0; ok && e < (uint32_t)n_e; e++) {
         const struct scene_tri *t = &sc->tris[e / 3];
-        uint32_t a = t->v[(e % 3 + 1) % 3], b = t->v[(e % 3 + 2) % 3];
+        uint32_t a = canon[t->v[(e % 3 + 1) % 3]], b = canon[t->v[(e % 3 + 2) % 3]];
         if (a != b)
             start[(a < b ? a : b) + 1]++;
     }
@@ -2214,7 +2260,7 @@ static bool grooves(struct parser *ps)
         start[v + 1] += start[v];
     for (uint32_t e = 0; ok && e < (uint32_t)n_e; e++) {
         const struct scene_tri *t = &sc->tris[e / 3];
-        uint32_t a = t->v[(e % 3 + 1) % 3], b = t->v[(e % 3 + 2) % 3];
+        uint32_t a = canon[t->v[(e % 3 + 1) % 3]], b = canon[t->v[(e % 3 + 2) % 3]];
         if (a != b) /* start[lo] counts up to the next list's start as it fills */
             ent[start[a < b ? a : b]++] = (struct groove_ent){a < b ? b : a, e};
     }
@@ -2255,18 +2301,21 @@ static bool grooves(struct parser *ps)
             const struct scene_tri *t = &sc->tris[e / 3];
             float g = sc->tri_groove[e / 3][e % 3];
             for (int k = 1; k <= 2; k++) {
-                uint32_t v = t->v[(e % 3 + k) % 3];
+                uint32_t v = canon[t->v[(e % 3 + k) % 3]];
                 at_v[v] = at_v[v] > g ? at_v[v] : g;
             }
         }
         for (uint32_t e = 0; ok && e < (uint32_t)n_e; e++) {
             const struct scene_tri *t = &sc->tris[e / 3];
             float *g = &sc->tri_groove[e / 3][e % 3];
-            for (int k = 1; k <= 2; k++)
-                *g = at_v[t->v[(e % 3 + k) % 3]] > *g ? at_v[t->v[(e % 3 + k) % 3]] : *g;
+            for (int k = 1; k <= 2; k++) {
+                float g_v = at_v[canon[t->v[(e % 3 + k) % 3]]];
+                *g = g_v > *g ? g_v : *g;
+            }
         }
         free(at_v);
     }
+    free(canon);
     if (!ok)
         return fail_oom(ps, 0);
     return true;

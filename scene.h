@@ -157,8 +157,8 @@ struct scene {
     struct scene_tri *tris;
     uint32_t n_tris;
     /* per triangle, the factor of each edge's margin (edge opposite corner i; shape.h, struct
-     * triangle_plane) where the edge is shared with a triangle of the same mesh at a groove
-     * sharper than 80 degrees, 1 elsewhere; NULL when every factor is 1 (scene.c, grooves) */
+     * triangle_plane) where another triangle shares the edge's corners at a groove sharper than
+     * 80 degrees, 1 elsewhere; NULL when every factor is 1 (scene.c, grooves) */
     float (*tri_groove)[3];
 
     struct sphere *spheres;

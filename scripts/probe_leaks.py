@@ -12,7 +12,7 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
   wedges   a closed wedge (a triangular prism of 8 triangles sharing vertices, its apex edge a
            groove of 0.5..45 degrees seen from inside) under a random rotation, scale 1e-8..1e8
            and offset up to 1e4 sizes, wound either way, the camera inside; every pixel must be
-           exactly 0 (scene.c, grooves).
+           exactly 0 (scene.c, grooves).  --soup gives each triangle its own three vertices.
   sheared  a closed parallelepiped of six quads whose faces meet at 2..45 degrees along one edge,
            turned, scaled 1e-6..1e6 and moved up to 1e4 sizes, corners and edges written to 17
            digits, the camera inside near that edge; every pixel must be exactly 0.
@@ -36,6 +36,7 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
   python3 scripts/probe_leaks.py cubes --cells 10 --cases 50 --seed 22
   python3 scripts/probe_leaks.py cubes --strips 30 --cases 50 --seed 21
   python3 scripts/probe_leaks.py wedges --cases 60 --seed 1
+  python3 scripts/probe_leaks.py wedges --cases 60 --seed 1 --soup
   python3 scripts/probe_leaks.py sheared --cases 70 --seed 1
   python3 scripts/probe_leaks.py spheres --cases 50 --seed 3
   python3 scripts/probe_leaks.py planes --cases 30 --decade 5 --seed 1
@@ -209,8 +210,14 @@ def probe_wedges(args, tmp):
         flip = rng.random() < 0.5
         obj = os.path.join(tmp, "wedge.obj")
         with open(obj, "w") as f:
-            f.write("".join("v %s\n" % fmt(place(p)).replace(",", " ") for p in local))
-            f.write("".join("f %d %d %d\n" % ((a, c, b) if flip else (a, b, c)) for a, b, c in faces))
+            if args.soup:  # every face its own three vertices, at the same coordinates
+                for a, b, c in faces:
+                    for k in ((a, c, b) if flip else (a, b, c)):
+                        f.write("v %s\n" % fmt(place(local[k - 1])).replace(",", " "))
+                f.write("".join("f %d %d %d\n" % (3 * i + 1, 3 * i + 2, 3 * i + 3) for i in range(len(faces))))
+            else:
+                f.write("".join("v %s\n" % fmt(place(p)).replace(",", " ") for p in local))
+                f.write("".join("f %d %d %d\n" % ((a, c, b) if flip else (a, b, c)) for a, b, c in faces))
         x = rng.uniform(0.6, 1.9)
         eye, at = place((x, 0, rng.uniform(-0.5, 0.5))), place((0, 0, rng.uniform(-0.5, 0.5)))
         up = [a - b for a, b in zip(place((0, 1, 0)), place((0, 0, 0)))]
@@ -486,6 +493,8 @@ def main():
     ap.add_argument("--strips", type=int, default=0, help="cubes: strips per face instead")
     ap.add_argument("--no-turn", dest="turn", action="store_false", help="cubes: no rotation")
     ap.add_argument("--decade", type=int, default=4, help="planes: moved 10^(D-1)..10^D sizes")
+    ap.add_argument("--soup", action="store_true",
+                    help="wedges: every triangle its own vertices (no index shared)")
     ap.add_argument("--grid", type=int, default=32, help="offset: vertices on the grid of 1/G")
     ap.add_argument("--offsets", default="1e5,2e5,4e5")
     ap.add_argument("--obj", default=os.path.join(ROOT, "scenes", "models", "CornellBox-Original.obj"))

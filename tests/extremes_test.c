@@ -412,9 +412,15 @@ Test(extremes, moved_closed_cube_sees_no_sky, .timeout = TEST_TIMEOUT_S(120))
  * the margin of a right angle, since the push of its spawned origin along the normal heads into
  * the neighbour (scene.c, grooves; shape.c, edge_margin_groove): before the groove factors,
  * wedges of 30 degrees and less let sky in (`python3 scripts/probe_leaks.py wedges --cases 60
- * --seed 1`: 16 of 60 before, 0 after). */
+ * --seed 1`: 16 of 60 before, 0 after).  layout: how the OBJ shares the corners. */
+enum wedge_layout {
+    WEDGE_SHARED,     /* one mesh, six vertices shared by index */
+    WEDGE_TWO_MESHES, /* the groove's two sides in two meshes, each with its six vertices */
+    WEDGE_SOUP,       /* one mesh, each triangle its own three vertices */
+};
+
 static void write_wedge(const char *dir, int k, double deg, const double m[4], bool inward,
-                        char *scene_path, size_t n)
+                        enum wedge_layout layout, char *scene_path, size_t n)
 {
     const double a = 37.0 * 3.14159265358979323846 / 180.0, c = cos(a), s = sin(a);
     const double ax[3] = {1.0 / sqrt(14.0), 2.0 / sqrt(14.0), 3.0 / sqrt(14.0)};
@@ -432,29 +438,48 @@ static void write_wedge(const char *dir, int k, double deg, const double m[4], b
     }
     static const int faces[8][3] = {{1, 2, 3}, {4, 6, 5}, {1, 4, 5}, {1, 5, 2},
                                     {1, 3, 6}, {1, 6, 4}, {2, 5, 6}, {2, 6, 3}};
-    char obj[300];
-    snprintf(obj, sizeof obj, "%s/wedge-%d.obj", dir, k);
-    FILE *f = fopen(obj, "w");
-    cr_assert_not_null(f);
-    for (int i = 0; i < 6; i++)
-        fprintf(f, "v %.9g %.9g %.9g\n", w[i][0], w[i][1], w[i][2]);
-    for (int i = 0; i < 8; i++)
-        fprintf(f, "f %d %d %d\n", faces[i][0], faces[i][inward ? 2 : 1], faces[i][inward ? 1 : 2]);
-    fclose(f);
+    /* the faces 0-3 (both ends and one side of the groove) and 4-7 (the other side) */
+    int n_obj = layout == WEDGE_TWO_MESHES ? 2 : 1;
+    char obj[2][300];
+    for (int o = 0; o < n_obj; o++) {
+        snprintf(obj[o], sizeof obj[o], "%s/wedge-%d-%d.obj", dir, k, o);
+        FILE *f = fopen(obj[o], "w");
+        cr_assert_not_null(f);
+        int first = n_obj == 2 ? 4 * o : 0, end = n_obj == 2 ? first + 4 : 8;
+        if (layout != WEDGE_SOUP)
+            for (int i = 0; i < 6; i++)
+                fprintf(f, "v %.9g %.9g %.9g\n", w[i][0], w[i][1], w[i][2]);
+        for (int i = first; i < end; i++) {
+            int v[3] = {faces[i][0], faces[i][inward ? 2 : 1], faces[i][inward ? 1 : 2]};
+            if (layout == WEDGE_SOUP) { /* three vertices of its own, at the same coordinates */
+                for (int c = 0; c < 3; c++)
+                    fprintf(f, "v %.9g %.9g %.9g\n", w[v[c] - 1][0], w[v[c] - 1][1],
+                            w[v[c] - 1][2]);
+                fprintf(f, "f -3 -2 -1\n");
+            } else {
+                fprintf(f, "f %d %d %d\n", v[0], v[1], v[2]);
+            }
+        }
+        fclose(f);
+    }
     snprintf(scene_path, n, "%s/wedge-%d.txt", dir, k);
-    f = fopen(scene_path, "w");
+    FILE *f = fopen(scene_path, "w");
     cr_assert_not_null(f);
     fprintf(f,
             "camera eye=%.9g,%.9g,%.9g look-at=%.9g,%.9g,%.9g up=%.9g,%.9g,%.9g fov=70\n"
             "film width=24 height=24\nrender spp=32 sampler=independent\n"
-            "material name=m type=diffuse albedo=0.9,0.9,0.9\n"
-            "mesh file=%s material=m\nsky type=constant radiance=1,1,1\n",
+            "material name=m type=diffuse albedo=0.9,0.9,0.9\n",
             w[6][0], w[6][1], w[6][2], w[7][0], w[7][1], w[7][2], w[4][0] - w[5][0],
-            w[4][1] - w[5][1], w[4][2] - w[5][2], obj);
+            w[4][1] - w[5][1], w[4][2] - w[5][2]);
+    for (int o = 0; o < n_obj; o++)
+        fprintf(f, "mesh file=%s material=m\n", obj[o]);
+    fprintf(f, "sky type=constant radiance=1,1,1\n");
     fclose(f);
 }
 
-Test(extremes, closed_wedges_see_no_sky, .timeout = TEST_TIMEOUT_S(120))
+/* Every wedge of three angles and four moves, written in each layout of layouts[0 .. n): the
+ * winding alternates from one render to the next. */
+static void wedges_see_no_sky(const char *name, const enum wedge_layout *layouts, int n)
 {
     static const double degrees[] = {30.0, 10.0, 2.0};
     static const double moves[][4] = {
@@ -465,15 +490,31 @@ Test(extremes, closed_wedges_see_no_sky, .timeout = TEST_TIMEOUT_S(120))
         {4.5e-4, 0.0, 0.676, 0.0},
     };
     char dir[64], scene_path[300];
-    test_make_dir(dir, sizeof dir, "wedges");
+    test_make_dir(dir, sizeof dir, name);
     int k = 0;
     for (size_t i = 0; i < sizeof degrees / sizeof degrees[0]; i++)
         for (size_t j = 0; j < sizeof moves / sizeof moves[0]; j++)
-            for (int inward = 0; inward < 2; inward++, k++) {
-                write_wedge(dir, k, degrees[i], moves[j], inward, scene_path, sizeof scene_path);
+            for (int l = 0; l < n; l++, k++) {
+                write_wedge(dir, k, degrees[i], moves[j], (i + j + (size_t)l) % 2 == 0, layouts[l],
+                            scene_path, sizeof scene_path);
                 assert_black(scene_path);
             }
     test_remove_dir(dir);
+}
+
+Test(extremes, closed_wedges_see_no_sky, .timeout = TEST_TIMEOUT_S(120))
+{
+    static const enum wedge_layout layouts[] = {WEDGE_SHARED, WEDGE_SHARED};
+    wedges_see_no_sky("wedges", layouts, 2);
+}
+
+/* The same wedges with the groove's two sides in two meshes, or as a triangle soup (each
+ * triangle its own vertices, as STL files and some exporters write them): no vertex index says
+ * that the faces meet, their coordinates do (scene.c, grooves).  Every pixel is exactly 0. */
+Test(extremes, wedges_of_parts_and_soups_see_no_sky, .timeout = TEST_TIMEOUT_S(120))
+{
+    static const enum wedge_layout layouts[] = {WEDGE_TWO_MESHES, WEDGE_SOUP};
+    wedges_see_no_sky("wedge-parts", layouts, 2);
 }
 
 /* A box of six quads around (0, 0, 0) with half-size 1, turned about (1, 2, 3) by 37 degrees,
