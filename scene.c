@@ -2229,46 +2229,37 @@ static uint32_t *weld_positions(const struct scene *sc)
     return canon;
 }
 
-/* sc->tri_groove from the edges the scene's triangles share: edges with the same two corners
- * (vertices at the same coordinates, weld_positions, so triangles of two meshes or of a soup
- * meet as those of one mesh do), each listed under its lower vertex (a counting sort), each
- * vertex's list sorted by the other vertex. */
-static bool grooves(struct parser *ps)
+/* The scene's edges (corners weld_positions apart) listed under their lower corner: on
+ * success *start (n_positions + 1 entries) and *ent, vertex v's edges being ent[start[v] ..
+ * start[v + 1]) sorted by the other corner (a counting sort, then each list by insertion sort
+ * or qsort).  False where out of memory (nothing to free). */
+static bool edge_lists(const struct scene *sc, const uint32_t *canon, uint32_t **start_out,
+                       struct groove_ent **ent_out)
 {
-    struct scene *sc = ps->scene;
-    if (!quad_grooves(sc))
-        return fail_oom(ps, 0);
-    uint64_t n_e = 3 * (uint64_t)sc->n_tris;
-    if (n_e == 0)
-        return true;
-    if (n_e >= UINT32_MAX || sc->n_positions >= UINT32_MAX / 4)
-        return true; /* beyond the indices' range: every factor stays 1 */
-    uint32_t n_v = sc->n_positions;
-    uint32_t *canon = weld_positions(sc);
-    uint32_t *start = calloc((size_t)n_v + 1, sizeof *start);
-    struct groove_ent *ent = malloc((size_t)n_e * sizeof *ent);
-    struct groove_arm *arms = NULL;
-    size_t arms_cap = 0;
-    bool ok = canon && start && ent;
-    for (uint32_t e = 0; ok && e < (uint32_t)n_e; e++) {
+    uint32_t n_e = 3 * sc->n_tris, n_v = sc->n_positions;
+    uint32_t *start = calloc((size_t)n_v + 2, sizeof *start);
+    struct groove_ent *ent = malloc(((size_t)n_e + 1) * sizeof *ent);
+    if (!start || !ent) {
+        free(start);
+        free(ent);
+        return false;
+    }
+    for (uint32_t e = 0; e < n_e; e++) {
         const struct scene_tri *t = &sc->tris[e / 3];
         uint32_t a = canon[t->v[(e % 3 + 1) % 3]], b = canon[t->v[(e % 3 + 2) % 3]];
         if (a != b)
-            start[(a < b ? a : b) + 1]++;
+            start[(a < b ? a : b) + 2]++;
     }
-    for (uint32_t v = 0; ok && v < n_v; v++)
-        start[v + 1] += start[v];
-    for (uint32_t e = 0; ok && e < (uint32_t)n_e; e++) {
+    for (uint32_t v = 0; v < n_v; v++)
+        start[v + 2] += start[v + 1];
+    for (uint32_t e = 0; e < n_e; e++) {
         const struct scene_tri *t = &sc->tris[e / 3];
         uint32_t a = canon[t->v[(e % 3 + 1) % 3]], b = canon[t->v[(e % 3 + 2) % 3]];
-        if (a != b) /* start[lo] counts up to the next list's start as it fills */
-            ent[start[a < b ? a : b]++] = (struct groove_ent){a < b ? b : a, e};
+        if (a != b) /* start[lo + 1] counts up to the next list's start as it fills */
+            ent[start[(a < b ? a : b) + 1]++] = (struct groove_ent){a < b ? b : a, e};
     }
-    for (uint32_t v = 0; ok && v < n_v; v++) {
-        /* start[v] is now where v + 1's list begins; v's began at start[v - 1] (0 for v = 0) */
-        uint32_t begin = v > 0 ? start[v - 1] : 0, end = start[v];
-        if (end - begin < 2)
-            continue;
+    for (uint32_t v = 0; v < n_v; v++) {
+        uint32_t begin = start[v], end = start[v + 1];
         if (end - begin <= 16) { /* the usual handful: insertion sort */
             for (uint32_t j = begin + 1; j < end; j++)
                 for (uint32_t k = j; k > begin && ent[k - 1].hi > ent[k].hi; k--) {
@@ -2279,6 +2270,31 @@ static bool grooves(struct parser *ps)
         } else {
             qsort(ent + begin, end - begin, sizeof *ent, groove_ent_cmp);
         }
+    }
+    *start_out = start;
+    *ent_out = ent;
+    return true;
+}
+
+/* sc->tri_groove from the edges the scene's triangles share: edges with the same two corners
+ * (vertices at the same coordinates, weld_positions, so triangles of two meshes or of a soup
+ * meet as those of one mesh do), edge_lists. */
+static bool grooves(struct parser *ps, const uint32_t *canon)
+{
+    struct scene *sc = ps->scene;
+    if (!quad_grooves(sc))
+        return fail_oom(ps, 0);
+    uint64_t n_e = 3 * (uint64_t)sc->n_tris;
+    if (n_e == 0 || !canon)
+        return true;
+    uint32_t n_v = sc->n_positions;
+    uint32_t *start = NULL;
+    struct groove_ent *ent = NULL;
+    struct groove_arm *arms = NULL;
+    size_t arms_cap = 0;
+    bool ok = edge_lists(sc, canon, &start, &ent);
+    for (uint32_t v = 0; ok && v < n_v; v++) {
+        uint32_t begin = start[v], end = start[v + 1];
         for (uint32_t j = begin; ok && j < end;) {
             uint32_t k = j + 1;
             while (k < end && ent[k].hi == ent[j].hi)
@@ -2315,10 +2331,302 @@ static bool grooves(struct parser *ps)
         }
         free(at_v);
     }
-    free(canon);
     if (!ok)
         return fail_oom(ps, 0);
     return true;
+}
+
+/* ---- T-junctions: triangles split where a neighbour's corners lie on their edge ----------- */
+
+/* A vertex on a neighbour's edge without being its corner (a T-junction: a face cut into strips
+ * that end on the next face's single edge) is exact in the file, but a rotation or a move rounds
+ * it off the edge, and a ray passes through the crack between them (docs/theory.md,
+ * "Self-intersection").  The load closes such cracks: an edge that no other triangle shares
+ * (edge_lists) whose line is covered from end to end by a chain of other unshared edges, each
+ * corner within TJ_TOL of the line's coordinates, has its triangle fanned from the opposite
+ * corner through the chain's corners, which the two sides then share.  A triangle with chains
+ * along two or three edges is split along one a pass, up to TJ_PASSES passes. */
+#define TJ_PASSES 3
+#define TJ_TOL 0x1p-20   /* of the largest coordinate of the edge's ends and the corner */
+#define TJ_WORK 32       /* list entries the passes may look at, per edge (and 2^20 more) */
+#define TJ_MAX_DEGREE 16 /* unshared edges at a corner of a chain (T-junctions have 2 to 4) */
+
+/* The unshared edges (those whose corners no other triangle's edge has) at each vertex, both
+ * ends: at[first[v] .. first[v + 1]) are edge ids (triangle * 3 + the opposite corner). */
+struct tj_lists {
+    uint32_t *first;
+    uint32_t *at;
+};
+
+static bool tj_lists(const struct scene *sc, const uint32_t *start, const struct groove_ent *ent,
+                     struct tj_lists *l)
+{
+    uint32_t n_v = sc->n_positions;
+    l->first = calloc((size_t)n_v + 2, sizeof *l->first);
+    l->at = NULL;
+    if (!l->first)
+        return false;
+    uint32_t n = 0;
+    for (int pass = 0; pass < 2; pass++) {
+        for (uint32_t v = 0; v < n_v; v++)
+            for (uint32_t j = start[v]; j < start[v + 1]; j++) {
+                bool alone = (j == start[v] || ent[j - 1].hi != ent[j].hi) &&
+                             (j + 1 == start[v + 1] || ent[j + 1].hi != ent[j].hi);
+                if (!alone)
+                    continue;
+                uint32_t ends[2] = {v, ent[j].hi};
+                for (int k = 0; k < 2; k++) {
+                    if (pass == 0)
+                        l->first[ends[k] + 2]++;
+                    else
+                        l->at[l->first[ends[k] + 1]++] = ent[j].e;
+                }
+                n += pass == 0 ? 2 : 0;
+            }
+        if (pass == 0) {
+            for (uint32_t v = 0; v < n_v; v++)
+                l->first[v + 2] += l->first[v + 1];
+            l->at = malloc(((size_t)n + 1) * sizeof *l->at);
+            if (!l->at)
+                return false;
+        }
+    }
+    return true;
+}
+
+/* The corner of edge e's triangle (of tris) at end k (1 or 2 from the opposite corner), welded. */
+static uint32_t tj_corner(const struct scene_tri *tris, const uint32_t *canon, uint32_t e, int k)
+{
+    return canon[tris[e / 3].v[(e % 3 + k) % 3]];
+}
+
+/* A chain's inner corners and their parameters along the edge, grown as needed. */
+struct tj_chain {
+    uint32_t *v;
+    double *t;
+    uint32_t n, cap;
+};
+
+/* The chain of unshared edges from corner a to corner b of edge e along its line, its inner
+ * corners in order into *ch; false where there is none (or the triangle is flat, or the pass's
+ * *work, the list entries it may still look at, runs out).  *oom where memory did. */
+static bool tj_find_chain(const struct scene *sc, const struct scene_tri *tris,
+                          const uint32_t *canon, const struct tj_lists *l, uint32_t e, uint32_t a,
+                          uint32_t b, struct tj_chain *ch, uint64_t *work, bool *oom)
+{
+    struct dvec3 pa = d3(sc->positions[a]), pb = d3(sc->positions[b]), d = d3_sub(pb, pa);
+    struct dvec3 pc = d3(sc->positions[canon[tris[e / 3].v[e % 3]]]);
+    struct dvec3 ma = d3_abs(pa), mb = d3_abs(pb), mc = d3_abs(pc);
+    double big = fmax(fmax(fmax(ma.x, ma.y), fmax(ma.z, mb.x)),
+                      fmax(fmax(mb.y, mb.z), fmax(mc.x, fmax(mc.y, mc.z))));
+    double tol2 = (TJ_TOL * big) * (TJ_TOL * big);
+    double len2 = d3_dot(d, d);
+    if (!(len2 > 0.0))
+        return false;
+    /* the opposite corner off the line: the triangle is not flat */
+    struct dvec3 qc = d3_sub(pc, pa);
+    struct dvec3 oc = d3_sub(qc, d3_scale(d, d3_dot(qc, d) / len2));
+    if (!(d3_dot(oc, oc) > 0.0))
+        return false;
+    ch->n = 0;
+    uint32_t cur = a;
+    double t_cur = 0.0;
+    for (;;) {
+        uint32_t degree = l->first[cur + 1] - l->first[cur];
+        if (degree > TJ_MAX_DEGREE || degree > *work)
+            return false;
+        *work -= degree;
+        uint32_t best = UINT32_MAX;
+        double best_t = 2.0;
+        for (uint32_t j = l->first[cur]; j < l->first[cur + 1]; j++) {
+            uint32_t f = l->at[j];
+            uint32_t p = tj_corner(tris, canon, f, 1), q = tj_corner(tris, canon, f, 2);
+            if (f / 3 == e / 3 || (p != cur && q != cur))
+                continue; /* the triangle's own edges are not its neighbours' */
+            uint32_t w = p == cur ? q : p;
+            double t = 1.0; /* b itself */
+            if (w != b) {
+                struct dvec3 qw = d3_sub(d3(sc->positions[w]), pa);
+                t = d3_dot(qw, d) / len2;
+                struct dvec3 o = d3_sub(qw, d3_scale(d, t));
+                if (!(t > t_cur && t < 1.0) || !(d3_dot(o, o) <= tol2))
+                    continue;
+            }
+            if (t < best_t) {
+                best_t = t;
+                best = w;
+            }
+        }
+        if (best == UINT32_MAX)
+            return false;
+        if (best == b)
+            return ch->n > 0;
+        if (ch->n == ch->cap) {
+            uint32_t cap = ch->cap ? 2 * ch->cap : 64;
+            uint32_t *v = realloc(ch->v, (size_t)cap * sizeof *v);
+            if (v)
+                ch->v = v;
+            double *t = v ? realloc(ch->t, (size_t)cap * sizeof *t) : NULL;
+            if (!t) {
+                *oom = true;
+                return false;
+            }
+            ch->t = t;
+            ch->cap = cap;
+        }
+        ch->v[ch->n] = best;
+        ch->t[ch->n++] = best_t;
+        cur = best;
+        t_cur = best_t;
+    }
+}
+
+/* The attributes of a new corner at t along triangle tr's corners p -> q, appended to the
+ * scene's normals and uvs: *vn, *vt (-1 where either corner has none). */
+static bool tj_attributes(struct parser *ps, const struct scene_tri *tr, int p, int q, double t,
+                          int32_t *vn, int32_t *vt)
+{
+    struct scene *sc = ps->scene;
+    *vn = *vt = -1;
+    if (tr->vn[p] >= 0 && tr->vn[q] >= 0) {
+        if (!RESERVE(ps, sc->normals, ps->cap_normals, (uint64_t)sc->n_normals + 1))
+            return false;
+        vec3 na = sc->normals[tr->vn[p]];
+        struct dvec3 n = d3_add(d3_scale(d3(na), 1.0 - t), d3_scale(d3(sc->normals[tr->vn[q]]), t));
+        double len = d3_length(n);
+        sc->normals[sc->n_normals] = len > 0.0 ? d3_to_float(d3_scale(n, 1.0 / len)) : na;
+        *vn = (int32_t)sc->n_normals++;
+    }
+    if (tr->vt[p] >= 0 && tr->vt[q] >= 0) {
+        if (!RESERVE(ps, sc->uvs, ps->cap_uvs, (uint64_t)sc->n_uvs + 1))
+            return false;
+        vec2 u = sc->uvs[tr->vt[p]], w = sc->uvs[tr->vt[q]];
+        sc->uvs[sc->n_uvs] = (vec2){(float)((1.0 - t) * u.x + t * w.x),
+                                    (float)((1.0 - t) * u.y + t * w.y)};
+        *vt = (int32_t)sc->n_uvs++;
+    }
+    return true;
+}
+
+/* A budget the passes share: list entries to look at, triangles to add. */
+struct tj_budget {
+    uint64_t work;
+    uint64_t tris;
+};
+
+/* One pass: every triangle with a chain along one of its edges fanned through it, while the
+ * budget lasts.  *split says whether any was. */
+static bool tj_pass(struct parser *ps, const uint32_t *canon, struct tj_budget *budget, bool *split)
+{
+    struct scene *sc = ps->scene;
+    *split = false;
+    uint32_t *start = NULL;
+    struct groove_ent *ent = NULL;
+    struct tj_lists l = {NULL, NULL};
+    if (!edge_lists(sc, canon, &start, &ent))
+        return fail_oom(ps, 0);
+    bool listed = tj_lists(sc, start, ent, &l);
+    free(start);
+    free(ent);
+    /* the chains are found in the triangles as the pass began, whatever it splits first */
+    uint32_t n_tris = sc->n_tris;
+    struct scene_tri *tris = listed ? malloc((size_t)n_tris * sizeof *tris) : NULL;
+    if (!tris) {
+        free(l.first);
+        free(l.at);
+        return fail_oom(ps, 0);
+    }
+    memcpy(tris, sc->tris, (size_t)n_tris * sizeof *tris);
+    bool ok = true; /* false: RESERVE failed and filled the error */
+    struct tj_chain ch = {NULL, NULL, 0, 0};
+    bool oom = false;
+    for (uint32_t i = 0; ok && !oom && budget->work > 0 && i < n_tris; i++) {
+        for (int o = 0; o < 3; o++) {
+            uint32_t e = 3 * i + (uint32_t)o;
+            uint32_t a = tj_corner(tris, canon, e, 1), b = tj_corner(tris, canon, e, 2);
+            uint32_t degree = l.first[a + 1] - l.first[a];
+            if (degree < 2 || degree > TJ_MAX_DEGREE)
+                continue;
+            /* unshared edges only: those at a in l */
+            bool alone = false;
+            for (uint32_t j = l.first[a]; j < l.first[a + 1] && !alone; j++)
+                alone = l.at[j] == e;
+            if (!alone)
+                continue;
+            if (!tj_find_chain(sc, tris, canon, &l, e, a, b, &ch, &budget->work, &oom))
+                continue;
+            uint32_t n = ch.n;
+            if (n > budget->tris || (uint64_t)sc->n_tris + (uint64_t)n >= UINT32_MAX / 8) {
+                budget->work = 0; /* the rest stays as it is */
+                break;
+            }
+            budget->tris -= n;
+            if (!RESERVE(ps, sc->tris, ps->cap_tris, (uint64_t)sc->n_tris + (uint64_t)n)) {
+                ok = false;
+                break;
+            }
+            /* the fan from corner o: (o, w_k, w_k+1) for w_0 = corner p, ..., w_n+1 = corner q,
+             * wound as (o, p, q); the first keeps slot i */
+            const struct scene_tri t = tris[i];
+            int p = (o + 1) % 3, q = (o + 2) % 3;
+            uint32_t prev_v = t.v[p];
+            int32_t prev_n = t.vn[p], prev_t = t.vt[p];
+            for (uint32_t k = 0; k <= n && ok; k++) {
+                uint32_t next_v = k < n ? ch.v[k] : t.v[q];
+                int32_t next_n = t.vn[q], next_t = t.vt[q];
+                if (k < n)
+                    ok = tj_attributes(ps, &t, p, q, ch.t[k], &next_n, &next_t);
+                struct scene_tri s = t;
+                s.v[p] = prev_v;
+                s.vn[p] = prev_n;
+                s.vt[p] = prev_t;
+                s.v[q] = next_v;
+                s.vn[q] = next_n;
+                s.vt[q] = next_t;
+                if (k == 0)
+                    sc->tris[i] = s;
+                else
+                    sc->tris[sc->n_tris++] = s;
+                prev_v = next_v;
+                prev_n = next_n;
+                prev_t = next_t;
+            }
+            *split = true;
+            break; /* this triangle's other edges: the next pass */
+        }
+    }
+    free(ch.v);
+    free(ch.t);
+    free(tris);
+    free(l.first);
+    free(l.at);
+    if (ok && oom)
+        return fail_oom(ps, 0);
+    return ok;
+}
+
+/* The load's passes over the triangles' shared corners: T-junctions closed (tj_pass), then the
+ * grooves' factors (grooves). */
+static bool mesh_topology(struct parser *ps)
+{
+    struct scene *sc = ps->scene;
+    uint32_t *canon = NULL;
+    if (sc->n_tris > 0 && sc->n_tris < UINT32_MAX / 8 && sc->n_positions < UINT32_MAX / 4) {
+        canon = weld_positions(sc); /* beyond that range no pass runs, every factor stays 1 */
+        if (!canon)
+            return fail_oom(ps, 0);
+    }
+    bool split = canon != NULL;
+    bool ok = true;
+    /* linear in the triangles, whatever the input: the passes together look at TJ_WORK list
+     * entries an edge and add as many triangles as there were, 2^20 and 2^16 more */
+    struct tj_budget budget = {TJ_WORK * 3 * (uint64_t)sc->n_tris + (1u << 20),
+                               (uint64_t)sc->n_tris + (1u << 16)};
+    for (int pass = 0; ok && split && pass < TJ_PASSES; pass++)
+        ok = tj_pass(ps, canon, &budget, &split);
+    ok = ok && grooves(ps, canon);
+    free(canon);
+    return ok;
 }
 
 /* ---- the light list ----------------------------------------------------------------------- */
@@ -2430,7 +2738,7 @@ static bool load(int fd, const char *path, size_t n_dir, struct scene *scene,
         mcpt_error_set(ps.err, path, 0, 0, "expected a 'camera' statement, got none");
         goto done;
     }
-    ok = grooves(&ps) && build_lights(&ps);
+    ok = mesh_topology(&ps) && build_lights(&ps);
 done:
     if (ps.fd >= 0 && is_opened)
         close(ps.fd);

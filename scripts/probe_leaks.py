@@ -8,7 +8,7 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
            rotation (--no-turn: none), scale 1e-15..1e15 and offset up to 1e4 sizes; every pixel
            must be exactly 0.  --cells N cuts each face into an N x N grid whose faces share
            their edges' vertices; --strips N into N strips, as tests/extremes_test.c does, whose
-           ends are T-junctions on the next face's edge.
+           ends are T-junctions on the next face's edge (scene.c, tj_pass, closes them).
   wedges   a closed wedge (a triangular prism of 8 triangles sharing vertices, its apex edge a
            groove of 0.5..45 degrees seen from inside) under a random rotation, scale 1e-8..1e8
            and offset up to 1e4 sizes, wound either way, the camera inside; every pixel must be

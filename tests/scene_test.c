@@ -1152,3 +1152,80 @@ Test(scene, many_materials_load_in_linear_time, .timeout = TEST_TIMEOUT_S(60))
     check_error(CAM MAT MAT, "scene.txt:3:15: error: expected a new material name, got 'red' "
                              "(defined on line 2)");
 }
+
+/* ---- T-junctions (scene.c, tj_pass) ------------------------------------------------------- */
+
+/* A triangle whose long edge (0,0,0)-(2,0,0) carries the corner (1,0,0) of the two triangles
+ * across it is fanned through that corner: two triangles wound as it was, the new corner's
+ * normal and uv halfway along the edge's, the triangles across it untouched. */
+Test(scene, t_junction_is_fanned)
+{
+    const char *const files[] = {"t.obj",
+                                 "v 0 0 0\nv 2 0 0\nv 1 -1 0\nv 1 0 0\nv 0 1 0\nv 2 1 0\n"
+                                 "vt 0 0\nvt 1 0\nvt 0.5 1\n"
+                                 "vn 0 0.6 0.8\nvn 0 -0.6 0.8\nvn 0 0 1\n"
+                                 "f 1/1/1 3/3/3 2/2/2\n"
+                                 "f 1 4 5\nf 4 6 5\nf 4 2 6\n",
+                                 NULL};
+    struct scene sc;
+    char msg[700];
+    cr_assert(load_with_files(CAM MAT "mesh file=t.obj material=red\n", files, &sc, msg,
+                              sizeof msg),
+              "%s", msg);
+    cr_assert_eq(sc.n_tris, 5);
+    int fan[2] = {0, 4}; /* the fanned triangle keeps its slot, the other half goes last */
+    float area = 0.0f;
+    for (int k = 0; k < 2; k++) {
+        const struct scene_tri *t = &sc.tris[fan[k]];
+        vec3 a = sc.positions[t->v[0]], b = sc.positions[t->v[1]], c = sc.positions[t->v[2]];
+        vec3 n = v3_cross(v3_sub(b, a), v3_sub(c, a));
+        cr_assert_gt(n.z, 0.0f, "wound as the triangle it came from");
+        area += 0.5f * v3_length(n);
+        bool has_mid = false;
+        for (int i = 0; i < 3; i++) {
+            vec3 p = sc.positions[t->v[i]];
+            if (p.x == 1.0f && p.y == 0.0f) {
+                has_mid = true;
+                vec3 ns = sc.normals[t->vn[i]];
+                cr_assert_float_eq(ns.x, 0.0f, 1e-6f);
+                cr_assert_float_eq(ns.y, 0.0f, 1e-6f);
+                cr_assert_float_eq(ns.z, 1.0f, 1e-6f);
+                vec2 uv = sc.uvs[t->vt[i]];
+                cr_assert(uv.x == 0.5f && uv.y == 0.0f, "uv %g %g", uv.x, uv.y);
+            }
+        }
+        cr_assert(has_mid, "triangle %d has the corner on the edge", fan[k]);
+    }
+    cr_assert_float_eq(area, 1.0f, 1e-6f);
+    scene_free(&sc);
+}
+
+/* Chains of unshared collinear edges with long edges over them, each covering 100 of 2000
+ * segments: the passes add at most as many triangles as the file had, and 2^16 more, and look
+ * at a bounded number of list entries, so no input makes the load quadratic. */
+Test(scene, t_junction_repair_is_bounded)
+{
+    enum { N = 2000, M = 100 };
+    size_t cap = 64 * (2 * N + 4), n = 0;
+    char *obj = malloc(cap);
+    cr_assert_not_null(obj);
+    for (int i = 0; i <= N; i++)
+        n += (size_t)snprintf(obj + n, cap - n, "v %d 0 0\n", i);
+    n += (size_t)snprintf(obj + n, cap - n, "v 0 1 0\n");
+    for (int i = 0; i < N; i++)
+        n += (size_t)snprintf(obj + n, cap - n, "f %d %d %d\n", i + 1, i + 2, N + 2);
+    for (int k = 0; k + M <= N; k++)
+        n += (size_t)snprintf(obj + n, cap - n, "v %d 0 -1\nf %d %d -1\n", k, k + 1, k + M + 1);
+    cr_assert_lt(n, cap);
+    const char *const files[] = {"chains.obj", obj, NULL};
+    struct scene sc;
+    char msg[700];
+    cr_assert(load_with_files(CAM MAT "mesh file=chains.obj material=red\n", files, &sc, msg,
+                              sizeof msg),
+              "%s", msg);
+    uint32_t n_file = N + (N - M + 1);
+    cr_assert_gt(sc.n_tris, n_file, "some long edges fanned");
+    cr_assert_leq(sc.n_tris, 2 * n_file + 65536);
+    scene_free(&sc);
+    free(obj);
+}
