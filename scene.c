@@ -2189,6 +2189,15 @@ static bool quad_grooves(struct scene *sc)
  * meshes keep their vertices apart, and a triangle soup (STL, some exporters) gives each
  * triangle its own, yet faces that meet at a groove share their corners' coordinates.  An open
  * hash of the positions, in a table of twice their number or more.  NULL where out of memory. */
+/* SplitMix64's finaliser (Steele, Lea and Flood 2014): every input bit reaches every output
+ * bit, so coordinates on a grid, whose low mantissa bits are zero, spread over the table. */
+static uint64_t weld_mix(uint64_t z)
+{
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+}
+
 static uint32_t *weld_positions(const struct scene *sc)
 {
     uint32_t n_v = sc->n_positions;
@@ -2208,9 +2217,8 @@ static uint32_t *weld_positions(const struct scene *sc)
         uint32_t bits[3];
         const float c[3] = {p.x + 0.0f, p.y + 0.0f, p.z + 0.0f}; /* -0 + 0 = +0 */
         memcpy(bits, c, sizeof bits);
-        uint64_t h = (bits[0] * 0x9E3779B97F4A7C15ull) ^ (bits[1] * 0xC2B2AE3D27D4EB4Full) ^
-                     (bits[2] * 0x165667B19E3779F9ull);
-        size_t slot = (size_t)(h ^ h >> 29) & (cap - 1);
+        uint64_t h = weld_mix(weld_mix((uint64_t)bits[0] << 32 | bits[1]) ^ bits[2]);
+        size_t slot = (size_t)h & (cap - 1);
         for (;; slot = (slot + 1) & (cap - 1)) {
             uint32_t w = table[slot];
             if (w == UINT32_MAX) {
@@ -2279,7 +2287,8 @@ static bool edge_lists(const struct scene *sc, const uint32_t *canon, uint32_t *
 /* sc->tri_groove from the edges the scene's triangles share: edges with the same two corners
  * (vertices at the same coordinates, weld_positions, so triangles of two meshes or of a soup
  * meet as those of one mesh do), edge_lists. */
-static bool grooves(struct parser *ps, const uint32_t *canon)
+static bool grooves(struct parser *ps, const uint32_t *canon, const uint32_t *start,
+                    const struct groove_ent *ent)
 {
     struct scene *sc = ps->scene;
     if (!quad_grooves(sc))
@@ -2288,11 +2297,9 @@ static bool grooves(struct parser *ps, const uint32_t *canon)
     if (n_e == 0 || !canon)
         return true;
     uint32_t n_v = sc->n_positions;
-    uint32_t *start = NULL;
-    struct groove_ent *ent = NULL;
     struct groove_arm *arms = NULL;
     size_t arms_cap = 0;
-    bool ok = edge_lists(sc, canon, &start, &ent);
+    bool ok = true;
     for (uint32_t v = 0; ok && v < n_v; v++) {
         uint32_t begin = start[v], end = start[v + 1];
         for (uint32_t j = begin; ok && j < end;) {
@@ -2304,8 +2311,6 @@ static bool grooves(struct parser *ps, const uint32_t *canon)
             j = k;
         }
     }
-    free(start);
-    free(ent);
     free(arms);
     if (ok && sc->tri_groove) {
         /* a groove's factor also for the other edges at its two vertices: a triangle that only
@@ -2516,18 +2521,13 @@ struct tj_budget {
 
 /* One pass: every triangle with a chain along one of its edges fanned through it, while the
  * budget lasts.  *split says whether any was. */
-static bool tj_pass(struct parser *ps, const uint32_t *canon, struct tj_budget *budget, bool *split)
+static bool tj_pass(struct parser *ps, const uint32_t *canon, const uint32_t *start,
+                    const struct groove_ent *ent, struct tj_budget *budget, bool *split)
 {
     struct scene *sc = ps->scene;
     *split = false;
-    uint32_t *start = NULL;
-    struct groove_ent *ent = NULL;
     struct tj_lists l = {NULL, NULL};
-    if (!edge_lists(sc, canon, &start, &ent))
-        return fail_oom(ps, 0);
     bool listed = tj_lists(sc, start, ent, &l);
-    free(start);
-    free(ent);
     /* the chains are found in the triangles as the pass began, whatever it splits first */
     uint32_t n_tris = sc->n_tris;
     struct scene_tri *tris = listed ? malloc((size_t)n_tris * sizeof *tris) : NULL;
@@ -2616,15 +2616,33 @@ static bool mesh_topology(struct parser *ps)
         if (!canon)
             return fail_oom(ps, 0);
     }
-    bool split = canon != NULL;
-    bool ok = true;
+    /* the edges as the file has them; listed again after each pass that split a triangle */
+    uint32_t *start = NULL;
+    struct groove_ent *ent = NULL;
+    bool ok = !canon || edge_lists(sc, canon, &start, &ent);
+    if (!ok) {
+        free(canon);
+        return fail_oom(ps, 0);
+    }
     /* linear in the triangles, whatever the input: the passes together look at TJ_WORK list
      * entries an edge and add as many triangles as there were, 2^20 and 2^16 more */
     struct tj_budget budget = {TJ_WORK * 3 * (uint64_t)sc->n_tris + (1u << 20),
                                (uint64_t)sc->n_tris + (1u << 16)};
-    for (int pass = 0; ok && split && pass < TJ_PASSES; pass++)
-        ok = tj_pass(ps, canon, &budget, &split);
-    ok = ok && grooves(ps, canon);
+    bool split = canon != NULL;
+    for (int pass = 0; ok && split && pass < TJ_PASSES; pass++) {
+        ok = tj_pass(ps, canon, start, ent, &budget, &split);
+        if (ok && split) {
+            free(start);
+            free(ent);
+            start = NULL;
+            ent = NULL;
+            if (!edge_lists(sc, canon, &start, &ent))
+                ok = fail_oom(ps, 0);
+        }
+    }
+    ok = ok && grooves(ps, canon, start, ent);
+    free(start);
+    free(ent);
     free(canon);
     return ok;
 }
