@@ -2185,10 +2185,6 @@ static bool quad_grooves(struct scene *sc)
     return true;
 }
 
-/* The lowest index of a vertex at each vertex's position (exactly equal coordinates, -0 as +0):
- * meshes keep their vertices apart, and a triangle soup (STL, some exporters) gives each
- * triangle its own, yet faces that meet at a groove share their corners' coordinates.  An open
- * hash of the positions, in a table of twice their number or more.  NULL where out of memory. */
 /* SplitMix64's finaliser (Steele, Lea and Flood 2014): every input bit reaches every output
  * bit, so coordinates on a grid, whose low mantissa bits are zero, spread over the table. */
 static uint64_t weld_mix(uint64_t z)
@@ -2198,6 +2194,10 @@ static uint64_t weld_mix(uint64_t z)
     return z ^ (z >> 31);
 }
 
+/* The lowest index of a vertex at each vertex's position (exactly equal coordinates, -0 as +0):
+ * meshes keep their vertices apart, and a triangle soup (STL, some exporters) gives each
+ * triangle its own, yet faces that meet at a groove share their corners' coordinates.  An open
+ * hash of the positions, in a table of twice their number or more.  NULL where out of memory. */
 static uint32_t *weld_positions(const struct scene *sc)
 {
     uint32_t n_v = sc->n_positions;
@@ -2357,10 +2357,12 @@ static bool grooves(struct parser *ps, const uint32_t *canon, const uint32_t *st
 #define TJ_MAX_DEGREE 16 /* unshared edges at a corner of a chain (T-junctions have 2 to 4) */
 
 /* The unshared edges (those whose corners no other triangle's edge has) at each vertex, both
- * ends: at[first[v] .. first[v + 1]) are edge ids (triangle * 3 + the opposite corner). */
+ * ends: at[first[v] .. first[v + 1]) are edge ids (triangle * 3 + the opposite corner); lone[e]
+ * says whether edge e is one. */
 struct tj_lists {
     uint32_t *first;
     uint32_t *at;
+    bool *lone;
 };
 
 static bool tj_lists(const struct scene *sc, const uint32_t *start, const struct groove_ent *ent,
@@ -2368,8 +2370,9 @@ static bool tj_lists(const struct scene *sc, const uint32_t *start, const struct
 {
     uint32_t n_v = sc->n_positions;
     l->first = calloc((size_t)n_v + 2, sizeof *l->first);
+    l->lone = calloc((size_t)sc->n_tris * 3, sizeof *l->lone);
     l->at = NULL;
-    if (!l->first)
+    if (!l->first || !l->lone)
         return false;
     uint32_t n = 0;
     for (int pass = 0; pass < 2; pass++) {
@@ -2380,13 +2383,15 @@ static bool tj_lists(const struct scene *sc, const uint32_t *start, const struct
                 if (!alone)
                     continue;
                 uint32_t ends[2] = {v, ent[j].hi};
-                for (int k = 0; k < 2; k++) {
-                    if (pass == 0)
-                        l->first[ends[k] + 2]++;
-                    else
-                        l->at[l->first[ends[k] + 1]++] = ent[j].e;
+                if (pass == 0) {
+                    l->first[ends[0] + 2]++;
+                    l->first[ends[1] + 2]++;
+                    l->lone[ent[j].e] = true;
+                    n += 2;
+                } else {
+                    l->at[l->first[ends[0] + 1]++] = ent[j].e;
+                    l->at[l->first[ends[1] + 1]++] = ent[j].e;
                 }
-                n += pass == 0 ? 2 : 0;
             }
         if (pass == 0) {
             for (uint32_t v = 0; v < n_v; v++)
@@ -2421,9 +2426,7 @@ static bool tj_find_chain(const struct scene *sc, const struct scene_tri *tris,
 {
     struct dvec3 pa = d3(sc->positions[a]), pb = d3(sc->positions[b]), d = d3_sub(pb, pa);
     struct dvec3 pc = d3(sc->positions[canon[tris[e / 3].v[e % 3]]]);
-    struct dvec3 ma = d3_abs(pa), mb = d3_abs(pb), mc = d3_abs(pc);
-    double big = fmax(fmax(fmax(ma.x, ma.y), fmax(ma.z, mb.x)),
-                      fmax(fmax(mb.y, mb.z), fmax(mc.x, fmax(mc.y, mc.z))));
+    double big = fmax(d3_max_abs(pa), fmax(d3_max_abs(pb), d3_max_abs(pc)));
     double tol2 = (TJ_TOL * big) * (TJ_TOL * big);
     double len2 = d3_dot(d, d);
     if (!(len2 > 0.0))
@@ -2526,7 +2529,7 @@ static bool tj_pass(struct parser *ps, const uint32_t *canon, const uint32_t *st
 {
     struct scene *sc = ps->scene;
     *split = false;
-    struct tj_lists l = {NULL, NULL};
+    struct tj_lists l = {NULL, NULL, NULL};
     bool listed = tj_lists(sc, start, ent, &l);
     /* the chains are found in the triangles as the pass began, whatever it splits first */
     uint32_t n_tris = sc->n_tris;
@@ -2534,6 +2537,7 @@ static bool tj_pass(struct parser *ps, const uint32_t *canon, const uint32_t *st
     if (!tris) {
         free(l.first);
         free(l.at);
+        free(l.lone);
         return fail_oom(ps, 0);
     }
     memcpy(tris, sc->tris, (size_t)n_tris * sizeof *tris);
@@ -2543,16 +2547,11 @@ static bool tj_pass(struct parser *ps, const uint32_t *canon, const uint32_t *st
     for (uint32_t i = 0; ok && !oom && budget->work > 0 && i < n_tris; i++) {
         for (int o = 0; o < 3; o++) {
             uint32_t e = 3 * i + (uint32_t)o;
+            if (!l.lone[e])
+                continue;
             uint32_t a = tj_corner(tris, canon, e, 1), b = tj_corner(tris, canon, e, 2);
-            uint32_t degree = l.first[a + 1] - l.first[a];
-            if (degree < 2 || degree > TJ_MAX_DEGREE)
-                continue;
-            /* unshared edges only: those at a in l */
-            bool alone = false;
-            for (uint32_t j = l.first[a]; j < l.first[a + 1] && !alone; j++)
-                alone = l.at[j] == e;
-            if (!alone)
-                continue;
+            if (l.first[a + 1] - l.first[a] < 2)
+                continue; /* a's only unshared edge is e: no chain starts there */
             if (!tj_find_chain(sc, tris, canon, &l, e, a, b, &ch, &budget->work, &oom))
                 continue;
             uint32_t n = ch.n;
@@ -2600,6 +2599,7 @@ static bool tj_pass(struct parser *ps, const uint32_t *canon, const uint32_t *st
     free(tris);
     free(l.first);
     free(l.at);
+    free(l.lone);
     if (ok && oom)
         return fail_oom(ps, 0);
     return ok;
