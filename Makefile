@@ -62,8 +62,17 @@ $(FLAGS_STAMP): $(call stamp_deps,$(FLAGS_STAMP),$(FLAGS_NOW))
 
 FORCE:
 
-mcpt: $(BUILD)/main.o $(LIB_OBJS)
-	$(CC) $(CFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
+# The link stamp: ./mcpt and bench/'s programs live outside the build folders, so
+# build/link.stamp holds the folder and command they were last linked from; a `make` with
+# another BUILD or other flags relinks them even where that folder's objects are older.
+LINK_STAMP := build/link.stamp
+LINK_NOW = $(BUILD) $(FLAGS_NOW)
+
+$(LINK_STAMP): $(call stamp_deps,$(LINK_STAMP),$(LINK_NOW))
+	@$(call stamp_write,$@,$(LINK_NOW))
+
+mcpt: $(BUILD)/main.o $(LIB_OBJS) $(LINK_STAMP)
+	$(CC) $(CFLAGS_ALL) -o $@ $(filter %.o,$^) $(LDLIBS_ALL)
 
 $(BUILD)/mcpt: $(BUILD)/main.o $(LIB_OBJS)
 	$(CC) $(CFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
@@ -208,18 +217,18 @@ EMBREE_CFLAGS := $(shell $(PKG_CONFIG) --cflags embree3 2>/dev/null)
 EMBREE_LIBS := $(shell $(PKG_CONFIG) --libs embree3 2>/dev/null || echo -lembree3)
 BENCH_CFLAGS = $(filter-out -MMD -MP,$(CFLAGS_ALL))
 
-bench/raybench: bench/raybench.c bench/bench.c bench/bench.h $(BENCH_OBJS) $(FLAGS_STAMP)
+bench/raybench: bench/raybench.c bench/bench.c bench/bench.h $(BENCH_OBJS) $(FLAGS_STAMP) $(LINK_STAMP)
 	$(CC) $(BENCH_CFLAGS) -o $@ bench/raybench.c bench/bench.c $(BENCH_OBJS) -lpthread -lm
 
 # bench/raydump: the rays of a render as ray files for raybench (links the renderer)
-bench/raydump: bench/raydump.c bench/bench.c bench/bench.h bench/bench_scene.c bench/bench_scene.h $(LIB_OBJS) $(FLAGS_STAMP)
+bench/raydump: bench/raydump.c bench/bench.c bench/bench.h bench/bench_scene.c bench/bench_scene.h $(LIB_OBJS) $(FLAGS_STAMP) $(LINK_STAMP)
 	$(CC) $(BENCH_CFLAGS) -o $@ bench/raydump.c bench/bench.c bench/bench_scene.c $(LIB_OBJS) $(LDLIBS_ALL)
 
 # bench/packetbench: a render with camera packets against one with single camera rays
-bench/packetbench: bench/packetbench.c bench/bench.c bench/bench.h bench/bench_scene.c bench/bench_scene.h $(LIB_OBJS) $(FLAGS_STAMP)
+bench/packetbench: bench/packetbench.c bench/bench.c bench/bench.h bench/bench_scene.c bench/bench_scene.h $(LIB_OBJS) $(FLAGS_STAMP) $(LINK_STAMP)
 	$(CC) $(BENCH_CFLAGS) -o $@ bench/packetbench.c bench/bench.c bench/bench_scene.c $(LIB_OBJS) $(LDLIBS_ALL)
 
-bench/embree_bench: bench/embree_bench.c bench/bench.c bench/bench.h $(BENCH_OBJS) $(FLAGS_STAMP)
+bench/embree_bench: bench/embree_bench.c bench/bench.c bench/bench.h $(BENCH_OBJS) $(FLAGS_STAMP) $(LINK_STAMP)
 	$(CC) $(BENCH_CFLAGS) $(EMBREE_CFLAGS) -o $@ bench/embree_bench.c bench/bench.c $(BENCH_OBJS) \
 	    $(EMBREE_LIBS) -lpthread -lm
 
