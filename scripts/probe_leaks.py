@@ -233,7 +233,7 @@ def probe_sheared(args, tmp):
     rng = random.Random(args.seed)
     leaks = 0
     for it in range(args.cases):
-        deg = rng.choice([2, 5, 10, 20, 30, 45])
+        deg = rng.choice([float(x) for x in args.degrees.split(",")])
         a, b, c = (2, 0, 0), (2 * math.cos(math.radians(deg)), 2 * math.sin(math.radians(deg)), 0), (0, 0, 2)
         rot = rotation(normalize([rng.gauss(0, 1) for _ in range(3)]), rng.uniform(0, 360))
         s = 10 ** rng.uniform(-6, 6)
@@ -241,16 +241,28 @@ def probe_sheared(args, tmp):
         vec = [[x * s for x in rot(e)] for e in (a, b, c)]
         far = [o + sum(v[i] for v in vec) for i, o in enumerate(t)]
         f17 = lambda v: ",".join("%.17g" % x for x in v)  # noqa: E731
-        quads = []
+        quads, mesh = [], []
         for corner, sign in ((t, 1), (far, -1)):
             for i, j in ((0, 1), (1, 2), (2, 0)):
                 e1, e2 = [sign * x for x in vec[i]], [sign * x for x in vec[j]]
                 if rng.random() < 0.5:
                     e1, e2 = e2, e1
+                if args.mixed and rng.random() < 0.5:  # this face as two triangles of a mesh
+                    p = [corner, [a + b for a, b in zip(corner, e1)],
+                         [a + b + c for a, b, c in zip(corner, e1, e2)], [a + b for a, b in zip(corner, e2)]]
+                    mesh.append(p)
+                    continue
                 quads.append("quad corner=%s edge1=%s edge2=%s material=m" % (f17(corner), f17(e1), f17(e2)))
         u, w = rng.uniform(0.3, 0.9), rng.uniform(0.2, 0.8)
         eye = [o + 0.55 * u * vec[0][i] + 0.45 * u * vec[1][i] + w * vec[2][i] for i, o in enumerate(t)]
         at = [o + 0.01 * vec[0][i] + 0.01 * vec[1][i] + 0.5 * vec[2][i] for i, o in enumerate(t)]
+        if mesh:
+            obj = os.path.join(tmp, "sheared.obj")
+            with open(obj, "w") as f:
+                f.write("".join("v %s\n" % f17(p).replace(",", " ") for face in mesh for p in face))
+                f.write("".join("f %d %d %d\n" % (4 * i + 1, 4 * i + 2, 4 * i + 3)
+                                + "f %d %d %d\n" % (4 * i + 1, 4 * i + 3, 4 * i + 4) for i in range(len(mesh))))
+            quads.append("mesh file=%s material=m" % obj)
         scene = os.path.join(tmp, "sheared.txt")
         closed_scene(scene, "eye=%s look-at=%s up=%s fov=70" % (f17(eye), f17(at), f17(vec[2])), quads)
         leaks += groove_leak(args, scene, it, deg, s)
@@ -495,6 +507,9 @@ def main():
     ap.add_argument("--decade", type=int, default=4, help="planes: moved 10^(D-1)..10^D sizes")
     ap.add_argument("--soup", action="store_true",
                     help="wedges: every triangle its own vertices (no index shared)")
+    ap.add_argument("--degrees", default="2,5,10,20,30,45", help="sheared: the angles drawn from")
+    ap.add_argument("--mixed", action="store_true",
+                    help="sheared: each face a quad or two triangles of one mesh, by chance")
     ap.add_argument("--grid", type=int, default=32, help="offset: vertices on the grid of 1/G")
     ap.add_argument("--offsets", default="1e5,2e5,4e5")
     ap.add_argument("--obj", default=os.path.join(ROOT, "scenes", "models", "CornellBox-Original.obj"))

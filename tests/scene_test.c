@@ -234,7 +234,7 @@ Test(scene, full_scene_values)
     assert_vec3(d3_to_float(sc.quads[0].e1), 1, 0, 0, "quad 0 e1");
     assert_vec3(d3_to_float(sc.quads[0].e2), 0, 0, -1, "quad 0 e2");
     cr_assert_eq(sc.quads[0].mat_idx, 1);
-    assert_vec3(d3_to_float(sc.quads[1].corner), -1, 0, 0, "quad 1 corner");
+    assert_vec3(d3_to_float(sc.quads[1].corner), -1, 0, 5, "quad 1 corner");
     assert_vec3(d3_to_float(sc.quads[1].e1), 0, 1, 0, "quad 1 e1");
     assert_vec3(d3_to_float(sc.quads[1].e2), -1, 0, 0, "quad 1 e2");
     assert_vec3(v3_cross(d3_to_float(sc.quads[1].e1), d3_to_float(sc.quads[1].e2)), 0, 0, 1,
@@ -1197,6 +1197,54 @@ Test(scene, t_junction_is_fanned)
         cr_assert(has_mid, "triangle %d has the corner on the edge", fan[k]);
     }
     cr_assert_float_eq(area, 1.0f, 1e-6f);
+    scene_free(&sc);
+}
+
+/* ---- quads that meet meshes (scene.c, quads_to_triangles) ---------------------------------- */
+
+/* A quad with an edge between two mesh vertices, and the quad sharing an edge with it, become
+ * two triangles each, at their corners rounded to float, wound as e1 x e2, with the quad's uvs
+ * and area; quads that meet a mesh at a corner only, by 1e-7 off, or inside a triangle stay. */
+Test(scene, quads_meeting_a_mesh_become_triangles)
+{
+    const char *const files[] = {"t.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", NULL};
+    struct scene sc;
+    char msg[700];
+    cr_assert(load_with_files(CAM MAT "mesh file=t.obj material=red\n"
+                                      "quad corner=1,0,0 edge1=0,-1,0 edge2=-1,0,0 material=red\n"
+                                      "quad corner=1,0,0 edge1=1,0,0 edge2=0,1,0 material=red\n"
+                                      "quad corner=0,-1,0 edge1=1,0,0 edge2=0,0,1 material=red\n"
+                                      "quad corner=1e-7,0,0 edge1=0,1,0 edge2=-1,0,0 "
+                                      "material=red\n"
+                                      "quad corner=0.1,0.1,0 edge1=0.1,0,0 edge2=0,0.1,0 "
+                                      "material=red\n",
+                              files, &sc, msg, sizeof msg),
+              "%s", msg);
+    cr_assert_eq(sc.n_quads, 3, "the quads that share no edge stay");
+    cr_assert(sc.quads[0].corner.x == 1.0 && sc.quads[1].corner.x == 1e-7 &&
+                  sc.quads[2].corner.x == 0.1,
+              "in file order");
+    cr_assert_eq(sc.n_tris, 5);
+    const vec3 normal[2] = {{0, 0, -1}, {0, -1, 0}}; /* e1 x e2 of the two quads */
+    for (int q = 0; q < 2; q++) {
+        float area = 0.0f;
+        for (int k = 0; k < 2; k++) {
+            const struct scene_tri *t = &sc.tris[1 + 2 * q + k];
+            vec3 a = sc.positions[t->v[0]], b = sc.positions[t->v[1]], c = sc.positions[t->v[2]];
+            vec3 n = v3_cross(v3_sub(b, a), v3_sub(c, a));
+            cr_assert_gt(v3_dot(n, normal[q]), 0.0f, "quad %d wound as e1 x e2", q);
+            area += 0.5f * v3_length(n);
+            for (int i = 0; i < 3; i++) { /* uv (alpha, beta): the point corner + a e1 + b e2 */
+                vec2 uv = sc.uvs[t->vt[i]];
+                vec3 p = sc.positions[t->v[i]];
+                vec3 want = q == 0 ? (vec3){1.0f - uv.y, -uv.x, 0.0f} : (vec3){uv.x, -1.0f, uv.y};
+                cr_assert(p.x == want.x && p.y == want.y && p.z == want.z,
+                          "quad %d corner %g %g %g at uv %g %g", q, p.x, p.y, p.z, uv.x, uv.y);
+            }
+            cr_assert_eq(t->mat_idx, sc.tris[0].mat_idx);
+        }
+        cr_assert_float_eq(area, 1.0f, 1e-6f);
+    }
     scene_free(&sc);
 }
 
