@@ -1610,6 +1610,49 @@ static void ray_setup(const struct ray *ray, struct ray_pre *rp)
 static bool tri_hit(const struct bvh_tri *tri, const struct ray_pre *rp, float t_min, float t_max,
                     float *t_out, float *u_out, float *v_out);
 
+/* The closest-hit loops' interior step: node's two children tested against [t_min, t_max]; where
+ * both are hit the nearer becomes *node_idx and the farther is pushed with its entry distance,
+ * where one is, it becomes *node_idx.  False where neither is (the caller pops). */
+static inline bool descend(const struct bvh_node *nodes, const struct bvh_node *node,
+                           const struct ray_pre *rp, float t_min, float t_max, uint32_t *node_idx,
+                           struct stack_entry *stack, uint32_t *n_stack)
+{
+    uint32_t near_idx = node->left_first;
+    uint32_t far_idx = near_idx + 1;
+    float t_near;
+    float t_far;
+    bool hit_near = box_hit(&nodes[near_idx], rp, t_min, t_max, &t_near);
+    bool hit_far = box_hit(&nodes[far_idx], rp, t_min, t_max, &t_far);
+    if (hit_near && hit_far) {
+        if (t_far < t_near) {
+            uint32_t tmp_idx = near_idx;
+            near_idx = far_idx;
+            far_idx = tmp_idx;
+            t_far = t_near;
+        }
+        assert(*n_stack < BVH_MAX_DEPTH);
+        stack[(*n_stack)++] = (struct stack_entry){far_idx, t_far};
+        *node_idx = near_idx;
+        return true;
+    }
+    *node_idx = hit_near ? near_idx : far_idx;
+    return hit_near || hit_far;
+}
+
+/* Pops the next pending node that still starts before t_max (the closest hit so far) into
+ * *node_idx; false where none is left. */
+static inline bool pop_before(const struct stack_entry *stack, uint32_t *n_stack, float t_max,
+                              uint32_t *node_idx)
+{
+    do {
+        if (*n_stack == 0)
+            return false;
+        (*n_stack)--;
+    } while (stack[*n_stack].t_entry > t_max);
+    *node_idx = stack[*n_stack].node_idx;
+    return true;
+}
+
 static bool binary_intersect(const struct bvh *bvh, const struct ray *ray, uint32_t from,
                              struct bvh_hit *hit)
 {
@@ -1645,41 +1688,12 @@ static bool binary_intersect(const struct bvh *bvh, const struct ray *ray, uint3
                     tri_idx = i;
                 }
             }
-        } else {
-            uint32_t near_idx = node->left_first;
-            uint32_t far_idx = near_idx + 1;
-            float t_near;
-            float t_far;
-            bool hit_near = box_hit(&nodes[near_idx], &rp, t_min, t_hit, &t_near);
-            bool hit_far = box_hit(&nodes[far_idx], &rp, t_min, t_hit, &t_far);
-            if (hit_near && hit_far) {
-                if (t_far < t_near) {
-                    uint32_t tmp_idx = near_idx;
-                    near_idx = far_idx;
-                    far_idx = tmp_idx;
-                    float tmp_t = t_near;
-                    t_near = t_far;
-                    t_far = tmp_t;
-                }
-                assert(n_stack < BVH_MAX_DEPTH);
-                stack[n_stack++] = (struct stack_entry){far_idx, t_far};
-                node_idx = near_idx;
-                continue;
-            }
-            if (hit_near || hit_far) {
-                node_idx = hit_near ? near_idx : far_idx;
-                continue;
-            }
+        } else if (descend(nodes, node, &rp, t_min, t_hit, &node_idx, stack, &n_stack)) {
+            continue;
         }
-        /* pop the next pending node that still starts before the closest hit */
-        do {
-            if (n_stack == 0)
-                goto done;
-            n_stack--;
-        } while (stack[n_stack].t_entry > t_hit);
-        node_idx = stack[n_stack].node_idx;
+        if (!pop_before(stack, &n_stack, t_hit, &node_idx))
+            break;
     }
-done:
     if (tri_idx == UINT32_MAX)
         return false;
     *hit = (struct bvh_hit){t_hit, u_hit, v_hit, bvh->prim_idx[tri_idx]};
@@ -2169,6 +2183,95 @@ uint64_t bvh_layout_hash(const struct bvh *bvh)
         h = bvh_hash_bytes(h, bvh->prim_idx, sizeof *bvh->prim_idx * bvh->n_refs);
     }
     return bvh_wide_hash(bvh, h);
+}
+
+/* ---- A tree over boxes: the analytic shapes -------------------------------------------------
+ * The same binned SAH build as the triangles' (no spatial splits: a box cannot be clipped), kept
+ * in the binary layout, and the reference traversal's loop with the primitives left to the
+ * caller (trace.c tests its spheres and quads itself). */
+struct bvh_boxes {
+    struct bvh_node *nodes; /* root at 0, nodes[1] unused */
+    uint32_t *prim_idx;     /* the caller's index of each leaf entry, in leaf order */
+    uint32_t n_nodes;
+};
+
+struct bvh_boxes *bvh_boxes_build(const float (*boxes)[2][3], uint32_t n)
+{
+    if (n == 0 || n > UINT32_MAX / 2)
+        return NULL;
+    struct bvh_boxes *tree = calloc(1, sizeof *tree);
+    struct prim_ref *refs = bvh_alloc_aligned(n, sizeof *refs);
+    uint8_t *degenerate = malloc(n);
+    if (!tree || !refs || !degenerate)
+        goto fail;
+    struct box bounds = empty_box, centres = empty_box;
+    for (uint32_t i = 0; i < n; i++) {
+        struct prim_ref *r = &refs[i];
+        for (int a = 0; a < 3; a++) {
+            r->min[a] = boxes[i][0][a];
+            r->max[a] = boxes[i][1][a];
+        }
+        r->prim_idx = i;
+        r->is_degenerate = 0;
+        float c[3];
+        ref_centre(r, c);
+        box_grow(&bounds, r->min, r->max);
+        box_grow(&centres, c, c);
+    }
+    struct build_ctx ctx = {refs, NULL, 1, false, 0.0f, NULL, NULL};
+    if (build_tree(&ctx, n, n, &bounds, &centres, &tree->nodes, &tree->n_nodes) == UINT32_MAX)
+        goto fail;
+    tree->prim_idx = bvh_alloc_array(n, sizeof *tree->prim_idx);
+    if (!tree->prim_idx)
+        goto fail;
+    compact_leaves(tree->nodes, refs, tree->prim_idx, degenerate);
+    free(refs);
+    free(degenerate);
+    return tree;
+fail:
+    free(refs);
+    free(degenerate);
+    bvh_boxes_free(tree);
+    return NULL;
+}
+
+bool bvh_boxes_traverse(const struct bvh_boxes *tree, struct ray *ray, bvh_box_visit visit,
+                        void *ctx)
+{
+    if (!ray_is_valid(ray))
+        return false;
+    struct ray_pre rp;
+    ray_setup_box(ray, &rp);
+    const struct bvh_node *nodes = tree->nodes;
+    const float t_min = ray->t_min;
+    float t_entry;
+    if (!box_hit(&nodes[0], &rp, t_min, ray->t_max, &t_entry))
+        return false;
+    struct stack_entry stack[BVH_MAX_DEPTH];
+    uint32_t n_stack = 0;
+    uint32_t node_idx = 0;
+    for (;;) {
+        const struct bvh_node *node = &nodes[node_idx];
+        if (node->n_tris > 0) {
+            uint32_t end = node->left_first + node->n_tris;
+            for (uint32_t i = node->left_first; i < end; i++)
+                if (visit(ctx, tree->prim_idx[i], ray))
+                    return true;
+        } else if (descend(nodes, node, &rp, t_min, ray->t_max, &node_idx, stack, &n_stack)) {
+            continue;
+        }
+        if (!pop_before(stack, &n_stack, ray->t_max, &node_idx))
+            return false;
+    }
+}
+
+void bvh_boxes_free(struct bvh_boxes *tree)
+{
+    if (!tree)
+        return;
+    free(tree->nodes);
+    free(tree->prim_idx);
+    free(tree);
 }
 
 void bvh_free(struct bvh *bvh)

@@ -172,4 +172,22 @@ const char *bvh_simd_name(void);
 
 void bvh_free(struct bvh *bvh);
 
+/* A tree over n axis-aligned boxes (boxes[i][0] the lower corner, [1] the upper), for primitives
+ * the caller tests itself: trace.c's spheres and quads.  The triangles' binned SAH build without
+ * spatial splits, the binary layout.  NULL where n is 0 or out of memory. */
+struct bvh_boxes;
+struct bvh_boxes *bvh_boxes_build(const float (*boxes)[2][3], uint32_t n);
+
+/* Called with each box i that the ray's [t_min, t_max] may cross (the conservative slab test of
+ * the triangles' traversal), nearer subtrees first: it tests primitive i, may lower ray->t_max
+ * to a hit's t (so farther subtrees are skipped: a closest hit), and returns true to end the
+ * traversal (an any hit). */
+typedef bool (*bvh_box_visit)(void *ctx, uint32_t i, struct ray *ray);
+
+/* Visits the boxes the ray may cross; true where a visit ended it.  A ray that is not finite
+ * visits none. */
+bool bvh_boxes_traverse(const struct bvh_boxes *tree, struct ray *ray, bvh_box_visit visit,
+                        void *ctx);
+void bvh_boxes_free(struct bvh_boxes *tree);
+
 #endif

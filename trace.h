@@ -22,6 +22,11 @@ struct trace_scene; /* opaque: scene + BVH + camera + light table */
  * Returns NULL and fills *err on failure: a bad-input error for a bad camera or a light of
  * non-finite power (light_table_build), a runtime error when memory runs out. */
 struct trace_scene *trace_prepare(const struct scene *scene, int n_threads, struct mcpt_error *err);
+/* Benchmarks and tests: the scene's spheres and quads found through a tree over their boxes
+ * (on) or tested one by one (off), whatever trace_prepare chose by their number; the image is
+ * the same.  False where out of memory (the shapes are then tested one by one). */
+bool trace_set_shape_tree(struct trace_scene *ts, bool on);
+
 void trace_free(struct trace_scene *ts);
 struct bvh_stats trace_bvh_stats(const struct trace_scene *ts);
 

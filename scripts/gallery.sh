@@ -13,7 +13,7 @@ cd "$(dirname "$0")/.."
 MCPT=${MCPT:-./mcpt}
 THREADS=${GALLERY_THREADS:-2}
 ALL="cornell-box cornell-spheres glass-balls sphere-refract glass-dragon bunny bunny-direct
-bunny-indirect depth-of-field materials"
+bunny-indirect depth-of-field materials random-spheres"
 SCENES=${GALLERY_SCENES:-$ALL}
 OUT=build/gallery
 mkdir -p "$OUT" docs/gallery

@@ -1370,3 +1370,92 @@ Test(bvh, spatial_splits_stay_watertight)
     probe_watertight_mesh(&m, v3(0, 0, 0), 0.5f);
     mesh_free(&m);
 }
+
+/* ---- the tree over boxes (bvh_boxes_build) ---- */
+
+struct sphere_visit {
+    const struct sphere *spheres;
+    uint32_t hit; /* closest so far, or UINT32_MAX */
+    uint32_t visits;
+};
+
+static bool visit_closest(void *ctx, uint32_t i, struct ray *ray)
+{
+    struct sphere_visit *v = ctx;
+    float t;
+    v->visits++;
+    if (shape_sphere_intersect(&v->spheres[i], ray, &t)) {
+        ray->t_max = t;
+        v->hit = i;
+    }
+    return false;
+}
+
+static bool visit_any(void *ctx, uint32_t i, struct ray *ray)
+{
+    struct sphere_visit *v = ctx;
+    float t;
+    v->visits++;
+    return shape_sphere_intersect(&v->spheres[i], ray, &t);
+}
+
+/* 2000 spheres of radius 10^-3 .. 10^-1 in a unit box (some overlapping, some nested), each in a
+ * box one float step wider than its extent: for 20000 rays from inside and outside the box, the
+ * tree's closest hit is the sphere and t a loop over all of them finds, its any hit the same
+ * answer, and a ray visits far fewer boxes than there are spheres.  Rays that are not finite
+ * visit none. */
+Test(bvh, boxes_tree_finds_what_a_loop_finds)
+{
+    enum { N = 2000, RAYS = 20000 };
+    struct rng r = {77};
+    struct sphere *sp = malloc(N * sizeof *sp);
+    float(*boxes)[2][3] = malloc(N * sizeof *boxes);
+    cr_assert(sp && boxes);
+    for (uint32_t i = 0; i < N; i++) {
+        sp[i] = (struct sphere){rng_in_box(&r, -1.0f, 1.0f), powf(10.0f, rng_range(&r, -3, -1)), 0};
+        const float c[3] = {sp[i].center.x, sp[i].center.y, sp[i].center.z};
+        for (int a = 0; a < 3; a++) {
+            boxes[i][0][a] = nextafterf(c[a] - sp[i].radius, -INFINITY);
+            boxes[i][1][a] = nextafterf(c[a] + sp[i].radius, INFINITY);
+        }
+    }
+    struct bvh_boxes *tree = bvh_boxes_build((const float(*)[2][3])boxes, N);
+    cr_assert_not_null(tree);
+    uint64_t visits = 0;
+    uint32_t n_hits = 0;
+    for (int k = 0; k < RAYS; k++) {
+        vec3 o = rng_in_box(&r, k % 2 ? -1.2f : -4.0f, k % 2 ? 1.2f : 4.0f);
+        vec3 d = v3_sub(rng_in_box(&r, -1.0f, 1.0f), o);
+        struct ray ray = {.o = o, .t_min = 0.0f, .d = d, .t_max = INFINITY};
+        float t_loop = INFINITY, t;
+        uint32_t hit_loop = UINT32_MAX;
+        struct ray probe = ray;
+        for (uint32_t i = 0; i < N; i++)
+            if (shape_sphere_intersect(&sp[i], &probe, &t)) {
+                probe.t_max = t_loop = t;
+                hit_loop = i;
+            }
+        struct sphere_visit v = {sp, UINT32_MAX, 0};
+        struct ray tr = ray;
+        cr_assert_not(bvh_boxes_traverse(tree, &tr, visit_closest, &v));
+        visits += v.visits;
+        cr_assert_eq(v.hit, hit_loop, "ray %d: sphere %u, the loop's %u", k, v.hit, hit_loop);
+        if (hit_loop != UINT32_MAX) {
+            n_hits++;
+            cr_assert_eq(tr.t_max, t_loop, "ray %d", k);
+        }
+        struct sphere_visit va = {sp, UINT32_MAX, 0};
+        struct ray ta = ray;
+        cr_assert_eq(bvh_boxes_traverse(tree, &ta, visit_any, &va), hit_loop != UINT32_MAX,
+                     "ray %d", k);
+    }
+    cr_assert_gt(n_hits, RAYS / 4, "most rays meet a sphere: %u", n_hits);
+    cr_assert_lt(visits, (uint64_t)RAYS * N / 20, "%llu visits", (unsigned long long)visits);
+    struct ray bad = {.o = v3(NAN, 0.0f, 0.0f), .d = v3(1.0f, 0.0f, 0.0f), .t_max = INFINITY};
+    struct sphere_visit vb = {sp, UINT32_MAX, 0};
+    cr_assert_not(bvh_boxes_traverse(tree, &bad, visit_closest, &vb));
+    cr_assert_eq(vb.visits, 0);
+    bvh_boxes_free(tree);
+    free(sp);
+    free(boxes);
+}

@@ -714,6 +714,84 @@ Test(trace, camera_packets_match_single_rays, .timeout = TEST_TIMEOUT_S(120))
     }
 }
 
+/* Uniform in [0, 1) from splitmix64 (Steele, Lea and Flood 2014). */
+static double splitmix_unit(uint64_t *state)
+{
+    uint64_t z = (*state += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return (double)((z ^ (z >> 31)) >> 11) * 0x1p-53;
+}
+
+/* The tree over a scene's spheres and quads (trace_set_shape_tree) changes how their hits are
+ * found, never what they are: the film is the same to the bit, with the same ray count, as
+ * with every shape tested one by one.  Scenes of spheres and a quad (materials: 10 and 1; glass:
+ * refraction through nested hits), 200 small spheres and 100 quads beside a mesh (written
+ * here: shadow rays through many boxes, triangles nearer or farther than the shapes). */
+Test(trace, shape_tree_matches_one_by_one, .timeout = TEST_TIMEOUT_S(120))
+{
+    char dir[64], path[128];
+    test_make_dir(dir, sizeof dir, "shape_tree");
+    snprintf(path, sizeof path, "%s/many.txt", dir);
+    FILE *f = fopen(path, "w"); /* the mesh by its full path: the test runs from the repo root */
+    cr_assert_not_null(f);
+    char cwd[512];
+    cr_assert_not_null(getcwd(cwd, sizeof cwd));
+    fprintf(f,
+            "camera eye=0,1,3.9 look-at=0,1,0 up=0,1,0 fov=60\nfilm width=24 height=18\n"
+            "material name=w type=diffuse albedo=0.7,0.7,0.7\n"
+            "material name=g type=dielectric ior=1.5\n"
+            "material name=lamp type=diffuse albedo=0,0,0 emission=4,4,4\n"
+            "mesh file=%s/scenes/models/CornellBox-Original.obj\n",
+            cwd);
+    uint64_t state = 12345;
+    for (int i = 0; i < 200; i++) {
+        double r[4];
+        for (int k = 0; k < 4; k++)
+            r[k] = splitmix_unit(&state);
+        fprintf(f, "sphere center=%.6f,%.6f,%.6f radius=%.4f material=%s\n", 1.6 * r[0] - 0.8,
+                1.6 * r[1] + 0.2, 1.6 * r[2] - 0.8, 0.02 + 0.08 * r[3], i % 5 ? "w" : "g");
+    }
+    for (int i = 0; i < 100; i++) {
+        double r[3];
+        for (int k = 0; k < 3; k++)
+            r[k] = splitmix_unit(&state);
+        fprintf(f, "quad corner=%.6f,%.6f,%.6f edge1=0.1,0.02,0 edge2=0,0.03,0.1 material=%s\n",
+                1.6 * r[0] - 0.9, 1.8 * r[1] + 0.05, 1.6 * r[2] - 0.9, i % 7 ? "w" : "lamp");
+    }
+    fclose(f);
+    const char *const scenes[] = {"scenes/materials.txt", "scenes/glass-balls.txt", path};
+    for (size_t k = 0; k < sizeof scenes / sizeof scenes[0]; k++) {
+        struct scene s;
+        struct mcpt_error err;
+        cr_assert(scene_load(scenes[k], &s, &err), "%s", err.msg);
+        s.width = 24;
+        s.height = 18;
+        struct trace_scene *ts = trace_prepare(&s, 1, &err);
+        cr_assert(ts, "%s", err.msg);
+        struct film a, b;
+        cr_assert(film_init(&a, s.width, s.height, &err));
+        cr_assert(film_init(&b, s.width, s.height, &err));
+        size_t bytes = sizeof(struct film_pixel) * (size_t)s.width * (size_t)s.height;
+        struct trace_options opt = default_options(3);
+        opt.spp = 16;
+        opt.n_threads = 2;
+        struct trace_result ra, rb;
+        cr_assert(trace_set_shape_tree(ts, true));
+        cr_assert(trace_render(ts, &opt, &a, &ra, &err));
+        cr_assert(trace_set_shape_tree(ts, false));
+        cr_assert(trace_render(ts, &opt, &b, &rb, &err));
+        cr_assert(memcmp(a.pixels, b.pixels, bytes) == 0, "%s: tree and one by one differ",
+                  scenes[k]);
+        cr_assert_eq(ra.n_rays, rb.n_rays, "%s", scenes[k]);
+        film_free(&a);
+        film_free(&b);
+        trace_free(ts);
+        scene_free(&s);
+    }
+    test_remove_dir(dir);
+}
+
 /* The Cornell box image mean (scenes/cornell-box.txt at size x size, spp) and its SE. */
 static void cornell_mean(int size, uint32_t spp, uint64_t seed, double mean[3], double se[3])
 {
