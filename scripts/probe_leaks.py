@@ -100,11 +100,13 @@ def render(mcpt, scene, seed=0, refusal_ok=False):
     return exr
 
 
-def cube_obj(path, cells, strips, inward):
+def cube_obj(path, cells, strips, inward, quad_faces=()):
     """The cube [-1, 1]^3: a grid of cells x cells per face sharing vertices by index, or strips
-    per face (T-junctions where they end on the next face)."""
+    per face (T-junctions where they end on the next face).  The faces numbered in quad_faces
+    (2 axis + (sign > 0)) are left out and returned as quads' (corner, edge1, edge2), facing as
+    the mesh's faces do."""
     n, m = (strips, 1) if strips else (cells, cells)
-    verts, out_v, out_f = {}, [], []
+    verts, out_v, out_f, quads = {}, [], [], []
 
     def vid(p):
         if p not in verts:
@@ -114,6 +116,11 @@ def cube_obj(path, cells, strips, inward):
     for axis in range(3):
         for sign in (-1, 1):
             u, w = (axis + 1) % 3, (axis + 2) % 3
+            if 2 * axis + (sign > 0) in quad_faces:
+                c, e1, e2 = [-1, -1, -1], [0, 0, 0], [0, 0, 0]
+                c[axis], e1[u], e2[w] = sign, 2, 2
+                quads.append((c, e1, e2) if (sign > 0) != inward else (c, e2, e1))  # e1 x e2 = +axis
+                continue
             for i in range(n):
                 for j in range(m):
                     def corner(a, b):
@@ -128,6 +135,7 @@ def cube_obj(path, cells, strips, inward):
                         out_f.append("f %d %d %d\nf %d %d %d" % (a, b, c, a, c, d))
     with open(path, "w") as f:
         f.write("\n".join(out_v + out_f) + "\n")
+    return quads
 
 
 def closed_scene(path, camera, shapes):
@@ -154,7 +162,8 @@ def probe_cubes(args, tmp):
     for it in range(args.cases):
         inward = rng.random() < 0.5
         obj = os.path.join(tmp, "cube-%d.obj" % inward)
-        cube_obj(obj, args.cells, args.strips, inward)
+        quad_faces = rng.sample(range(6), args.quad_faces)
+        quads = cube_obj(obj, args.cells, args.strips, inward, quad_faces)
         s = 10 ** rng.uniform(-15, 15)
         t = [rng.uniform(-1, 1) * s * rng.choice([0, 1, 10, 100, 1000, 1e4]) for _ in range(3)]
         axis = normalize([rng.gauss(0, 1) for _ in range(3)])
@@ -175,7 +184,9 @@ def probe_cubes(args, tmp):
         scene = os.path.join(tmp, "cube.txt")
         closed_scene(scene, "eye=%s look-at=%s up=0.1,1,0.2 fov=%.3f" % (fmt(eye), fmt(at), rng.uniform(30, 150)),
                      ["mesh file=%s material=m rotate=%s,%.9g scale=%.9g translate=%s"
-                      % (obj, fmt(axis), angle, s, fmt(t))])
+                      % (obj, fmt(axis), angle, s, fmt(t))]
+                     + ["quad corner=%s edge1=%s edge2=%s material=m rotate=%s,%.9g scale=%.9g translate=%s"
+                        % (fmt(c), fmt(e1), fmt(e2), fmt(axis), angle, s, fmt(t)) for c, e1, e2 in quads])
         ran += 1
         b = brightest(args, scene)
         if b != 0:
@@ -503,6 +514,7 @@ def main():
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--cells", type=int, default=3, help="cubes: grid cells per face side")
     ap.add_argument("--strips", type=int, default=0, help="cubes: strips per face instead")
+    ap.add_argument("--quad-faces", type=int, default=0, help="cubes: this many faces as quads")
     ap.add_argument("--no-turn", dest="turn", action="store_false", help="cubes: no rotation")
     ap.add_argument("--decade", type=int, default=4, help="planes: moved 10^(D-1)..10^D sizes")
     ap.add_argument("--soup", action="store_true",
