@@ -827,6 +827,57 @@ Test(trace, cornell_box_mean_matches_reference, .timeout = TEST_TIMEOUT_S(120))
     }
 }
 
+/* A lamp quad sharing its edge with a mesh wall is loaded as two triangles of the mesh (scene.c,
+ * quads_to_triangles) and sampled as two triangle lights; the same lamp 1e-6 away stays a quad.
+ * Both light a floor plane alike: image means within 4 combined SE (independent seeds). */
+Test(trace, lamp_quad_as_triangles_lights_alike, .timeout = TEST_TIMEOUT_S(120))
+{
+    char dir[64], obj[128], path[2][128];
+    test_make_dir(dir, sizeof dir, "lamp_quad");
+    snprintf(obj, sizeof obj, "%s/wall.obj", dir);
+    FILE *f = fopen(obj, "w");
+    cr_assert_not_null(f);
+    fprintf(f, "v 0 0 -1\nv 0 0 1\nv 0 1 1\nv 0 1 -1\nf 1 2 3\nf 1 3 4\n");
+    fclose(f);
+    double mean[2][3], se[2][3];
+    for (int k = 0; k < 2; k++) {
+        snprintf(path[k], sizeof path[k], "%s/lamp-%d.txt", dir, k);
+        f = fopen(path[k], "w");
+        cr_assert_not_null(f);
+        fprintf(f,
+                "camera eye=1.5,0.8,2.5 look-at=0.3,0.2,0 up=0,1,0 fov=50\n"
+                "film width=32 height=32\n"
+                "material name=w type=diffuse albedo=0.7,0.7,0.7\n"
+                "material name=lamp type=diffuse albedo=0,0,0 emission=5,4,3\n"
+                "mesh file=wall.obj material=w\n"
+                "quad corner=%s,1,-1 edge1=0,0,2 edge2=0.5,0,0 material=lamp\n"
+                "plane point=0,0,0 normal=0,1,0 material=w\n"
+                "sky type=constant radiance=0.1,0.1,0.1\n",
+                k ? "1e-6" : "0");
+        fclose(f);
+        struct scene s;
+        struct mcpt_error err;
+        cr_assert(scene_load(path[k], &s, &err), "%s", err.msg);
+        cr_assert_eq(s.n_quads, (uint32_t)k, "the lamp at the wall's edge is two triangles");
+        cr_assert_eq(s.n_tris, k ? 2u : 4u);
+        struct trace_scene *ts = trace_prepare(&s, 1, &err);
+        cr_assert(ts, "%s", err.msg);
+        struct film film;
+        cr_assert(film_init(&film, s.width, s.height, &err));
+        render(ts, &film, 1024, 2, 11 + (uint64_t)k);
+        image_mean_se(&film, mean[k], se[k]);
+        film_free(&film);
+        trace_free(ts);
+        scene_free(&s);
+    }
+    for (int c = 0; c < 3; c++) {
+        double tol = 4.0 * sqrt(se[0][c] * se[0][c] + se[1][c] * se[1][c]);
+        cr_assert(fabs(mean[0][c] - mean[1][c]) < tol, "channel %d: %.6f vs %.6f (tolerance %.6f)",
+                  c, mean[0][c], mean[1][c], tol);
+    }
+    test_remove_dir(dir);
+}
+
 /* Reads the 3 numbers of the JSON array "key": [a, b, c] in text. */
 static bool json_triple(const char *text, const char *key, double out[3])
 {
