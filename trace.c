@@ -776,7 +776,9 @@ fail:
     return NULL;
 }
 
-/* A sphere's or quad's box, one float step wider than its exact extent on every side. */
+/* A sphere's or quad's box: its extent in double, rounded to float and then moved one float
+ * step outwards, so at least half a step wider on every side (the shapes decide their hits in
+ * double, far closer to the exact surface than that). */
 static void shape_box(const struct scene *scene, uint32_t i, float box[2][3])
 {
     double lo[3], hi[3];
