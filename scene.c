@@ -2185,6 +2185,14 @@ static bool quad_grooves(struct scene *sc)
     return true;
 }
 
+/* A position's coordinates as bits, -0 as +0: equal keys, equal positions (the weld, and the
+ * quads that meet meshes). */
+static void corner_key(vec3 p, uint32_t key[3])
+{
+    const float c[3] = {p.x + 0.0f, p.y + 0.0f, p.z + 0.0f}; /* -0 + 0 = +0 */
+    memcpy(key, c, 3 * sizeof *key);
+}
+
 /* SplitMix64's finaliser (Steele, Lea and Flood 2014): every input bit reaches every output
  * bit, so coordinates on a grid, whose low mantissa bits are zero, spread over the table. */
 static uint64_t weld_mix(uint64_t z)
@@ -2215,8 +2223,7 @@ static uint32_t *weld_positions(const struct scene *sc)
     for (uint32_t v = 0; v < n_v; v++) {
         const vec3 p = sc->positions[v];
         uint32_t bits[3];
-        const float c[3] = {p.x + 0.0f, p.y + 0.0f, p.z + 0.0f}; /* -0 + 0 = +0 */
-        memcpy(bits, c, sizeof bits);
+        corner_key(p, bits);
         uint64_t h = weld_mix(weld_mix((uint64_t)bits[0] << 32 | bits[1]) ^ bits[2]);
         size_t slot = (size_t)h & (cap - 1);
         for (;; slot = (slot + 1) & (cap - 1)) {
@@ -2610,10 +2617,10 @@ static bool tj_pass(struct parser *ps, const uint32_t *canon, const uint32_t *st
 /* A quad keeps its corner and edges in double, a mesh its vertices in float, so where the two
  * share an edge the quad's runs up to half a float ulp beside the mesh's, and rays pass through
  * the crack (a box of quads and mesh faces, camera inside, let sky in in 11 of 30 random
- * placements at right angles; `python3 scripts/probe_leaks.py sheared --mixed --degrees 90`).  A quad with
- * an edge whose two ends are mesh vertices (the corners rounded to float, exactly equal), and
- * every quad that shares an edge with it so, becomes two triangles of the meshes with those
- * float corners: the faces then meet by coordinates as a mesh's do, and the weld, the
+ * placements at right angles; `python3 scripts/probe_leaks.py sheared --mixed --degrees 90`).
+ * A quad with an edge whose two ends are mesh vertices (the corners rounded to float, exactly
+ * equal), and every quad that shares an edge with it so, becomes two triangles of the meshes
+ * with those float corners: the faces then meet by coordinates as a mesh's do, and the weld, the
  * T-junction pass and the grooves treat them so.  Uvs (0, 0), (1, 0), (1, 1), (0, 1) keep the
  * quad's (alpha, beta); the front normal e1 x e2 and the area are the quad's.  Quads that meet
  * only quads stay as they are. */
@@ -2621,12 +2628,6 @@ struct corner_rec {
     uint32_t key[3]; /* the float corner's bits, -0 as +0 */
     uint32_t at;     /* 4 quad + corner */
 };
-
-static void corner_key(vec3 p, uint32_t key[3])
-{
-    const float c[3] = {p.x + 0.0f, p.y + 0.0f, p.z + 0.0f}; /* -0 + 0 = +0 */
-    memcpy(key, c, 3 * sizeof *key);
-}
 
 static int corner_key_cmp(const uint32_t a[3], const uint32_t b[3])
 {

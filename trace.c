@@ -1052,25 +1052,14 @@ static bool closest_hit(const struct trace_scene *ts, const struct ray *ray_in,
         ray.t_max = bh->t;
     }
     float t;
-    if (ts->shapes) {
-        struct shape_hit sh = {scene, kind, idx};
+    struct shape_hit sh = {scene, kind, idx};
+    if (ts->shapes)
         bvh_boxes_traverse(ts->shapes, &ray, shape_closest, &sh);
-        kind = sh.kind;
-        idx = sh.idx;
-    } else {
-        for (uint32_t i = 0; i < scene->n_spheres; i++)
-            if (shape_sphere_intersect(&scene->spheres[i], &ray, &t)) {
-                kind = HIT_SPHERE;
-                idx = i;
-                ray.t_max = t;
-            }
-        for (uint32_t i = 0; i < scene->n_quads; i++)
-            if (shape_quad_intersect(&scene->quads[i], &ray, &t)) {
-                kind = HIT_QUAD;
-                idx = i;
-                ray.t_max = t;
-            }
-    }
+    else /* a few: each in turn, spheres then quads */
+        for (uint32_t i = 0; i < scene->n_spheres + scene->n_quads; i++)
+            shape_closest(&sh, i, &ray);
+    kind = sh.kind;
+    idx = sh.idx;
     for (uint32_t i = 0; i < scene->n_planes; i++)
         if (shape_plane_intersect(&scene->planes[i], &ray, &t)) {
             kind = HIT_PLANE;
@@ -1135,16 +1124,13 @@ static bool occluded(const struct trace_scene *ts, const struct ray *ray, uint32
 {
     const struct scene *scene = ts->scene;
     float t;
+    struct ray r = *ray;
     if (ts->shapes) {
-        struct ray r = *ray;
         if (bvh_boxes_traverse(ts->shapes, &r, shape_any, (void *)scene))
             return true;
-    } else {
-        for (uint32_t i = 0; i < scene->n_spheres; i++)
-            if (shape_sphere_intersect(&scene->spheres[i], ray, &t))
-                return true;
-        for (uint32_t i = 0; i < scene->n_quads; i++)
-            if (shape_quad_intersect(&scene->quads[i], ray, &t))
+    } else { /* a few: each in turn */
+        for (uint32_t i = 0; i < scene->n_spheres + scene->n_quads; i++)
+            if (shape_any((void *)scene, i, &r))
                 return true;
     }
     for (uint32_t i = 0; i < scene->n_planes; i++)
