@@ -1124,14 +1124,18 @@ static bool occluded(const struct trace_scene *ts, const struct ray *ray, uint32
 {
     const struct scene *scene = ts->scene;
     float t;
-    struct ray r = *ray;
-    if (ts->shapes) {
-        if (bvh_boxes_traverse(ts->shapes, &r, shape_any, (void *)scene))
-            return true;
-    } else { /* a few: each in turn */
-        for (uint32_t i = 0; i < scene->n_spheres + scene->n_quads; i++)
-            if (shape_any((void *)scene, i, &r))
+    uint32_t n_shapes = scene->n_spheres + scene->n_quads;
+    if (n_shapes > 0) {
+        /* the visits take a mutable ray; a scene of meshes alone makes no copy */
+        struct ray r = *ray;
+        if (ts->shapes) {
+            if (bvh_boxes_traverse(ts->shapes, &r, shape_any, (void *)scene))
                 return true;
+        } else { /* a few: each in turn */
+            for (uint32_t i = 0; i < n_shapes; i++)
+                if (shape_any((void *)scene, i, &r))
+                    return true;
+        }
     }
     for (uint32_t i = 0; i < scene->n_planes; i++)
         if (shape_plane_intersect(&scene->planes[i], ray, &t))
