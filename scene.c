@@ -2083,15 +2083,20 @@ static bool edge_grooves(struct scene *sc, uint32_t lo, const struct groove_ent 
     return true;
 }
 
-/* Quads are separate statements, so no index says which meet: each pair is tested, up to
- * GROOVE_MAX_QUADS quads (beyond, every factor stays 1), pairs whose boxes do not meet set
- * aside.  Quad b meets an edge of quad a where both of the edge's ends lie in b, within
+/* Quads are separate statements, so no index says which meet: the pairs whose boxes meet are
+ * found by sweep and prune (the boxes sorted by their low end along the axis their centres
+ * spread most on, each compared with those that start before it ends), and each is tested both
+ * ways.  The sweep compares at most GROOVE_MAX_COMPARES pairs of boxes and tests at most
+ * GROOVE_MAX_MEETS pairs that meet (four edges each way): a scene of quads that nearly all
+ * overlap stops there, its remaining factors 1, so that no input makes the load quadratic.
+ * Quad b meets an edge of quad a where both of the edge's ends lie in b, within
  * GROOVE_QUAD_TOL of the ends' coordinates and the edge's length (the file writes each quad's
  * corner and edges apart, to the digits it prints); the groove's angle is that between the two
  * quads' arms away from the edge (the acute one of the two, where the edge crosses b's inside
  * rather than lying on its border).  A quad takes the largest factor of its four edges for all
  * of them. */
-#define GROOVE_MAX_QUADS 1024
+#define GROOVE_MAX_COMPARES (1u << 26)
+#define GROOVE_MAX_MEETS (1u << 19)
 #define GROOVE_QUAD_TOL 1e-6
 
 /* Where p lies in quad q: its coordinates (alpha along e1, beta along e2) and distance from the
@@ -2160,28 +2165,78 @@ static void quad_box(const struct quad *q, double lo[3], double hi[3])
     quad_span(q->corner.z, q->e1.z, q->e2.z, &lo[2], &hi[2]);
 }
 
+/* A quad's box along the sweep axis, and its index (quad_grooves). */
+struct sweep_ent {
+    double lo, hi;
+    uint32_t idx;
+};
+
+static int sweep_ent_cmp(const void *x, const void *y)
+{
+    const struct sweep_ent *a = x, *b = y;
+    if (a->lo != b->lo)
+        return a->lo < b->lo ? -1 : 1;
+    return a->idx < b->idx ? -1 : a->idx > b->idx; /* a total order: the same on every libc */
+}
+
+/* Raises quad i's factor to what its edges lying in quad j call for. */
+static void quad_pair_groove(struct scene *sc, uint32_t i, uint32_t j)
+{
+    for (int k = 0; k < 4; k++) {
+        double g = quad_edge_groove(&sc->quads[i], k, &sc->quads[j]);
+        float gf = (float)g * (1.0f + 0x1p-20f);
+        if (g > 1.0 && gf > sc->quads[i].groove)
+            sc->quads[i].groove = gf;
+    }
+}
+
 static bool quad_grooves(struct scene *sc)
 {
-    if (sc->n_quads < 2 || sc->n_quads > GROOVE_MAX_QUADS)
+    uint32_t n = sc->n_quads;
+    if (n < 2)
         return true;
-    double(*box)[2][3] = malloc((size_t)sc->n_quads * sizeof *box);
-    if (!box)
+    double(*box)[2][3] = malloc((size_t)n * sizeof *box);
+    struct sweep_ent *ent = malloc((size_t)n * sizeof *ent);
+    if (!box || !ent) {
+        free(box);
+        free(ent);
         return false;
-    for (uint32_t i = 0; i < sc->n_quads; i++)
+    }
+    double c_lo[3] = {INFINITY, INFINITY, INFINITY}, c_hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (uint32_t i = 0; i < n; i++) {
         quad_box(&sc->quads[i], box[i][0], box[i][1]);
-    for (uint32_t i = 0; i < sc->n_quads; i++)
-        for (uint32_t j = 0; j < sc->n_quads; j++) {
-            bool meet = i != j;
+        for (int a = 0; a < 3; a++) {
+            double c = 0.5 * box[i][0][a] + 0.5 * box[i][1][a];
+            c_lo[a] = fmin(c_lo[a], c);
+            c_hi[a] = fmax(c_hi[a], c);
+        }
+    }
+    int axis = 0;
+    for (int a = 1; a < 3; a++)
+        if (c_hi[a] - c_lo[a] > c_hi[axis] - c_lo[axis])
+            axis = a;
+    for (uint32_t i = 0; i < n; i++)
+        ent[i] = (struct sweep_ent){box[i][0][axis], box[i][1][axis], i};
+    qsort(ent, n, sizeof *ent, sweep_ent_cmp);
+    uint32_t compares = 0, meets = 0;
+    for (uint32_t p = 0; p < n; p++)
+        for (uint32_t q = p + 1; q < n && ent[q].lo <= ent[p].hi; q++) {
+            if (++compares > GROOVE_MAX_COMPARES)
+                goto done;
+            uint32_t i = ent[p].idx, j = ent[q].idx;
+            bool meet = true;
             for (int a = 0; meet && a < 3; a++)
                 meet = box[i][0][a] <= box[j][1][a] && box[j][0][a] <= box[i][1][a];
-            for (int k = 0; meet && k < 4; k++) {
-                double g = quad_edge_groove(&sc->quads[i], k, &sc->quads[j]);
-                float gf = (float)g * (1.0f + 0x1p-20f);
-                if (g > 1.0 && gf > sc->quads[i].groove)
-                    sc->quads[i].groove = gf;
-            }
+            if (!meet)
+                continue;
+            if (++meets > GROOVE_MAX_MEETS)
+                goto done;
+            quad_pair_groove(sc, i, j);
+            quad_pair_groove(sc, j, i);
         }
+done:
     free(box);
+    free(ent);
     return true;
 }
 

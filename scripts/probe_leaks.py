@@ -15,7 +15,8 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
            exactly 0 (scene.c, grooves).  --soup gives each triangle its own three vertices.
   sheared  a closed parallelepiped of six quads whose faces meet at 2..45 degrees along one edge,
            turned, scaled 1e-6..1e6 and moved up to 1e4 sizes, corners and edges written to 17
-           digits, the camera inside near that edge; every pixel must be exactly 0.
+           digits, the camera inside near that edge; every pixel must be exactly 0.  --boxes N
+           puts N - 1 copies of quads in a row beside it (N = 200: 1200 quads).
   spheres  a closed analytic sphere (camera inside, diffuse walls, white sky) of radius 1e-15..1e15
            moved up to 2^20 radii from the origin in a random direction (down to the smallest
            radius scene.c accepts there); every pixel must be exactly 0.
@@ -253,6 +254,13 @@ def probe_sheared(args, tmp):
         far = [o + sum(v[i] for v in vec) for i, o in enumerate(t)]
         f17 = lambda v: ",".join("%.17g" % x for x in v)  # noqa: E731
         quads, mesh = [], []
+        for k in range(1, args.boxes):  # copies beside it, 3 sizes apart along a (quads only)
+            o = [x + 3 * k * v for x, v in zip(t, vec[0])]
+            fo = [x + 3 * k * v for x, v in zip(far, vec[0])]
+            for corner, sign in ((o, 1), (fo, -1)):
+                for i, j in ((0, 1), (1, 2), (2, 0)):
+                    quads.append("quad corner=%s edge1=%s edge2=%s material=m"
+                                 % (f17(corner), f17([sign * x for x in vec[i]]), f17([sign * x for x in vec[j]])))
         for corner, sign in ((t, 1), (far, -1)):
             for i, j in ((0, 1), (1, 2), (2, 0)):
                 e1, e2 = [sign * x for x in vec[i]], [sign * x for x in vec[j]]
@@ -522,6 +530,8 @@ def main():
     ap.add_argument("--degrees", default="2,5,10,20,30,45", help="sheared: the angles drawn from")
     ap.add_argument("--mixed", action="store_true",
                     help="sheared: each face a quad or two triangles of one mesh, by chance")
+    ap.add_argument("--boxes", type=int, default=1,
+                    help="sheared: this many boxes in a row (of quads but the first), camera in the first")
     ap.add_argument("--grid", type=int, default=32, help="offset: vertices on the grid of 1/G")
     ap.add_argument("--offsets", default="1e5,2e5,4e5")
     ap.add_argument("--obj", default=os.path.join(ROOT, "scenes", "models", "CornellBox-Original.obj"))
