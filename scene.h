@@ -167,6 +167,11 @@ struct scene {
     uint32_t n_quads;
     struct plane *planes;
     uint32_t n_planes;
+    /* where meshes stand on the planes and quads (scene.c, contacts): surface k's (planes
+     * first, then quads) are contacts[contact_start[k] .. contact_start[k + 1]); both NULL when
+     * there are none */
+    struct contact *contacts;
+    uint32_t *contact_start;
 
     struct light *lights; /* every emissive triangle, quad and sphere, then point lights */
     uint32_t n_lights;
@@ -184,6 +189,14 @@ struct scene {
                              folder): inputs no output may overwrite */
     uint32_t n_loaded;
 };
+
+/* The contacts of surface k (planes first, then quads) in *n; NULL where it has none. */
+static inline const struct contact *scene_contacts(const struct scene *scene, uint32_t k,
+                                                   uint32_t *n)
+{
+    *n = scene->contact_start ? scene->contact_start[k + 1] - scene->contact_start[k] : 0;
+    return *n ? scene->contacts + scene->contact_start[k] : NULL;
+}
 
 /* scene->tri_groove's factors of triangle i, or NULL where the scene has none. */
 static inline const float *scene_tri_groove(const struct scene *scene, uint32_t i)

@@ -880,6 +880,28 @@ struct surface shape_plane_surface(const struct plane *pl, const struct ray *ray
     return sf;
 }
 
+void shape_pull_from_contacts(struct surface *sf, const struct contact *cs, uint32_t n, vec3 from)
+{
+    for (uint32_t i = 0; i < n; i++) {
+        const struct contact *c = &cs[i];
+        struct dvec3 p = d3(sf->p), e = d3(sf->p_error);
+        /* the margin of triangle_margins: M = 6 (m . e) + g (n . e) */
+        double M = 6.0 * d3_dot(d3_abs(c->m), e) + c->g * d3_dot(d3_abs(d3(sf->ng)), e);
+        struct dvec3 ab = d3_sub(c->b, c->a), ap = d3_sub(p, c->a);
+        double len2 = d3_dot(ab, ab), along = d3_dot(ap, ab), s = d3_dot(ap, c->m);
+        double reach = M * sqrt(len2);
+        if (!(fabs(s) < M && along >= -reach && along <= len2 + reach))
+            continue;
+        double side = d3_dot(d3_sub(d3(from), c->a), c->m);
+        double sgn = side > 0.0 || (side == 0.0 && s >= 0.0) ? 1.0 : -1.0;
+        struct dvec3 q = d3_add(p, d3_scale(c->m, sgn * M - s));
+        sf->p = d3_to_float(q);
+        sf->p_error = (vec3){float_up(e.x + fabs(q.x) * 0x1p-24),
+                             float_up(e.y + fabs(q.y) * 0x1p-24),
+                             float_up(e.z + fabs(q.z) * 0x1p-24)};
+    }
+}
+
 /* ---- triangle (the BVH finds the hit) ---- */
 
 /* What every point of triangle p[3] shares (shape.h): a hit computes it for its triangle, the

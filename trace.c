@@ -1037,6 +1037,17 @@ static bool shape_any(void *ctx, uint32_t i, struct ray *ray)
                : shape_quad_intersect(&scene->quads[i - scene->n_spheres], ray, &t);
 }
 
+/* A hit sf on surface k (scene_contacts: planes, then quads) kept clear of the walls that stand
+ * on it, on the side the ray came from (shape_pull_from_contacts). */
+static void pull_from_contacts(const struct scene *scene, uint32_t k, struct surface *sf,
+                               const struct ray *ray)
+{
+    uint32_t n;
+    const struct contact *cs = scene_contacts(scene, k, &n);
+    if (cs)
+        shape_pull_from_contacts(sf, cs, n, ray->o);
+}
+
 /* The closest hit along ray_in among the analytic shapes, nearer than the triangle hit bh (NULL:
  * none) the BVH found, as a hit record: the second half of every intersection. */
 static bool closest_hit(const struct trace_scene *ts, const struct ray *ray_in,
@@ -1082,10 +1093,12 @@ static bool closest_hit(const struct trace_scene *ts, const struct ray *ray_in,
     case HIT_QUAD:
         hr->sf = shape_quad_surface(&scene->quads[idx], &ray, ray.t_max);
         hr->light_idx = light_idx_of(ts->lights, LIGHT_QUAD, idx);
+        pull_from_contacts(scene, scene->n_planes + idx, &hr->sf, ray_in);
         return true;
     case HIT_PLANE:
         hr->sf = shape_plane_surface(&scene->planes[idx], &ray, ray.t_max);
         hr->light_idx = LIGHT_NONE;
+        pull_from_contacts(scene, idx, &hr->sf, ray_in);
         return true;
     }
     return false;

@@ -17,6 +17,9 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
            turned, scaled 1e-6..1e6 and moved up to 1e4 sizes, corners and edges written to 17
            digits, the camera inside near that edge; every pixel must be exactly 0.  --boxes N
            puts N - 1 copies of quads in a row beside it (N = 200: 1200 quads).
+  standing an open-bottomed cube of 10 mesh triangles standing on a plane or a quad (a floor
+           statement), turned, scaled 1e-6..1e6 and moved up to 1e3 sizes, the camera inside,
+           down to 1e-4 of its size above the floor; every pixel must be exactly 0.
   spheres  a closed analytic sphere (camera inside, diffuse walls, white sky) of radius 1e-15..1e15
            moved up to 2^20 radii from the origin in a random direction (down to the smallest
            radius scene.c accepts there); every pixel must be exactly 0.
@@ -39,6 +42,7 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
   python3 scripts/probe_leaks.py wedges --cases 60 --seed 1
   python3 scripts/probe_leaks.py wedges --cases 60 --seed 1 --soup
   python3 scripts/probe_leaks.py sheared --cases 70 --seed 1
+  python3 scripts/probe_leaks.py standing --cases 40 --seed 1
   python3 scripts/probe_leaks.py spheres --cases 50 --seed 3
   python3 scripts/probe_leaks.py planes --cases 30 --decade 5 --seed 1
   python3 scripts/probe_leaks.py quads --cases 100 --seed 2
@@ -205,6 +209,15 @@ def groove_leak(args, scene, it, deg, s):
     return int(b != 0)
 
 
+def random_placement(rng, scales, moves):
+    """A random rotation, a scale 10^-scales..10^scales and a move of up to 10^moves scaled sizes
+    (or none), as a function of a local point, and the scale."""
+    rot = rotation(normalize([rng.gauss(0, 1) for _ in range(3)]), rng.uniform(0, 360))
+    s = 10 ** rng.uniform(-scales, scales)
+    t = [rng.uniform(-1, 1) * 10 ** rng.uniform(0, moves) * s * rng.choice([0, 1]) for _ in range(3)]
+    return (lambda p: [v * s + o for v, o in zip(rot(p), t)]), s
+
+
 def probe_wedges(args, tmp):
     rng = random.Random(args.seed)
     leaks = 0
@@ -213,12 +226,7 @@ def probe_wedges(args, tmp):
         deg = rng.choice([0.5, 2, 5, 10, 20, 30, 45])
         h = 2 * math.tan(math.radians(deg / 2))
         local = [(0, 0, -1), (2, h, -1), (2, -h, -1), (0, 0, 1), (2, h, 1), (2, -h, 1)]
-        rot = rotation(normalize([rng.gauss(0, 1) for _ in range(3)]), rng.uniform(0, 360))
-        s = 10 ** rng.uniform(-8, 8)
-        t = [rng.uniform(-1, 1) * 10 ** rng.uniform(0, 4) * s * rng.choice([0, 1]) for _ in range(3)]
-
-        def place(p):
-            return [v * s + o for v, o in zip(rot(p), t)]
+        place, s = random_placement(rng, 8, 4)
         flip = rng.random() < 0.5
         obj = os.path.join(tmp, "wedge.obj")
         with open(obj, "w") as f:
@@ -286,6 +294,48 @@ def probe_sheared(args, tmp):
         closed_scene(scene, "eye=%s look-at=%s up=%s fov=70" % (f17(eye), f17(at), f17(vec[2])), quads)
         leaks += groove_leak(args, scene, it, deg, s)
     print("sheared: %d of %d let sky in" % (leaks, args.cases))
+    return leaks == 0
+
+
+def probe_standing(args, tmp):
+    rng = random.Random(args.seed)
+    leaks = 0
+    # an open-bottomed cube [-1, 1] x [0, 2] x [-1, 1]: 10 triangles, the bottom corners 0..3
+    local = [(x, y, z) for y in (0, 2) for x in (-1, 1) for z in (-1, 1)]
+    faces = [(4, 6, 7), (4, 7, 5), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3), (0, 4, 5), (0, 5, 1),
+             (2, 3, 7), (2, 7, 6)]
+    for it in range(args.cases):
+        place, s = random_placement(rng, 6, 3)
+        flip = rng.random() < 0.5
+        obj = os.path.join(tmp, "standing.obj")
+        with open(obj, "w") as f:
+            f.write("".join("v %s\n" % fmt(place(p)).replace(",", " ") for p in local))
+            f.write("".join("f %d %d %d\n" % tuple(k + 1 for k in ((a, c, b) if flip else (a, b, c)))
+                            for a, b, c in faces))
+        up = [a - b for a, b in zip(place((0, 1, 0)), place((0, 0, 0)))]
+        if rng.random() < 0.5:
+            floor = "plane point=%s normal=%s material=m" % (fmt(place((0, 0, 0))), fmt(up))
+        else:
+            c = place((-3, 0, -3))
+            e1 = [a - b for a, b in zip(place((3, 0, -3)), c)]
+            e2 = [a - b for a, b in zip(place((-3, 0, 3)), c)]
+            floor = "quad corner=%s edge1=%s edge2=%s material=m" % (fmt(c), fmt(e1), fmt(e2))
+        eye = place((rng.uniform(-0.9, 0.9), 10 ** rng.uniform(-4, 0.2), rng.uniform(-0.9, 0.9)))
+        at = place((rng.uniform(-1, 1), 0, rng.uniform(-1, 1)))
+        scene = os.path.join(tmp, "standing.txt")
+        closed_scene(scene, "eye=%s look-at=%s up=%s fov=%.1f" % (fmt(eye), fmt(at), fmt(up), rng.uniform(40, 150)),
+                     ["mesh file=%s material=m" % obj, floor])
+        b = brightest(args, scene)
+        if b != 0:
+            leaks += 1
+            print("leak: case %d, %s, scale %.3g, brightest pixel %.3g" % (it, floor.split()[0], s, b))
+            if args.save:  # the case as standing-SEED-CASE.txt and .obj, the OBJ named relatively
+                name = os.path.join(args.save, "standing-%d-%d" % (args.seed, it))
+                with open(obj) as f, open(name + ".obj", "w") as g:
+                    g.write(f.read())
+                with open(scene) as f, open(name + ".txt", "w") as g:
+                    g.write(f.read().replace(obj, os.path.basename(name) + ".obj"))
+    print("standing: %d of %d let sky in" % (leaks, args.cases))
     return leaks == 0
 
 
@@ -515,8 +565,8 @@ def probe_scene(args, tmp):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("mode", choices=["cubes", "wedges", "sheared", "spheres", "planes", "quads", "offset", "scales",
-                                     "scene"])
+    ap.add_argument("mode", choices=["cubes", "wedges", "sheared", "standing", "spheres", "planes", "quads",
+                                     "offset", "scales", "scene"])
     ap.add_argument("--mcpt", default=os.path.join(ROOT, "mcpt"))
     ap.add_argument("--cases", type=int, default=50)
     ap.add_argument("--seed", type=int, default=1)
@@ -532,6 +582,7 @@ def main():
                     help="sheared: each face a quad or two triangles of one mesh, by chance")
     ap.add_argument("--boxes", type=int, default=1,
                     help="sheared: this many boxes in a row (of quads but the first), camera in the first")
+    ap.add_argument("--save", help="standing: copy each case that lets sky in into this folder")
     ap.add_argument("--grid", type=int, default=32, help="offset: vertices on the grid of 1/G")
     ap.add_argument("--offsets", default="1e5,2e5,4e5")
     ap.add_argument("--obj", default=os.path.join(ROOT, "scenes", "models", "CornellBox-Original.obj"))
@@ -541,7 +592,7 @@ def main():
     ap.add_argument("--move", action="store_true", help="scene: move along x instead of scaling")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        ok = {"cubes": probe_cubes, "wedges": probe_wedges, "sheared": probe_sheared,
+        ok = {"cubes": probe_cubes, "wedges": probe_wedges, "sheared": probe_sheared, "standing": probe_standing,
               "spheres": probe_spheres, "planes": probe_planes,
               "quads": probe_quads, "offset": probe_offset,
               "scales": probe_scales, "scene": probe_scene}[args.mode](args, tmp)

@@ -1202,6 +1202,46 @@ Test(scene, t_junction_is_fanned)
 
 /* ---- quads that meet meshes (scene.c, quads_to_triangles) ---------------------------------- */
 
+/* A wall standing on a plane: its two bottom corners, a rounding off the plane, are moved onto
+ * it or the least way past it (never up, never more than 4 float steps), and its bottom edge is
+ * listed as the plane's contact, m within the plane and across the edge; a triangle lying in the
+ * plane, one crossing it and one off it give none, and a quad that the wall does not stand on
+ * has none. */
+Test(scene, walls_standing_on_a_plane_are_seated_and_listed)
+{
+    /* the wall x in [0, 1], y = 0.3 (its bottom) .. 1.3, z = 0.5; the plane y = 0.3 through a
+     * point whose y is the float nearest 0.3 from the other side */
+    const char *const files[] = {"w.obj",
+                                 "v 0 0.3000001 0.5\nv 1 0.3000001 0.5\nv 0 1.3 0.5\n"
+                                 "v 0 0.3 2\nv 1 0.3 2\nv 0 0.3 3\n"
+                                 "v 0 -1 4\nv 1 1 4\nv 0 1 4.5\nv 5 5 5\nv 6 5 5\nv 5 6 5\n"
+                                 "f 1 2 3\nf 4 5 6\nf 7 8 9\nf 10 11 12\n",
+                                 NULL};
+    struct scene sc;
+    char msg[700];
+    cr_assert(load_with_files(CAM MAT "mesh file=w.obj material=red\n"
+                                      "plane point=7,0.3,-2 normal=0,1,0 material=red\n"
+                                      "quad corner=-9,-9,-9 edge1=1,0,0 edge2=0,1,0 material=red\n",
+                              files, &sc, msg, sizeof msg),
+              "%s", msg);
+    uint32_t n;
+    const struct contact *c = scene_contacts(&sc, 0, &n);
+    cr_assert_eq(n, 1, "the wall's bottom edge only");
+    cr_assert_null(scene_contacts(&sc, 1, &n), "the quad has none");
+    const float plane_y = 0.3f;
+    for (int k = 0; k < 2; k++) {
+        float y = sc.positions[k].y;
+        cr_assert(y <= plane_y && y >= plane_y - 4 * 0x1p-24f, "corner %d: y %.9g", k, y);
+    }
+    cr_assert(c->a.y <= plane_y && c->b.y <= plane_y && fabs(c->m.y) < 1e-12 &&
+                  fabs(fabs(c->m.z) - 1.0) < 1e-12 && c->g == 1.0,
+              "a %g %g %g m %g %g %g g %g", c->a.x, c->a.y, c->a.z, c->m.x, c->m.y, c->m.z, c->g);
+    cr_assert(sc.positions[3].y == plane_y && sc.positions[6].y == -1.0f &&
+                  sc.positions[9].y == 5.0f,
+              "the others stay");
+    scene_free(&sc);
+}
+
 /* A quad with an edge between two mesh vertices, and the quad sharing an edge with it, become
  * two triangles each, at their corners rounded to float, wound as e1 x e2, with the quad's uvs
  * and area; quads that meet a mesh at a corner only, by 1e-7 off, or inside a triangle stay. */
