@@ -2826,34 +2826,37 @@ static bool quads_to_triangles(struct parser *ps)
 
 /* The load's passes over the triangles' shared corners: T-junctions closed (tj_pass), then the
  * grooves' factors (grooves). */
-/* ---- where meshes stand on planes and quads ----------------------------------------------- */
+/* ---- where meshes stand on planes, quads and other meshes -------------------------------- */
 
-/* A mesh wall standing on a plane or a quad (a room's walls on a floor statement, a box on the
- * ground) shares no edge with it.  Two things let rays through there: the wall's bottom corners,
- * on the surface in the file, round to float up to half a float step above it, a crack under
- * the wall; and no margin keeps the surface's points near the wall in front of it, so that a
- * point of the floor within a float step of the wall spawns rays past it.  Boxes standing on a
- * plane, turned and moved, camera inside, let sky in in 4 of 20 cases, on a quad in 4 of 20.
- * So the load finds, per plane and quad, the mesh vertices on it (within CONTACT_ULPS float
- * steps of its plane, and inside a quad to that distance) whose triangles' other corners off it
- * lie all on one side, and moves each onto it or the least way past it (stand_seat), so that the
- * wall reaches it (the surface hides any overlap); a vertex with corners on both sides (a mesh that
- * crosses the surface) or none off it (a mesh lying in it) stays.  And it lists the edges with
- * both corners on the surface and the third corner off it, the lines where something stands:
- * shape_pull_from_contacts keeps the surface's hits a triangle edge's margin away from them.  A
- * surface with more than CONTACT_MAX lines keeps none of them (each of its hits would test them
- * all; its vertices are still seated), and the search stops after CONTACT_MAX_WORK vertex and
- * triangle visits.  A mesh standing on another mesh's triangles is not looked for. */
+/* A mesh wall standing on a plane, a quad or another mesh's triangle (a room's walls on a floor,
+ * a box on the ground) shares no edge with it.  Two things let rays through there: the wall's
+ * bottom corners, on the floor in the file, round to float up to half a float step above it, a
+ * crack under the wall; and no margin keeps the floor's points near the wall in front of it, so
+ * that a point of the floor within a float step of the wall spawns rays past it.  Open boxes
+ * standing on a plane or a quad, turned and moved, camera inside, let sky in in 7 of 40 cases,
+ * on two triangles of another mesh in 6 of 40.  So the load finds, per plane, quad and
+ * triangle, the mesh vertices on it (within CONTACT_ULPS float steps of its plane, and inside
+ * it to that distance; for a triangle, only vertices of edges that one triangle alone has, as an
+ * open wall's bottom corners are, and not its own) whose triangles' other corners off it lie
+ * all on one side, and moves each onto it or the least way past it (stand_seat), so that the
+ * wall reaches it (the floor hides any overlap); a vertex with corners on both sides (a mesh
+ * that crosses the floor) or none off it (a mesh lying in it) stays.  And it lists the edges
+ * with both corners on the surface and the third corner off it, the lines where something
+ * stands: shape_pull_from_contacts keeps the floor's hits a triangle edge's margin away from
+ * them.  A surface with more than CONTACT_MAX lines keeps none of them (each of its hits would
+ * test them all; its vertices are still seated), and the search stops after CONTACT_MAX_WORK
+ * vertex and triangle visits. */
 #define CONTACT_ULPS 8.0
 #define SEAT_ULPS 4.0
 #define CONTACT_MAX 64
 #define CONTACT_MAX_WORK (1u << 26)
 
 /* A surface that meshes may stand on: the plane through o with unit normal n; q its quad, or
- * NULL for a plane. */
+ * tri its triangle's corners, or neither for a plane. */
 struct stand_surface {
     struct dvec3 o, n;
     const struct quad *q;
+    const struct dvec3 *tri;
 };
 
 /* ulps float steps of p's and s's largest coordinate. */
@@ -2862,12 +2865,22 @@ static double stand_tol(const struct stand_surface *s, struct dvec3 p, double ul
     return ulps * 0x1p-24 * (d3_max_abs(p) + d3_max_abs(s->o));
 }
 
-/* Whether p lies on s: within CONTACT_ULPS of its plane, and inside its quad to that distance. */
+/* Whether p lies on s: within CONTACT_ULPS of its plane, and inside its quad or triangle to
+ * that distance. */
 static bool stand_on(const struct stand_surface *s, struct dvec3 p)
 {
     double tol = stand_tol(s, p, CONTACT_ULPS);
     if (!(fabs(d3_dot(d3_sub(p, s->o), s->n)) <= tol))
         return false;
+    if (s->tri) { /* within tol of each edge's line, on the inner side */
+        for (int k = 0; k < 3; k++) {
+            struct dvec3 a = s->tri[k], ab = d3_sub(s->tri[(k + 1) % 3], a);
+            double len = d3_length(ab);
+            if (!(d3_dot(d3_cross(ab, d3_sub(p, a)), s->n) >= -tol * len))
+                return false;
+        }
+        return true;
+    }
     if (!s->q)
         return true;
     double alpha, beta, unused;
@@ -2900,123 +2913,325 @@ static void stand_seat(struct scene *sc, const struct stand_surface *s, uint32_t
     }
 }
 
-/* Seats the vertices that stand on s and appends its contacts to *out (growing *cap), up to
- * CONTACT_MAX + 1 of them; flags is scratch of n_positions bytes.  False where out of memory. */
-static bool stand_surface(struct scene *sc, const struct stand_surface *s, uint8_t *flags,
-                          struct contact **out, uint32_t *n_out, uint32_t *cap)
+/* What the search shares: the triangles at each vertex (adj[adj_start[v] .. adj_start[v + 1])),
+ * a flag byte per vertex (0 between surfaces), the vertices flagged for the current surface,
+ * the contacts found so far, and the work left. */
+struct stand_state {
+    struct scene *sc;
+    uint32_t *adj_start, *adj;
+    uint8_t *flags;
+    uint32_t *marked, n_marked;
+    struct contact *out;
+    uint32_t n_out, cap;
+    uint64_t work;
+};
+
+/* Marks vertex i when it lies on s. */
+static void stand_mark(struct stand_state *st, const struct stand_surface *s, uint32_t i)
 {
-    double lo[3] = {-INFINITY, -INFINITY, -INFINITY}, hi[3] = {INFINITY, INFINITY, INFINITY};
-    if (s->q)
-        quad_box(s->q, lo, hi);
-    bool any = false;
-    for (uint32_t i = 0; i < sc->n_positions; i++) {
-        struct dvec3 p = d3(sc->positions[i]);
-        bool in_box = p.x >= lo[0] && p.x <= hi[0] && p.y >= lo[1] && p.y <= hi[1] &&
-                      p.z >= lo[2] && p.z <= hi[2];
-        flags[i] = in_box && stand_on(s, p) ? STAND_ON : 0;
-        any |= flags[i] != 0;
+    st->work++;
+    if (!st->flags[i] && stand_on(s, d3(st->sc->positions[i]))) {
+        st->flags[i] = STAND_ON;
+        st->marked[st->n_marked++] = i;
     }
-    if (!any)
-        return true;
-    /* the sides of the corners off s of each triangle with a corner on it */
-    for (uint32_t t = 0; t < sc->n_tris; t++) {
-        const uint32_t *v = sc->tris[t].v;
-        for (int k = 0; k < 3; k++)
-            if (!(flags[v[k]] & STAND_ON)) {
-                double d = d3_dot(d3_sub(d3(sc->positions[v[k]]), s->o), s->n);
-                uint8_t side = d > 0.0 ? STAND_ABOVE : STAND_BELOW;
-                for (int j = 1; j < 3; j++)
-                    if (flags[v[(k + j) % 3]] & STAND_ON)
-                        flags[v[(k + j) % 3]] |= side;
-            }
+}
+
+/* Seats the marked vertices that stand on s, appends its contacts (up to CONTACT_MAX + 1) and
+ * clears the marks.  False where out of memory. */
+static bool stand_finish(struct stand_state *st, const struct stand_surface *s)
+{
+    struct scene *sc = st->sc;
+    bool ok = true;
+    for (uint32_t m = 0; m < st->n_marked; m++) { /* the sides of the corners off s */
+        uint32_t i = st->marked[m];
+        for (uint32_t a = st->adj_start[i]; a < st->adj_start[i + 1]; a++) {
+            const uint32_t *v = sc->tris[st->adj[a]].v;
+            for (int k = 0; k < 3; k++)
+                if (!(st->flags[v[k]] & STAND_ON)) {
+                    double d = d3_dot(d3_sub(d3(sc->positions[v[k]]), s->o), s->n);
+                    st->flags[i] |= d > 0.0 ? STAND_ABOVE : STAND_BELOW;
+                }
+        }
+        st->work += st->adj_start[i + 1] - st->adj_start[i];
     }
-    for (uint32_t i = 0; i < sc->n_positions; i++)
-        if (flags[i] == (STAND_ON | STAND_ABOVE) || flags[i] == (STAND_ON | STAND_BELOW))
-            stand_seat(sc, s, i, flags[i]);
-    /* the lines: edges with both corners on s, the third off it (seated corners as moved) */
+    for (uint32_t m = 0; m < st->n_marked; m++) {
+        uint32_t i = st->marked[m];
+        if (st->flags[i] == (STAND_ON | STAND_ABOVE) || st->flags[i] == (STAND_ON | STAND_BELOW))
+            stand_seat(sc, s, i, st->flags[i]);
+    }
+    /* the lines: edges with both corners on s, the third off it (seated corners as moved),
+     * each found from its triangle's first corner on s */
     uint32_t found = 0;
-    for (uint32_t t = 0; t < sc->n_tris && found <= CONTACT_MAX; t++) {
-        const uint32_t *v = sc->tris[t].v;
-        int n_on = 0, c = 0;
-        for (int k = 0; k < 3; k++) {
-            if (flags[v[k]] & STAND_ON)
-                n_on++;
-            else
-                c = k; /* the corner off s */
+    for (uint32_t m = 0; ok && m < st->n_marked && found <= CONTACT_MAX; m++) {
+        uint32_t i = st->marked[m];
+        for (uint32_t a = st->adj_start[i]; a < st->adj_start[i + 1]; a++) {
+            const uint32_t *v = sc->tris[st->adj[a]].v;
+            int n_on = 0, c = 0, first = -1;
+            for (int k = 0; k < 3; k++) {
+                if (st->flags[v[k]] & STAND_ON) {
+                    n_on++;
+                    first = first < 0 ? k : first;
+                } else {
+                    c = k; /* the corner off s */
+                }
+            }
+            if (n_on != 2 || v[first] != i)
+                continue;
+            struct dvec3 p = d3(sc->positions[v[(c + 1) % 3]]);
+            struct dvec3 q = d3(sc->positions[v[(c + 2) % 3]]);
+            struct dvec3 pq = d3_sub(q, p), mv = d3_cross(s->n, pq);
+            struct dvec3 arm = groove_arm(d3_sub(d3(sc->positions[v[c]]), p), pq);
+            double m_len = d3_length(mv), arm_len = d3_length(arm);
+            if (!(m_len > 0.0 && arm_len > 0.0))
+                continue;
+            double phi = asin(fmin(1.0, fabs(d3_dot(arm, s->n)) / arm_len)); /* acute angle */
+            if (st->n_out == st->cap) {
+                uint32_t grown = st->cap ? 2 * st->cap : 16;
+                struct contact *more = grown > st->cap ? realloc(st->out, grown * sizeof *st->out)
+                                                       : NULL;
+                if (!more) {
+                    ok = false;
+                    break;
+                }
+                st->out = more;
+                st->cap = grown;
+            }
+            st->out[st->n_out++] = (struct contact){p, q, d3_scale(mv, 1.0 / m_len),
+                                                    groove_factor(phi)};
+            found++;
         }
-        if (n_on != 2)
-            continue;
-        struct dvec3 a = d3(sc->positions[v[(c + 1) % 3]]), b = d3(sc->positions[v[(c + 2) % 3]]);
-        struct dvec3 ab = d3_sub(b, a), m = d3_cross(s->n, ab);
-        struct dvec3 arm = groove_arm(d3_sub(d3(sc->positions[v[c]]), a), ab);
-        double m_len = d3_length(m), arm_len = d3_length(arm);
-        if (!(m_len > 0.0 && arm_len > 0.0))
-            continue;
-        double phi = asin(fmin(1.0, fabs(d3_dot(arm, s->n)) / arm_len)); /* the acute angle */
-        if (*n_out == *cap) {
-            uint32_t grown = *cap ? 2 * *cap : 16;
-            struct contact *more = grown > *cap ? realloc(*out, grown * sizeof **out) : NULL;
-            if (!more)
-                return false;
-            *out = more;
-            *cap = grown;
-        }
-        (*out)[(*n_out)++] = (struct contact){a, b, d3_scale(m, 1.0 / m_len), groove_factor(phi)};
-        found++;
     }
+    for (uint32_t m = 0; m < st->n_marked; m++)
+        st->flags[st->marked[m]] = 0;
+    st->n_marked = 0;
+    return ok;
+}
+
+/* A vertex of an open edge and one of its coordinates (stand_candidates). */
+struct stand_cand {
+    double x;
+    uint32_t v;
+};
+
+static int stand_cand_cmp(const void *x, const void *y)
+{
+    const struct stand_cand *a = x, *b = y;
+    if (a->x != b->x)
+        return a->x < b->x ? -1 : 1;
+    return (a->v > b->v) - (a->v < b->v);
+}
+
+/* The vertices of edges that one triangle alone has (from the edge lists: a run of one entry),
+ * three times, sorted by x, by y and by z, in out[0..2] (*n_out each); NULL lists: none.  False
+ * where out of memory. */
+static bool stand_candidates(const struct scene *sc, const uint32_t *canon, const uint32_t *start,
+                             const struct groove_ent *ent, struct stand_cand **out, uint32_t *n_out)
+{
+    out[0] = out[1] = out[2] = NULL;
+    *n_out = 0;
+    if (!canon || !start)
+        return true;
+    uint8_t *open = calloc(sc->n_positions, 1);
+    if (!open)
+        return false;
+    for (uint32_t v = 0; v < sc->n_positions; v++)
+        for (uint32_t j = start[v], k; j < start[v + 1]; j = k) {
+            for (k = j + 1; k < start[v + 1] && ent[k].hi == ent[j].hi;)
+                k++;
+            if (k - j == 1)
+                open[v] = open[ent[j].hi] = 1;
+        }
+    uint32_t n = 0;
+    for (uint32_t p = 0; p < sc->n_positions; p++)
+        n += open[canon[p]];
+    for (int a = 0; n && a < 3; a++) {
+        struct stand_cand *c = malloc((size_t)n * sizeof *c);
+        if (!c) {
+            free(open);
+            for (int b = 0; b < a; b++)
+                free(out[b]);
+            return false;
+        }
+        uint32_t m = 0;
+        for (uint32_t p = 0; p < sc->n_positions; p++)
+            if (open[canon[p]])
+                c[m++] = (struct stand_cand){v3_get(sc->positions[p], a), p};
+        qsort(c, n, sizeof *c, stand_cand_cmp);
+        out[a] = c;
+    }
+    free(open);
+    *n_out = n;
     return true;
 }
 
-/* Seats vertices on the planes and quads and fills sc->contacts and sc->contact_start (see
- * above); false where out of memory. */
-static bool contacts(struct parser *ps)
+/* The triangles at each vertex, as a list per vertex (stand_state).  False where out of
+ * memory. */
+static bool stand_adjacency(struct stand_state *st)
+{
+    const struct scene *sc = st->sc;
+    st->adj_start = calloc((size_t)sc->n_positions + 2, sizeof *st->adj_start);
+    st->adj = malloc((3 * (size_t)sc->n_tris + 1) * sizeof *st->adj);
+    if (!st->adj_start || !st->adj)
+        return false;
+    for (uint32_t t = 0; t < sc->n_tris; t++)
+        for (int k = 0; k < 3; k++)
+            st->adj_start[sc->tris[t].v[k] + 2]++;
+    for (uint32_t v = 0; v < sc->n_positions; v++)
+        st->adj_start[v + 2] += st->adj_start[v + 1];
+    for (uint32_t t = 0; t < sc->n_tris; t++)
+        for (int k = 0; k < 3; k++)
+            st->adj[st->adj_start[sc->tris[t].v[k] + 1]++] = t;
+    return true;
+}
+
+/* Surface k of the search (planes, then quads, then triangles) as *s, its triangle's corners
+ * in tri[3]; false where it has no plane (a degenerate triangle or quad). */
+static bool stand_surface_of(const struct scene *sc, uint32_t k, struct stand_surface *s,
+                             struct dvec3 tri[3])
+{
+    *s = (struct stand_surface){{0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}, NULL, NULL};
+    if (k < sc->n_planes) {
+        s->o = d3(sc->planes[k].point);
+        s->n = d3(sc->planes[k].n);
+    } else if (k < sc->n_planes + sc->n_quads) {
+        s->q = &sc->quads[k - sc->n_planes];
+        s->o = s->q->corner;
+        s->n = d3_cross(s->q->e1, s->q->e2);
+    } else {
+        const uint32_t *v = sc->tris[k - sc->n_planes - sc->n_quads].v;
+        for (int j = 0; j < 3; j++)
+            tri[j] = d3(sc->positions[v[j]]);
+        s->tri = tri;
+        s->o = tri[0];
+        s->n = d3_cross(d3_sub(tri[1], tri[0]), d3_sub(tri[2], tri[0]));
+    }
+    double len = d3_length(s->n);
+    s->n = d3_scale(s->n, 1.0 / len);
+    return len > 0.0;
+}
+
+/* Marks the vertices on surface k: for a plane or quad every vertex (a quad's in its box), for
+ * triangle t the open edges' vertices (cand, sorted by each axis) within its range along the
+ * axis it spans least (a floor's up axis: a thin slab) that are not at its own corners'
+ * coordinates (canon). */
+static void stand_mark_all(struct stand_state *st, uint32_t k, const struct stand_surface *s,
+                           struct stand_cand *const *cands, uint32_t n_cand, const uint32_t *canon)
+{
+    const struct scene *sc = st->sc;
+    if (!s->tri) {
+        double lo[3] = {-INFINITY, -INFINITY, -INFINITY}, hi[3] = {INFINITY, INFINITY, INFINITY};
+        if (s->q)
+            quad_box(s->q, lo, hi);
+        for (uint32_t i = 0; i < sc->n_positions; i++) {
+            vec3 p = sc->positions[i];
+            if (p.x >= lo[0] && p.x <= hi[0] && p.y >= lo[1] && p.y <= hi[1] && p.z >= lo[2] &&
+                p.z <= hi[2])
+                stand_mark(st, s, i);
+        }
+        return;
+    }
+    const uint32_t *v = sc->tris[k - sc->n_planes - sc->n_quads].v;
+    int axis = 0;
+    double x_lo = 0.0, x_hi = INFINITY;
+    for (int a = 0; a < 3; a++) {
+        double c[3]; /* the corners' coordinates along a (floats, exact in double) */
+        for (int j = 0; j < 3; j++)
+            c[j] = v3_get(sc->positions[v[j]], a);
+        double l = fmin(c[0], fmin(c[1], c[2])), h = fmax(c[0], fmax(c[1], c[2]));
+        if (h - l < x_hi - x_lo) {
+            axis = a;
+            x_lo = l;
+            x_hi = h;
+        }
+    }
+    const struct stand_cand *cand = cands[axis];
+    double pad = 4.0 * CONTACT_ULPS * 0x1p-24 *
+                 fmax(d3_max_abs(s->tri[0]), fmax(d3_max_abs(s->tri[1]), d3_max_abs(s->tri[2])));
+    uint32_t lo = 0, hi = n_cand; /* the first candidate with x >= x_lo - pad */
+    while (lo < hi) {
+        uint32_t mid = lo + (hi - lo) / 2;
+        if (cand[mid].x < x_lo - pad)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    float box[2][3]; /* the triangle's box, padded: most of the slab lies outside it */
+    for (int a = 0; a < 3; a++) {
+        float c0 = v3_get(sc->positions[v[0]], a), c1 = v3_get(sc->positions[v[1]], a),
+              c2 = v3_get(sc->positions[v[2]], a);
+        box[0][a] = (float)(min_f(c0, min_f(c1, c2)) - pad);
+        box[1][a] = (float)(max_f(c0, max_f(c1, c2)) + pad);
+    }
+    for (uint32_t c = lo; c < n_cand && cand[c].x <= x_hi + pad && st->work <= CONTACT_MAX_WORK;
+         c++) {
+        uint32_t i = cand[c].v;
+        vec3 p = sc->positions[i];
+        st->work++;
+        if (p.x >= box[0][0] && p.x <= box[1][0] && p.y >= box[0][1] && p.y <= box[1][1] &&
+            p.z >= box[0][2] && p.z <= box[1][2] && canon[i] != canon[v[0]] &&
+            canon[i] != canon[v[1]] && canon[i] != canon[v[2]])
+            stand_mark(st, s, i);
+    }
+}
+
+/* Seats vertices on the planes, quads and triangles and fills sc->contacts and
+ * sc->contact_start (see above); canon, start and ent are the weld and the edge lists (NULL:
+ * no triangle is searched).  False where out of memory. */
+static bool contacts(struct parser *ps, const uint32_t *canon, const uint32_t *start,
+                     const struct groove_ent *ent)
 {
     struct scene *sc = ps->scene;
-    uint32_t n_surf = sc->n_planes + sc->n_quads;
-    if (sc->n_tris == 0 || n_surf == 0 || n_surf > UINT32_MAX / 2)
+    struct stand_state st = {sc, NULL, NULL, NULL, NULL, 0, NULL, 0, 0, 0};
+    struct stand_cand *cand[3] = {NULL, NULL, NULL};
+    uint32_t n_cand = 0;
+    if (sc->n_tris == 0 || sc->n_tris > UINT32_MAX / 4 ||
+        sc->n_planes + (uint64_t)sc->n_quads + sc->n_tris > UINT32_MAX / 2)
         return true;
-    uint32_t *start = calloc((size_t)n_surf + 1, sizeof *start);
-    uint8_t *flags = malloc(sc->n_positions);
-    struct contact *out = NULL;
-    uint32_t n_out = 0, cap = 0;
-    bool ok = start && flags;
-    uint64_t work = 0;
-    for (uint32_t k = 0; ok && k < n_surf; k++) {
-        start[k] = n_out;
-        work += (uint64_t)sc->n_tris + sc->n_positions;
-        if (work > CONTACT_MAX_WORK)
-            continue;
-        struct stand_surface s = {{0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}, NULL};
-        if (k < sc->n_planes) {
-            s.o = d3(sc->planes[k].point);
-            s.n = d3(sc->planes[k].n);
-        } else {
-            s.q = &sc->quads[k - sc->n_planes];
-            s.o = s.q->corner;
-            s.n = d3_cross(s.q->e1, s.q->e2);
-        }
-        double len = d3_length(s.n);
-        if (!(len > 0.0))
-            continue;
-        s.n = d3_scale(s.n, 1.0 / len);
-        ok = stand_surface(sc, &s, flags, &out, &n_out, &cap);
-        if (n_out - start[k] > CONTACT_MAX)
-            n_out = start[k]; /* too many to test at every hit: none */
+    uint32_t n_tri_surf = 0;
+    bool ok = stand_candidates(sc, canon, start, ent, cand, &n_cand);
+    if (ok && n_cand > 0)
+        n_tri_surf = sc->n_tris;
+    uint32_t n_surf = sc->n_planes + sc->n_quads + n_tri_surf;
+    if (!ok || n_surf == 0) {
+        for (int a = 0; a < 3; a++)
+            free(cand[a]);
+        return ok || fail_oom(ps, 0);
     }
-    free(flags);
+    uint32_t *cs_start = calloc((size_t)n_surf + 1, sizeof *cs_start);
+    st.flags = calloc(sc->n_positions, 1);
+    st.marked = malloc((size_t)sc->n_positions * sizeof *st.marked);
+    ok = cs_start && st.flags && st.marked && stand_adjacency(&st);
+    for (uint32_t k = 0; ok && k < n_surf; k++) {
+        cs_start[k] = st.n_out;
+        struct stand_surface s;
+        struct dvec3 tri[3];
+        if (st.work > CONTACT_MAX_WORK || !stand_surface_of(sc, k, &s, tri))
+            continue;
+        stand_mark_all(&st, k, &s, cand, n_cand, canon);
+        ok = stand_finish(&st, &s);
+        if (st.n_out - cs_start[k] > CONTACT_MAX)
+            st.n_out = cs_start[k]; /* too many to test at every hit: none */
+    }
+    for (int a = 0; a < 3; a++)
+        free(cand[a]);
+    free(st.adj_start);
+    free(st.adj);
+    free(st.flags);
+    free(st.marked);
     if (!ok) {
-        free(start);
-        free(out);
+        free(cs_start);
+        free(st.out);
         return fail_oom(ps, 0);
     }
-    start[n_surf] = n_out;
-    if (n_out == 0) {
-        free(start);
-        free(out);
+    if (st.n_out == 0) {
+        free(cs_start);
+        free(st.out);
         return true;
     }
-    sc->contacts = out;
-    sc->contact_start = start;
+    cs_start[n_surf] = st.n_out;
+    sc->contacts = st.out;
+    sc->contact_start = cs_start;
+    sc->n_contact_surfaces = n_surf;
     return true;
 }
 
@@ -3055,11 +3270,11 @@ static bool mesh_topology(struct parser *ps)
                 ok = fail_oom(ps, 0);
         }
     }
-    ok = ok && grooves(ps, canon, start, ent);
+    ok = ok && grooves(ps, canon, start, ent) && contacts(ps, canon, start, ent);
     free(start);
     free(ent);
     free(canon);
-    return ok && contacts(ps);
+    return ok;
 }
 
 /* ---- the light list ----------------------------------------------------------------------- */

@@ -167,11 +167,12 @@ struct scene {
     uint32_t n_quads;
     struct plane *planes;
     uint32_t n_planes;
-    /* where meshes stand on the planes and quads (scene.c, contacts): surface k's (planes
-     * first, then quads) are contacts[contact_start[k] .. contact_start[k + 1]); both NULL when
-     * there are none */
+    /* where meshes stand on the planes, quads and triangles (scene.c, contacts): surface k's
+     * (planes first, then quads, then triangles, n_contact_surfaces in all) are
+     * contacts[contact_start[k] .. contact_start[k + 1]); both NULL when there are none */
     struct contact *contacts;
     uint32_t *contact_start;
+    uint32_t n_contact_surfaces;
 
     struct light *lights; /* every emissive triangle, quad and sphere, then point lights */
     uint32_t n_lights;
@@ -190,11 +191,12 @@ struct scene {
     uint32_t n_loaded;
 };
 
-/* The contacts of surface k (planes first, then quads) in *n; NULL where it has none. */
+/* The contacts of surface k (planes first, then quads, then triangles) in *n; NULL where it has
+ * none. */
 static inline const struct contact *scene_contacts(const struct scene *scene, uint32_t k,
                                                    uint32_t *n)
 {
-    *n = scene->contact_start ? scene->contact_start[k + 1] - scene->contact_start[k] : 0;
+    *n = k < scene->n_contact_surfaces ? scene->contact_start[k + 1] - scene->contact_start[k] : 0;
     return *n ? scene->contacts + scene->contact_start[k] : NULL;
 }
 

@@ -1085,6 +1085,8 @@ static bool closest_hit(const struct trace_scene *ts, const struct ray *ray_in,
         hr->sf = triangle_surface(ts, idx, &ray, bh->t, bh->u, bh->v);
         hr->light_idx = light_idx_of(ts->lights, LIGHT_TRIANGLE, idx);
         hr->tri = idx;
+        if (scene->contact_start) /* walls standing on mesh triangles (scene.c, contacts) */
+            pull_from_contacts(scene, scene->n_planes + scene->n_quads + idx, &hr->sf, ray_in);
         return true;
     case HIT_SPHERE:
         hr->sf = shape_sphere_surface(&scene->spheres[idx], &ray, ray.t_max);

@@ -18,8 +18,9 @@ Python standard library only; renders with an mcpt binary in a scratch folder.  
            digits, the camera inside near that edge; every pixel must be exactly 0.  --boxes N
            puts N - 1 copies of quads in a row beside it (N = 200: 1200 quads).
   standing an open-bottomed cube of 10 mesh triangles standing on a plane or a quad (a floor
-           statement), turned, scaled 1e-6..1e6 and moved up to 1e3 sizes, the camera inside,
-           down to 1e-4 of its size above the floor; every pixel must be exactly 0.
+           statement; --mesh-floor: two triangles of another mesh), turned, scaled 1e-6..1e6 and
+           moved up to 1e3 sizes, the camera inside, down to 1e-4 of its size above the floor;
+           every pixel must be exactly 0.
   spheres  a closed analytic sphere (camera inside, diffuse walls, white sky) of radius 1e-15..1e15
            moved up to 2^20 radii from the origin in a random direction (down to the smallest
            radius scene.c accepts there); every pixel must be exactly 0.
@@ -313,7 +314,14 @@ def probe_standing(args, tmp):
             f.write("".join("f %d %d %d\n" % tuple(k + 1 for k in ((a, c, b) if flip else (a, b, c)))
                             for a, b, c in faces))
         up = [a - b for a, b in zip(place((0, 1, 0)), place((0, 0, 0)))]
-        if rng.random() < 0.5:
+        if args.mesh_floor:  # two triangles of another mesh
+            floor_obj = os.path.join(tmp, "floor.obj")
+            with open(floor_obj, "w") as f:
+                f.write("".join("v %s\n" % fmt(place(p)).replace(",", " ")
+                                for p in ((-3, 0, -3), (3, 0, -3), (3, 0, 3), (-3, 0, 3))))
+                f.write("f 1 3 2\nf 1 4 3\n")
+            floor = "mesh file=%s material=m" % floor_obj
+        elif rng.random() < 0.5:
             floor = "plane point=%s normal=%s material=m" % (fmt(place((0, 0, 0))), fmt(up))
         else:
             c = place((-3, 0, -3))
@@ -331,10 +339,14 @@ def probe_standing(args, tmp):
             print("leak: case %d, %s, scale %.3g, brightest pixel %.3g" % (it, floor.split()[0], s, b))
             if args.save:  # the case as standing-SEED-CASE.txt and .obj, the OBJ named relatively
                 name = os.path.join(args.save, "standing-%d-%d" % (args.seed, it))
-                with open(obj) as f, open(name + ".obj", "w") as g:
-                    g.write(f.read())
-                with open(scene) as f, open(name + ".txt", "w") as g:
-                    g.write(f.read().replace(obj, os.path.basename(name) + ".obj"))
+                text = open(scene).read()
+                for src, suffix in ((obj, ".obj"), (os.path.join(tmp, "floor.obj"), "-floor.obj")):
+                    if src in text:
+                        with open(src) as f, open(name + suffix, "w") as g:
+                            g.write(f.read())
+                        text = text.replace(src, os.path.basename(name) + suffix)
+                with open(name + ".txt", "w") as g:
+                    g.write(text)
     print("standing: %d of %d let sky in" % (leaks, args.cases))
     return leaks == 0
 
@@ -582,6 +594,7 @@ def main():
                     help="sheared: each face a quad or two triangles of one mesh, by chance")
     ap.add_argument("--boxes", type=int, default=1,
                     help="sheared: this many boxes in a row (of quads but the first), camera in the first")
+    ap.add_argument("--mesh-floor", action="store_true", help="standing: the floor two triangles of a mesh")
     ap.add_argument("--save", help="standing: copy each case that lets sky in into this folder")
     ap.add_argument("--grid", type=int, default=32, help="offset: vertices on the grid of 1/G")
     ap.add_argument("--offsets", default="1e5,2e5,4e5")

@@ -1242,6 +1242,39 @@ Test(scene, walls_standing_on_a_plane_are_seated_and_listed)
     scene_free(&sc);
 }
 
+/* A wall standing inside a triangle of another mesh (the floor y = 0, x, z in [0, 4]): its
+ * bottom corners, 1e-7 above, are seated on the floor and its bottom edge is the floor
+ * triangle's contact; a closed box's corners on the floor stay (no open edge), and so does
+ * every corner where no wall stands. */
+Test(scene, walls_standing_on_a_mesh_are_seated_and_listed)
+{
+    const char *const files[] = {
+        "f.obj", "v 0 0 0\nv 4 0 0\nv 0 0 4\nf 1 3 2\n", "w.obj",
+        "v 0.5 1e-7 0.5\nv 1.5 1e-7 0.5\nv 0.5 1 0.5\nf 1 2 3\n", "b.obj",
+        /* a closed tetrahedron with its base on the floor */
+        "v 2 0 0.2\nv 2.5 0 0.2\nv 2 0 0.7\nv 2 0.5 0.2\nf 1 2 3\nf 1 4 2\nf 2 4 3\nf 3 4 1\n",
+        NULL};
+    struct scene sc;
+    char msg[700];
+    cr_assert(load_with_files(CAM MAT "mesh file=f.obj material=red\n"
+                                      "mesh file=w.obj material=red\n"
+                                      "mesh file=b.obj material=red\n",
+                              files, &sc, msg, sizeof msg),
+              "%s", msg);
+    uint32_t n;
+    const struct contact *c = scene_contacts(&sc, 0, &n); /* the floor: triangle 0 */
+    cr_assert_eq(n, 1);
+    cr_assert(c->a.y <= 0.0 && c->b.y <= 0.0 && fabs(c->m.y) < 1e-12, "a %g b %g", c->a.y, c->b.y);
+    for (int k = 3; k < 5; k++)
+        cr_assert(sc.positions[k].y <= 0.0f && sc.positions[k].y >= -4 * 0x1p-24f,
+                  "wall corner %d: y %g", k, sc.positions[k].y);
+    for (uint32_t t = 1; t < sc.n_tris; t++)
+        cr_assert_null(scene_contacts(&sc, t, &n), "triangle %u", t);
+    cr_assert(sc.positions[6].y == 0.0f && sc.positions[7].y == 0.0f && sc.positions[8].y == 0.0f,
+              "the tetrahedron stays");
+    scene_free(&sc);
+}
+
 /* A quad with an edge between two mesh vertices, and the quad sharing an edge with it, become
  * two triangles each, at their corners rounded to float, wound as e1 x e2, with the quad's uvs
  * and area; quads that meet a mesh at a corner only, by 1e-7 off, or inside a triangle stay. */
