@@ -15,6 +15,7 @@
 #include "trace.h"
 
 #include <limits.h>
+#include <math.h>
 #include <stdlib.h>
 #include <unistd.h>
 
@@ -89,6 +90,26 @@ static void check_scene(const struct scene *s)
     for (uint32_t i = 0; i < s->n_planes; i++)
         if (s->planes[i].mat_idx >= s->n_materials)
             abort();
+    if (s->contact_start) { /* scene.c, contacts: planes, quads, then triangles or none */
+        uint32_t n_pq = s->n_planes + s->n_quads;
+        if (s->n_contact_surfaces != n_pq && s->n_contact_surfaces != n_pq + s->n_tris)
+            abort();
+        if (s->contact_start[0] != 0)
+            abort();
+        for (uint32_t k = 0; k < s->n_contact_surfaces; k++)
+            if (s->contact_start[k + 1] < s->contact_start[k] ||
+                s->contact_start[k + 1] - s->contact_start[k] > 64)
+                abort();
+        for (uint32_t i = 0; i < s->contact_start[s->n_contact_surfaces]; i++) {
+            const struct contact *c = &s->contacts[i];
+            double m2 = c->m.x * c->m.x + c->m.y * c->m.y + c->m.z * c->m.z;
+            if (!(fabs(m2 - 1.0) < 1e-9 && c->g >= 1.0 && isfinite(c->a.x + c->a.y + c->a.z) &&
+                  isfinite(c->b.x + c->b.y + c->b.z)))
+                abort();
+        }
+    } else if (s->contacts || s->n_contact_surfaces) {
+        abort();
+    }
     for (uint32_t i = 0; i < s->n_lights; i++) {
         const struct light *l = &s->lights[i];
         uint32_t n = l->kind == LIGHT_TRIANGLE ? s->n_tris
