@@ -2824,8 +2824,6 @@ static bool quads_to_triangles(struct parser *ps)
     return ok;
 }
 
-/* The load's passes over the triangles' shared corners: T-junctions closed (tj_pass), then the
- * grooves' factors (grooves). */
 /* ---- where meshes stand on planes, quads and other meshes -------------------------------- */
 
 /* A mesh wall standing on a plane, a quad or another mesh's triangle (a room's walls on a floor,
@@ -3235,6 +3233,9 @@ static bool contacts(struct parser *ps, const uint32_t *canon, const uint32_t *s
     return true;
 }
 
+/* The load's passes over the triangles' shared corners: T-junctions closed (tj_pass), then the
+ * grooves' factors (grooves), then where meshes stand on planes, quads and triangles
+ * (contacts). */
 static bool mesh_topology(struct parser *ps)
 {
     struct scene *sc = ps->scene;

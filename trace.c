@@ -1037,7 +1037,7 @@ static bool shape_any(void *ctx, uint32_t i, struct ray *ray)
                : shape_quad_intersect(&scene->quads[i - scene->n_spheres], ray, &t);
 }
 
-/* A hit sf on surface k (scene_contacts: planes, then quads) kept clear of the walls that stand
+/* A hit sf on surface k (scene_contacts: planes, then quads, then triangles) kept clear of the walls that stand
  * on it, on the side the ray came from (shape_pull_from_contacts). */
 static void pull_from_contacts(const struct scene *scene, uint32_t k, struct surface *sf,
                                const struct ray *ray)
@@ -1085,8 +1085,7 @@ static bool closest_hit(const struct trace_scene *ts, const struct ray *ray_in,
         hr->sf = triangle_surface(ts, idx, &ray, bh->t, bh->u, bh->v);
         hr->light_idx = light_idx_of(ts->lights, LIGHT_TRIANGLE, idx);
         hr->tri = idx;
-        if (scene->contact_start) /* walls standing on mesh triangles (scene.c, contacts) */
-            pull_from_contacts(scene, scene->n_planes + scene->n_quads + idx, &hr->sf, ray_in);
+        pull_from_contacts(scene, scene->n_planes + scene->n_quads + idx, &hr->sf, ray_in);
         return true;
     case HIT_SPHERE:
         hr->sf = shape_sphere_surface(&scene->spheres[idx], &ray, ray.t_max);

@@ -1200,23 +1200,24 @@ Test(scene, t_junction_is_fanned)
     scene_free(&sc);
 }
 
-/* ---- quads that meet meshes (scene.c, quads_to_triangles) ---------------------------------- */
+/* ---- meshes standing on planes and meshes (scene.c, contacts) ----------------------------- */
 
-/* A wall standing on a plane: its two bottom corners, a rounding off the plane, are moved onto
- * it or the least way past it (never up, never more than 4 float steps), and its bottom edge is
- * listed as the plane's contact, m within the plane and across the edge; a triangle lying in the
- * plane, one crossing it and one off it give none, and a quad that the wall does not stand on
- * has none. */
+/* A wall standing on a plane: its two bottom corners, a rounding above the plane, are moved onto
+ * it or the least way past it (never up, and here less than 4 2^-24 below), and its bottom edge
+ * is listed as the plane's contact, m within the plane and across the edge.  The corners of a
+ * triangle lying in the plane and the one corner on it of a triangle crossing it, as far off it
+ * as the wall's, stay; a quad that the wall does not stand on has no contact. */
 Test(scene, walls_standing_on_a_plane_are_seated_and_listed)
 {
-    /* the wall x in [0, 1], y = 0.3 (its bottom) .. 1.3, z = 0.5; the plane y = 0.3 through a
-     * point whose y is the float nearest 0.3 from the other side */
-    const char *const files[] = {"w.obj",
-                                 "v 0 0.3000001 0.5\nv 1 0.3000001 0.5\nv 0 1.3 0.5\n"
-                                 "v 0 0.3 2\nv 1 0.3 2\nv 0 0.3 3\n"
-                                 "v 0 -1 4\nv 1 1 4\nv 0 1 4.5\nv 5 5 5\nv 6 5 5\nv 5 6 5\n"
-                                 "f 1 2 3\nf 4 5 6\nf 7 8 9\nf 10 11 12\n",
-                                 NULL};
+    /* the wall x in [0, 1], y = 0.3 (its bottom) .. 1.3, z = 0.5, its bottom 3 floats above
+     * the plane y = 0.3f */
+    const char *const files[] = {
+        "w.obj",
+        "v 0 0.3000001 0.5\nv 1 0.3000001 0.5\nv 0 1.3 0.5\n"
+        "v 0 0.3000001 2\nv 1 0.3000001 2\nv 0 0.3000001 3\n"
+        "v 0 0.3000001 4\nv 1 1.3 4\nv 0 -0.7 4.5\nv 5 5 5\nv 6 5 5\nv 5 6 5\n"
+        "f 1 2 3\nf 4 5 6\nf 7 8 9\nf 10 11 12\n",
+        NULL};
     struct scene sc;
     char msg[700];
     cr_assert(load_with_files(CAM MAT "mesh file=w.obj material=red\n"
@@ -1236,7 +1237,9 @@ Test(scene, walls_standing_on_a_plane_are_seated_and_listed)
     cr_assert(c->a.y <= plane_y && c->b.y <= plane_y && fabs(c->m.y) < 1e-12 &&
                   fabs(fabs(c->m.z) - 1.0) < 1e-12 && c->g == 1.0,
               "a %g %g %g m %g %g %g g %g", c->a.x, c->a.y, c->a.z, c->m.x, c->m.y, c->m.z, c->g);
-    cr_assert(sc.positions[3].y == plane_y && sc.positions[6].y == -1.0f &&
+    const float above = 0.3000001f;
+    cr_assert(sc.positions[3].y == above && sc.positions[4].y == above &&
+                  sc.positions[5].y == above && sc.positions[6].y == above &&
                   sc.positions[9].y == 5.0f,
               "the others stay");
     scene_free(&sc);
@@ -1244,16 +1247,15 @@ Test(scene, walls_standing_on_a_plane_are_seated_and_listed)
 
 /* A wall standing inside a triangle of another mesh (the floor y = 0, x, z in [0, 4]): its
  * bottom corners, 1e-7 above, are seated on the floor and its bottom edge is the floor
- * triangle's contact; a closed box's corners on the floor stay (no open edge), and so does
- * every corner where no wall stands. */
+ * triangle's contact; a closed tetrahedron's base corners, as far above, stay (no open edge). */
 Test(scene, walls_standing_on_a_mesh_are_seated_and_listed)
 {
-    const char *const files[] = {
-        "f.obj", "v 0 0 0\nv 4 0 0\nv 0 0 4\nf 1 3 2\n", "w.obj",
-        "v 0.5 1e-7 0.5\nv 1.5 1e-7 0.5\nv 0.5 1 0.5\nf 1 2 3\n", "b.obj",
-        /* a closed tetrahedron with its base on the floor */
-        "v 2 0 0.2\nv 2.5 0 0.2\nv 2 0 0.7\nv 2 0.5 0.2\nf 1 2 3\nf 1 4 2\nf 2 4 3\nf 3 4 1\n",
-        NULL};
+    const char *const files[] = {"f.obj", "v 0 0 0\nv 4 0 0\nv 0 0 4\nf 1 3 2\n", "w.obj",
+                                 "v 0.5 1e-7 0.5\nv 1.5 1e-7 0.5\nv 0.5 1 0.5\nf 1 2 3\n", "b.obj",
+                                 /* a closed tetrahedron with its base on the floor */
+                                 "v 2 1e-7 0.2\nv 2.5 1e-7 0.2\nv 2 1e-7 0.7\nv 2 0.5 0.2\nf 1 2 "
+                                 "3\nf 1 4 2\nf 2 4 3\nf 3 4 1\n",
+                                 NULL};
     struct scene sc;
     char msg[700];
     cr_assert(load_with_files(CAM MAT "mesh file=f.obj material=red\n"
@@ -1270,10 +1272,13 @@ Test(scene, walls_standing_on_a_mesh_are_seated_and_listed)
                   "wall corner %d: y %g", k, sc.positions[k].y);
     for (uint32_t t = 1; t < sc.n_tris; t++)
         cr_assert_null(scene_contacts(&sc, t, &n), "triangle %u", t);
-    cr_assert(sc.positions[6].y == 0.0f && sc.positions[7].y == 0.0f && sc.positions[8].y == 0.0f,
+    cr_assert(sc.positions[6].y == 1e-7f && sc.positions[7].y == 1e-7f &&
+                  sc.positions[8].y == 1e-7f,
               "the tetrahedron stays");
     scene_free(&sc);
 }
+
+/* ---- quads that meet meshes (scene.c, quads_to_triangles) ---------------------------------- */
 
 /* A quad with an edge between two mesh vertices, and the quad sharing an edge with it, become
  * two triangles each, at their corners rounded to float, wound as e1 x e2, with the quad's uvs
