@@ -37,9 +37,8 @@ struct plane {
 };
 
 /* A line where a mesh stands on a plane, a quad or a triangle (scene.c, contacts): a mesh edge
- * from a to b
- * lying on the surface, whose triangle rises off it; m is the unit normal of the line within
- * the surface's plane, g the factor of the margin's normal term (docs/theory.md,
+ * from a to b lying on the surface, whose triangle rises off it; m is the unit normal of the
+ * line within the surface's plane, g the factor of the margin's normal term (docs/theory.md,
  * "Self-intersection": 6 cot of the acute angle between the triangle and the surface, at least
  * 1). */
 struct contact {
@@ -67,8 +66,8 @@ bool shape_plane_intersect(const struct plane *pl, const struct ray *ray, float 
 struct surface shape_sphere_surface(const struct sphere *s, const struct ray *ray, float t_hit);
 struct surface shape_quad_surface(const struct quad *q, const struct ray *ray, float t_hit);
 struct surface shape_plane_surface(const struct plane *pl, const struct ray *ray, float t_hit);
-/* A point sf of a plane, quad or triangle within the margin of one of its n contacts cs (a wall that
- * stands on the surface there) moved, within the surface, to that margin on the side of the line
+/* A point sf of a plane, quad or triangle within the margin of one of its n contacts cs (a wall
+ * that stands on the surface there) moved, within the surface, to that margin on the side of the line
  * the point `from` lies on (the incoming ray's origin), as triangle_point pulls points away from
  * a triangle's edges: a ray spawned there then starts in front of the wall, not past it. */
 void shape_pull_from_contacts(struct surface *sf, const struct contact *cs, uint32_t n, vec3 from);

@@ -1037,8 +1037,8 @@ static bool shape_any(void *ctx, uint32_t i, struct ray *ray)
                : shape_quad_intersect(&scene->quads[i - scene->n_spheres], ray, &t);
 }
 
-/* A hit sf on surface k (scene_contacts: planes, then quads, then triangles) kept clear of the walls that stand
- * on it, on the side the ray came from (shape_pull_from_contacts). */
+/* A hit sf on surface k (scene_contacts: planes, then quads, then triangles) kept clear of the
+ * walls that stand on it, on the side the ray came from (shape_pull_from_contacts). */
 static void pull_from_contacts(const struct scene *scene, uint32_t k, struct surface *sf,
                                const struct ray *ray)
 {
