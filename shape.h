@@ -67,9 +67,10 @@ struct surface shape_sphere_surface(const struct sphere *s, const struct ray *ra
 struct surface shape_quad_surface(const struct quad *q, const struct ray *ray, float t_hit);
 struct surface shape_plane_surface(const struct plane *pl, const struct ray *ray, float t_hit);
 /* A point sf of a plane, quad or triangle within the margin of one of its n contacts cs (a wall
- * that stands on the surface there) moved, within the surface, to that margin on the side of the line
- * the point `from` lies on (the incoming ray's origin), as triangle_point pulls points away from
- * a triangle's edges: a ray spawned there then starts in front of the wall, not past it. */
+ * that stands on the surface there) moved, within the surface, to that margin on the side of
+ * the line the point `from` lies on (the incoming ray's origin), as triangle_point pulls points
+ * away from a triangle's edges: a ray spawned there then starts in front of the wall, not past
+ * it. */
 void shape_pull_from_contacts(struct surface *sf, const struct contact *cs, uint32_t n, vec3 from);
 
 /* Surface of the triangle with corners p[3] at barycentrics (1 - b1 - b2, b1, b2) of a hit of
